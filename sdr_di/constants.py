@@ -1,0 +1,55 @@
+"""Physical constants, CGCS2000 ellipsoid and BeiDou B3I signal parameters.
+
+All values SI. CGCS2000 values follow BDS-SIS-ICD-B3I-1.0 section 5.2.4.
+"""
+
+#: Speed of light in vacuum [m/s].
+C_LIGHT = 299_792_458.0
+
+# --- CGCS2000 ellipsoid and Earth parameters -------------------------------------
+#: Semi-major axis [m].
+A_CGCS = 6_378_137.0
+#: Flattening [-].
+F_CGCS = 1.0 / 298.257222101
+#: First eccentricity squared [-].
+E2_CGCS = F_CGCS * (2.0 - F_CGCS)
+#: Semi-minor axis [m].
+B_CGCS = A_CGCS * (1.0 - F_CGCS)
+#: Earth gravitational constant GM [m^3/s^2].
+GM_CGCS = 3.986004418e14
+#: Earth rotation rate [rad/s].
+OMEGA_E = 7.2921150e-5
+#: Relativistic clock correction constant F = -2 sqrt(GM)/c^2 [s/m^0.5].
+F_REL = -4.442807309e-10
+
+# --- BeiDou B3I ---------------------------------------------------------------------
+#: B3I carrier frequency [Hz].
+F_B3I = 1268.52e6
+#: B3I chipping rate [chip/s].
+CHIP_RATE_B3I = 10.23e6
+#: Chips per primary code period.
+CODE_LENGTH_B3I = 10230
+#: Primary code period [s].
+CODE_PERIOD_B3I = CODE_LENGTH_B3I / CHIP_RATE_B3I
+#: Carrier wavelength [m].
+LAMBDA_B3I = C_LIGHT / F_B3I
+#: Carrier cycles per code chip (1268.52e6 / 10.23e6 = 124).
+CARRIER_PER_CHIP_B3I = F_B3I / CHIP_RATE_B3I
+
+#: GEO PRNs (D2 navigation message, no NH code).
+GEO_PRNS = frozenset((1, 2, 3, 4, 5, 59, 60, 61, 62, 63))
+#: All B3I PRNs.
+ALL_PRNS = tuple(range(1, 64))
+
+# --- Time ---------------------------------------------------------------------------
+#: Seconds per week.
+SECONDS_PER_WEEK = 604_800.0
+#: BDT = GPST - 14 s.
+BDT_MINUS_GPST = -14.0
+#: BDT week = GPS week - 1356.
+BDT_WEEK_OFFSET = 1356
+
+
+def is_geo(prn: int) -> bool:
+    """Return True for a GEO PRN (D2 message, GEO orbit computation)."""
+    return int(prn) in GEO_PRNS

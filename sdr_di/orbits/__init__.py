@@ -1,0 +1,1 @@
+"""Broadcast ephemerides, satellite orbits and clocks, precise orbits, atmosphere models."""
