@@ -1,0 +1,1 @@
+"""File formats: IF samples, metadata sidecar, IMU and truth files, atomic writing."""

@@ -1,0 +1,472 @@
+"""Scenario file schema (TOML) and its validation.
+
+A scenario says *what* to simulate: when and where the vehicle starts, how it moves, which IMU
+it carries, which satellites it sees at what C/N0 (and when they are blocked), and how the IF
+samples are made. ``docs/scenario.md`` documents every key; ``signals/default.toml`` is the
+paper 004 scenario. Every problem is reported as :class:`~sdr_di.errors.ScenarioError` naming
+the file, the key and what is wrong.
+
+Units at the user interface: degrees, metres, seconds, Hz, dB-Hz; SI/radians inside.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as _dt
+import hashlib
+import json
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from ..errors import ScenarioError
+from ..timebase import datetime_to_bdt, utc_to_bdt
+
+#: Motion segment types and their required / optional keys (besides ``type``).
+SEGMENT_KEYS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "uniform": (("duration_s",), ()),
+    "accelerate": (("duration_s", "accel_mps2"), ()),
+    "decelerate": (("duration_s", "decel_mps2"), ()),
+    "climb": (("duration_s", "vertical_rate_mps"), ()),
+    "descend": (("duration_s", "vertical_rate_mps"), ()),
+    "turn_left": (("duration_s", "rate_dps"), ()),
+    "turn_right": (("duration_s", "rate_dps"), ()),
+    "circle": (("duration_s", "direction"), ("rate_dps", "radius_m")),
+    "hold": (("duration_s",), ()),
+}
+
+#: IMU grade presets: (accel scale ppm, gyro scale ppm, accel bias mg, gyro bias deg/h,
+#: accel random walk m/s/sqrt(h), gyro random walk deg/sqrt(h)).
+IMU_GRADES: dict[str, tuple[float, float, float, float, float, float]] = {
+    "mems": (100.0, 100.0, 4.0, 8.0, 0.05, 0.04),  # paper 004 Table 4
+    "tactical": (50.0, 50.0, 1.0, 1.0, 0.03, 0.05),
+    "navigation": (10.0, 10.0, 0.025, 0.01, 0.002, 0.002),
+    "perfect": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+}
+
+#: Sample formats the generator writes (see :mod:`sdr_di.io.sample_formats`).
+SAMPLE_FORMATS = ("iq_int8", "real_int8", "iq_int16", "real_int16", "iq_int4")
+
+
+@dataclasses.dataclass(frozen=True)
+class ImuSpec:
+    """IMU grade and error parameters (user units; see :mod:`sdr_di.sim.imu`)."""
+
+    grade: str
+    rate_hz: float
+    accel_scale_factor_ppm: float
+    gyro_scale_factor_ppm: float
+    accel_bias_mg: float
+    gyro_bias_deg_h: float
+    accel_random_walk_mps_sqrth: float
+    gyro_random_walk_deg_sqrth: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Outage:
+    """Attenuation window for one PRN (``prn`` None = every satellite).
+
+    ``attenuation_db`` is ``math.inf`` for full blockage. Times are seconds from the start.
+    """
+
+    prn: int | None
+    start_s: float
+    end_s: float
+    attenuation_db: float
+
+
+@dataclasses.dataclass(frozen=True)
+class SatelliteSpec:
+    """Which satellites are simulated and how strong they are."""
+
+    ephemeris: Path
+    prns: tuple[int, ...] | None  # None = automatic selection
+    count: int
+    elevation_mask_deg: float
+    cn0_dbhz: float
+    cn0_per_prn: dict[int, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class SignalSpec:
+    """How IF samples are produced."""
+
+    sampling_rate_hz: float
+    if_hz: float
+    complex_baseband: bool
+    sample_format: str
+    quantization_bits: int
+    ionosphere: str
+    troposphere: str
+    chunk_ms: int
+
+
+@dataclasses.dataclass(frozen=True)
+class ReceiverClock:
+    """Receiver clock: bias [s] at t = 0 and constant drift [s/s]."""
+
+    bias_s: float
+    drift_s_s: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    """A validated scenario. Times BDT; angles in radians; start epoch (week, sow)."""
+
+    name: str
+    source: Path | None
+    week: int
+    sow: float
+    duration_s: float
+    seed: int
+    lat: float
+    lon: float
+    height: float
+    v_n: tuple[float, float, float]
+    att: tuple[float, float, float]  # pitch, roll, yaw [rad]
+    motion: tuple[dict[str, Any], ...]
+    imu: ImuSpec
+    satellites: SatelliteSpec
+    signal: SignalSpec
+    outages: tuple[Outage, ...]
+    clock: ReceiverClock
+    raw: dict[str, Any] = dataclasses.field(repr=False, compare=False)
+
+    @property
+    def hash(self) -> str:
+        """SHA-256 (hex, first 16 characters) of the canonical scenario content."""
+        canon = json.dumps(self.raw, sort_keys=True, default=str).encode()
+        return hashlib.sha256(canon).hexdigest()[:16]
+
+    def with_overrides(self, **kw: Any) -> "Scenario":
+        """Return a copy with CLI overrides applied and re-validated.
+
+        Accepted keys: ``duration_s``, ``seed``, ``sampling_rate_hz``, ``if_hz``,
+        ``kind``, ``sample_format``, ``quantization_bits``, ``cn0_dbhz``, ``ephemeris``,
+        ``prns``. A relative ``ephemeris`` path is taken relative to the working directory.
+        """
+        raw = json.loads(json.dumps(self.raw, default=str))
+        sec = {
+            "duration_s": ("scenario", "duration_s"),
+            "seed": ("scenario", "seed"),
+            "sampling_rate_hz": ("signal", "sampling_rate_hz"),
+            "if_hz": ("signal", "if_hz"),
+            "kind": ("signal", "kind"),
+            "sample_format": ("signal", "sample_format"),
+            "quantization_bits": ("signal", "quantization_bits"),
+            "cn0_dbhz": ("satellites", "cn0_dbhz"),
+            "ephemeris": ("satellites", "ephemeris"),
+            "prns": ("satellites", "prns"),
+        }
+        for key, value in kw.items():
+            if value is None:
+                continue
+            if key not in sec:
+                raise ScenarioError(f"unknown scenario override {key!r}")
+            table, name = sec[key]
+            if key == "ephemeris":
+                value = str(Path(value).resolve())
+            raw.setdefault(table, {})[name] = value
+        base = self.source.parent if self.source is not None else Path.cwd()
+        return parse_scenario(raw, source=self.source, base_dir=base)
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read and validate a TOML scenario file.
+
+    Raises
+    ------
+    ScenarioError
+        The file is missing, not TOML, or any key is missing, of the wrong type or impossible.
+    """
+    path = Path(path)
+    try:
+        text = path.read_bytes()
+    except OSError as exc:
+        raise ScenarioError(f"scenario {path}: cannot read ({exc.strerror or exc})") from None
+    try:
+        raw = tomllib.loads(text.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"scenario {path}: not valid TOML ({exc})") from None
+    return parse_scenario(raw, source=path, base_dir=path.parent)
+
+
+class _Reader:
+    """Typed access to one TOML table with errors naming file and key."""
+
+    def __init__(self, table: Any, where: str):
+        if not isinstance(table, dict):
+            raise ScenarioError(f"{where}: expected a table")
+        self.t = table
+        self.where = where
+        self.used: set[str] = set()
+
+    def _get(self, key: str, default: Any) -> Any:
+        self.used.add(key)
+        if key not in self.t:
+            if default is _REQUIRED:
+                raise ScenarioError(f"{self.where}: missing key {key!r}")
+            return default
+        return self.t[key]
+
+    def num(self, key: str, default: Any = None, *, lo: float | None = None,
+            hi: float | None = None, lo_open: bool = False) -> float:
+        v = self._get(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ScenarioError(f"{self.where}.{key}: expected a finite number, got {v!r}")
+        v = float(v)
+        if lo is not None and (v < lo or (lo_open and v == lo)):
+            op = ">" if lo_open else ">="
+            raise ScenarioError(f"{self.where}.{key}: must be {op} {lo:g}, got {v:g}")
+        if hi is not None and v > hi:
+            raise ScenarioError(f"{self.where}.{key}: must be <= {hi:g}, got {v:g}")
+        return v
+
+    def int_(self, key: str, default: Any = None, *, lo: int | None = None,
+             hi: int | None = None) -> int:
+        v = self._get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ScenarioError(f"{self.where}.{key}: expected an integer, got {v!r}")
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            raise ScenarioError(f"{self.where}.{key}: must be in [{lo}, {hi}], got {v}")
+        return v
+
+    def str_(self, key: str, default: Any = None, choices: tuple[str, ...] | None = None) -> str:
+        v = self._get(key, default)
+        if not isinstance(v, str):
+            raise ScenarioError(f"{self.where}.{key}: expected a string, got {v!r}")
+        if choices is not None and v not in choices:
+            raise ScenarioError(f"{self.where}.{key}: {v!r} is not one of {', '.join(choices)}")
+        return v
+
+    def vec3(self, key: str, default: Any = None) -> tuple[float, float, float]:
+        v = self._get(key, default)
+        if (not isinstance(v, list) or len(v) != 3
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                           and math.isfinite(x) for x in v)):
+            raise ScenarioError(f"{self.where}.{key}: expected 3 finite numbers, got {v!r}")
+        return (float(v[0]), float(v[1]), float(v[2]))
+
+    def check_unknown(self) -> None:
+        extra = sorted(set(self.t) - self.used)
+        if extra:
+            raise ScenarioError(f"{self.where}: unknown key(s) {', '.join(map(repr, extra))}")
+
+
+_REQUIRED = object()
+
+
+def _parse_prn(value: Any, where: str) -> int:
+    """Accept 21, "21" or "C21"; return the PRN number 1..63."""
+    from ..errors import UnknownPrnError
+
+    s = str(value).strip().upper()
+    if s.startswith("C"):
+        s = s[1:]
+    try:
+        prn = int(s)
+    except ValueError:
+        raise ScenarioError(f"{where}: {value!r} is not a BDS PRN (1..63 or C01..C63)") from None
+    if not 1 <= prn <= 63:
+        raise UnknownPrnError(f"{where}: unknown BDS PRN {value!r} (valid: 1..63)")
+    return prn
+
+
+def _parse_time(value: Any, scale: str, where: str) -> tuple[int, float]:
+    if isinstance(value, _dt.datetime):
+        t = value.replace(tzinfo=None)
+    elif isinstance(value, str):
+        try:
+            t = _dt.datetime.fromisoformat(value.replace("Z", ""))
+        except ValueError:
+            raise ScenarioError(f"{where}: {value!r} is not an ISO date-time") from None
+    else:
+        raise ScenarioError(f"{where}: expected an ISO date-time, got {value!r}")
+    try:
+        return utc_to_bdt(t) if scale == "UTC" else datetime_to_bdt(t)
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+
+
+def _parse_segment(seg: Any, i: int, where: str) -> dict[str, Any]:
+    w = f"{where}.motion[{i}]"
+    r = _Reader(seg, w)
+    kind = r.str_("type", _REQUIRED, tuple(SEGMENT_KEYS))
+    required, optional = SEGMENT_KEYS[kind]
+    out: dict[str, Any] = {"type": kind}
+    for key in required + optional:
+        if key == "direction":
+            out[key] = r.str_(key, _REQUIRED if key in required else None, ("left", "right"))
+        elif key in required:
+            out[key] = r.num(key, _REQUIRED)
+        elif key in seg:
+            out[key] = r.num(key)
+    r.check_unknown()
+    if out["duration_s"] <= 0:
+        raise ScenarioError(f"{w}.duration_s: must be > 0, got {out['duration_s']:g}")
+    if kind == "circle" and ("rate_dps" in out) == ("radius_m" in out):
+        raise ScenarioError(f"{w}: give exactly one of rate_dps or radius_m")
+    for key in ("decel_mps2", "rate_dps", "radius_m"):
+        if key in out and out[key] <= 0:
+            raise ScenarioError(f"{w}.{key}: must be > 0, got {out[key]:g}")
+    return out
+
+
+def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
+                   base_dir: Path | None = None) -> Scenario:
+    """Validate a scenario given as the parsed TOML dictionary.
+
+    Parameters
+    ----------
+    raw : dict
+        Parsed TOML (see ``docs/scenario.md``).
+    source : Path, optional
+        File the dictionary came from (for messages).
+    base_dir : Path, optional
+        Directory relative ephemeris paths are resolved against (the scenario's folder).
+    """
+    where = str(source) if source is not None else "scenario"
+    if not isinstance(raw, dict):
+        raise ScenarioError(f"{where}: expected TOML tables at the top level")
+    known = {"scenario", "time", "start", "motion", "imu", "satellites", "signal", "outage",
+             "receiver_clock"}
+    extra = sorted(set(raw) - known)
+    if extra:
+        raise ScenarioError(f"{where}: unknown table(s) {', '.join(map(repr, extra))}")
+    base_dir = base_dir or Path.cwd()
+
+    sc = _Reader(raw.get("scenario", {}), f"{where}: [scenario]")
+    name = sc.str_("name", "unnamed")
+    duration = sc.num("duration_s", _REQUIRED, lo=0.0, lo_open=True)
+    seed = sc.int_("seed", 0, lo=0)
+    sc.check_unknown()
+
+    tm = _Reader(raw.get("time"), f"{where}: [time]") if "time" in raw else None
+    if tm is None:
+        raise ScenarioError(f"{where}: missing table [time]")
+    scale = tm.str_("scale", "BDT", ("BDT", "UTC"))
+    week, sow = _parse_time(tm._get("start", _REQUIRED), scale, f"{where}: [time].start")
+    tm.check_unknown()
+
+    st = _Reader(raw.get("start", {}), f"{where}: [start]")
+    lat = st.num("lat_deg", _REQUIRED, lo=-90.0, hi=90.0)
+    lon = st.num("lon_deg", _REQUIRED, lo=-180.0, hi=360.0)
+    h = st.num("height_m", 0.0, lo=-500.0, hi=1.0e5)
+    v_n = st.vec3("velocity_enu_mps", [0.0, 0.0, 0.0])
+    att_deg = st.vec3("attitude_pitch_roll_yaw_deg", [0.0, 0.0, 0.0])
+    st.check_unknown()
+
+    motion_raw = raw.get("motion", [])
+    if not isinstance(motion_raw, list):
+        raise ScenarioError(f"{where}: [[motion]] must be an array of tables")
+    motion = tuple(_parse_segment(s, i, where) for i, s in enumerate(motion_raw))
+    total = sum(s["duration_s"] for s in motion)
+    if motion and total + 1e-9 < duration:
+        # The last state is held: that is documented, not an error.
+        pass
+
+    im = _Reader(raw.get("imu", {}), f"{where}: [imu]")
+    grade = im.str_("grade", "mems", tuple(IMU_GRADES))
+    g = IMU_GRADES[grade]
+    imu = ImuSpec(
+        grade=grade,
+        rate_hz=im.num("rate_hz", 200.0, lo=1.0, hi=10000.0),
+        accel_scale_factor_ppm=im.num("accel_scale_factor_ppm", g[0], lo=0.0),
+        gyro_scale_factor_ppm=im.num("gyro_scale_factor_ppm", g[1], lo=0.0),
+        accel_bias_mg=im.num("accel_bias_mg", g[2], lo=0.0),
+        gyro_bias_deg_h=im.num("gyro_bias_deg_h", g[3], lo=0.0),
+        accel_random_walk_mps_sqrth=im.num("accel_random_walk_mps_sqrth", g[4], lo=0.0),
+        gyro_random_walk_deg_sqrth=im.num("gyro_random_walk_deg_sqrth", g[5], lo=0.0),
+    )
+    im.check_unknown()
+
+    sa = _Reader(raw.get("satellites", {}), f"{where}: [satellites]")
+    eph = Path(sa.str_("ephemeris", _REQUIRED))
+    if not eph.is_absolute():
+        eph = (base_dir / eph).resolve()
+    sel = sa._get("prns", "auto")
+    if sel == "auto":
+        prns = None
+    elif isinstance(sel, list) and sel:
+        prns = tuple(_parse_prn(p, f"{where}: [satellites].prns") for p in sel)
+        if len(set(prns)) != len(prns):
+            raise ScenarioError(f"{where}: [satellites].prns: duplicate PRN in {sel!r}")
+    else:
+        raise ScenarioError(f"{where}: [satellites].prns: expected \"auto\" or a list of PRNs")
+    count = sa.int_("count", len(prns) if prns else 7, lo=1, hi=63)
+    mask = sa.num("elevation_mask_deg", 10.0, lo=-5.0, hi=90.0)
+    cn0 = sa.num("cn0_dbhz", 40.0, lo=0.0, hi=70.0)
+    per = sa._get("cn0_per_prn", {})
+    if not isinstance(per, dict):
+        raise ScenarioError(f"{where}: [satellites].cn0_per_prn must be a table")
+    cn0_per = {}
+    for k, v in per.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 70:
+            raise ScenarioError(f"{where}: [satellites].cn0_per_prn.{k}: expected 0..70 dB-Hz")
+        cn0_per[_parse_prn(k, f"{where}: [satellites].cn0_per_prn")] = float(v)
+    sa.check_unknown()
+    satellites = SatelliteSpec(eph, prns, count, mask, cn0, cn0_per)
+
+    sg = _Reader(raw.get("signal", {}), f"{where}: [signal]")
+    fs = sg.num("sampling_rate_hz", 25.0e6, lo=1.0e6, hi=200.0e6)
+    f_if = sg.num("if_hz", 0.0, lo=-fs / 2, hi=fs / 2)
+    kind = sg.str_("kind", "complex", ("complex", "real"))
+    fmt = sg.str_("sample_format", "iq_int8" if kind == "complex" else "real_int8",
+                  SAMPLE_FORMATS)
+    bits = sg.int_("quantization_bits", 4, lo=1, hi=16)
+    iono = sg.str_("ionosphere", "klobuchar", ("klobuchar", "none"))
+    tropo = sg.str_("troposphere", "saastamoinen", ("saastamoinen", "none"))
+    chunk_ms = sg.int_("chunk_ms", 50, lo=1, hi=1000)
+    sg.check_unknown()
+    is_complex = kind == "complex"
+    if fmt.startswith("iq") != is_complex:
+        raise ScenarioError(
+            f"{where}: [signal].sample_format {fmt!r} does not match kind {kind!r}")
+    fmt_bits = {"iq_int8": 8, "real_int8": 8, "iq_int16": 16, "real_int16": 16, "iq_int4": 4}
+    if bits > fmt_bits[fmt]:
+        raise ScenarioError(
+            f"{where}: [signal].quantization_bits {bits} does not fit format {fmt!r}")
+    if not is_complex and f_if <= 0:
+        raise ScenarioError(f"{where}: [signal].if_hz must be > 0 for real sampling")
+    signal = SignalSpec(fs, f_if, is_complex, fmt, bits, iono, tropo, chunk_ms)
+
+    outages_raw = raw.get("outage", [])
+    if not isinstance(outages_raw, list):
+        raise ScenarioError(f"{where}: [[outage]] must be an array of tables")
+    outages = []
+    for i, o in enumerate(outages_raw):
+        w = f"{where}: [[outage]][{i}]"
+        r = _Reader(o, w)
+        p = r._get("prn", _REQUIRED)
+        prn = None if p == "all" else _parse_prn(p, f"{w}.prn")
+        t0 = r.num("start_s", _REQUIRED, lo=0.0)
+        t1 = r.num("end_s", _REQUIRED, lo=0.0)
+        if t1 <= t0:
+            raise ScenarioError(f"{w}: end_s ({t1:g}) must be after start_s ({t0:g})")
+        blocked = r._get("blockage", False)
+        if not isinstance(blocked, bool):
+            raise ScenarioError(f"{w}.blockage: expected true or false")
+        if blocked:
+            if "attenuation_db" in o:
+                raise ScenarioError(f"{w}: give blockage = true or attenuation_db, not both")
+            att_db = math.inf
+        else:
+            att_db = r.num("attenuation_db", _REQUIRED, lo=0.0)
+        r.check_unknown()
+        outages.append(Outage(prn, t0, t1, att_db))
+
+    ck = _Reader(raw.get("receiver_clock", {}), f"{where}: [receiver_clock]")
+    clock = ReceiverClock(ck.num("bias_s", 0.0, lo=-1.0, hi=1.0),
+                          ck.num("drift_s_s", 0.0, lo=-1e-4, hi=1e-4))
+    ck.check_unknown()
+
+    raw_canon = json.loads(json.dumps(raw, default=str))
+    raw_canon.setdefault("satellites", {})["ephemeris"] = str(eph)
+    return Scenario(
+        name=name, source=source, week=week, sow=sow, duration_s=duration, seed=seed,
+        lat=math.radians(lat), lon=math.radians(lon), height=h, v_n=v_n,
+        att=tuple(math.radians(a) for a in att_deg),  # type: ignore[arg-type]
+        motion=motion, imu=imu, satellites=satellites, signal=signal,
+        outages=tuple(outages), clock=clock, raw=raw_canon,
+    )
