@@ -1,0 +1,146 @@
+"""``sdr-di generate``: scenario -> IF file + IMU file + truth file + metadata sidecar.
+
+Outputs in ``out_dir`` (``NAME`` = scenario name unless given):
+
+``NAME.bin``        IF samples (format in the sidecar)
+``NAME.json``       metadata sidecar (:mod:`sdr_di.io.sidecar`), written last
+``NAME_imu.csv``    200 Hz IMU data (:mod:`sdr_di.io.imu_files`)
+``NAME_truth.csv``  200 Hz truth (position, velocity, attitude, specific force, rates)
+
+Each file is written under ``<file>.part`` and renamed when complete; on any error nothing
+new carries a final name.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..errors import OutputError
+from ..io.atomic import atomic_open, ensure_output_dir
+from ..io.imu_files import write_imu, write_truth
+from ..io.sidecar import write_sidecar
+from ..orbits.rinex_nav import load_nav
+from ..scenario.schema import Scenario
+from ..scenario.motion import build_segments
+from ..timebase import bdt_minus_utc, bdt_to_datetime
+from .geometry import ReceiverPath
+from .ifgen import IfGenerator, build_satellites
+from .imu import ImuErrorModel
+from .trajectory import generate_trajectory
+
+
+def simulate_truth(sc: Scenario):
+    """Truth trajectory of a scenario at the IMU rate (true time from the start)."""
+    return generate_trajectory(sc.lat, sc.lon, sc.height, np.array(sc.v_n), np.array(sc.att),
+                               build_segments(sc.motion, sc.duration_s), rate_hz=sc.imu.rate_hz)
+
+
+def imu_model(sc: Scenario) -> ImuErrorModel:
+    """IMU error model of a scenario."""
+    i = sc.imu
+    return ImuErrorModel(
+        accel_scale_factor_ppm=i.accel_scale_factor_ppm,
+        gyro_scale_factor_ppm=i.gyro_scale_factor_ppm,
+        accel_bias_mg=i.accel_bias_mg,
+        gyro_bias_deg_h=i.gyro_bias_deg_h,
+        accel_random_walk=i.accel_random_walk_mps_sqrth,
+        gyro_random_walk=i.gyro_random_walk_deg_sqrth,
+    )
+
+
+def make_generator(sc: Scenario, truth=None) -> IfGenerator:
+    """Build the IF generator of a scenario (loads ephemeris, selects satellites)."""
+    nav = load_nav(sc.satellites.ephemeris)
+    truth = simulate_truth(sc) if truth is None else truth
+    path = ReceiverPath(truth.t, truth.r_e, truth.v_e)
+    iono = nav.iono if sc.signal.ionosphere == "klobuchar" else None
+    sats = build_satellites(sc, nav, path, iono)
+    return IfGenerator(sc, sats, path, iono)
+
+
+def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None,
+                   progress: bool = True) -> dict[str, Path]:
+    """Generate all outputs of a scenario; returns {label: path}.
+
+    Raises
+    ------
+    SdrDiError
+        Bad scenario, ephemeris or output problems (see :mod:`sdr_di.errors`).
+    """
+    out_dir = ensure_output_dir(out_dir)
+    name = name or sc.name
+    if not name or "/" in name or name.startswith("."):
+        raise OutputError(f"invalid output name {name!r}")
+    truth = simulate_truth(sc)
+    gen = make_generator(sc, truth)
+    rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
+    imu = imu_model(sc).apply(truth, rng)
+
+    paths = {
+        "if": out_dir / f"{name}.bin",
+        "imu": out_dir / f"{name}_imu.csv",
+        "truth": out_dir / f"{name}_truth.csv",
+        "metadata": out_dir / f"{name}.json",
+    }
+    duration = gen.n_samples / gen.fs
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=round(duration, 3), unit="s", desc=f"generate {name}",
+                   bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s [{elapsed}<{remaining}]")
+    try:
+        with atomic_open(paths["if"]) as fh:
+            for chunk in gen.chunks():
+                fh.write(chunk.tobytes())
+                if bar is not None:
+                    bar.update(chunk.shape[0] / gen.fs)
+    finally:
+        if bar is not None:
+            bar.close()
+    try:
+        week, sow = sc.week, sc.sow
+        bdt = bdt_to_datetime(week, sow)
+        write_imu(paths["imu"], imu, week=week, sow=sow)
+        write_truth(paths["truth"], truth, week=week, sow=sow)
+        utc = bdt - _dt.timedelta(seconds=bdt_minus_utc(bdt))
+        meta = {
+            "if_file": paths["if"].name,
+            "sampling_rate_hz": gen.fs,
+            "if_hz": sc.signal.if_hz,
+            "carrier_hz": 1268.52e6,
+            "sample_format": sc.signal.sample_format,
+            "quantization_bits": sc.signal.quantization_bits,
+            "spectrum_inverted": False,
+            "n_samples": gen.n_samples,
+            "duration_s": duration,
+            "start": {"week": week, "sow": sow, "bdt": bdt.isoformat(), "utc": utc.isoformat()},
+            "receiver_clock": {"bias_s": sc.clock.bias_s, "drift_s_s": sc.clock.drift_s_s},
+            "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain},
+            "ionosphere": "klobuchar" if gen.iono is not None else "none",
+            "klobuchar": None if gen.iono is None else {"alpha": list(gen.iono.alpha),
+                                                        "beta": list(gen.iono.beta)},
+            "troposphere": sc.signal.troposphere,
+            "scenario": {"name": sc.name, "hash": sc.hash, "seed": sc.seed,
+                         "file": str(sc.source) if sc.source else None},
+            "satellites": gen.start_summary(),
+            "outages": [{"prn": o.prn, "start_s": o.start_s, "end_s": o.end_s,
+                         "attenuation_db": None if math.isinf(o.attenuation_db)
+                         else o.attenuation_db} for o in sc.outages],
+            "imu_file": paths["imu"].name,
+            "truth_file": paths["truth"].name,
+            "ephemeris_file": str(sc.satellites.ephemeris),
+            "generator": {"name": "sdr-di", "version": __version__},
+        }
+        write_sidecar(paths["metadata"], meta)
+    except BaseException:
+        for key in ("if", "imu", "truth"):
+            paths[key].unlink(missing_ok=True)
+        raise
+    return paths
+

@@ -1,0 +1,285 @@
+"""B3I IF generator: scenario + ephemeris + truth -> quantized IF sample chunks.
+
+Data flow per chunk of ``chunk_ms`` milliseconds (bounded memory whatever the file length):
+
+1. node grid every ``N = round(fs / 1000)`` samples; receiver-clock time of node ``j`` is
+   ``s_j = j N / fs`` after the start; true time ``t_j = (s_j - b0) / (1 + drift)``;
+2. :func:`~sdr_di.sim.geometry.satellite_delays` gives each satellite's code and carrier delay
+   at the nodes (light time, Sagnac, satellite clock with relativity, Klobuchar ionosphere,
+   Saastamoinen troposphere);
+3. code phase ``(t_sv - t0_nav) * 10.23e6 mod 10230`` and code-epoch index, carrier phase
+   ``f_IF s - f_B3I D_carr`` and per-sample increments are handed to the numba kernel
+   (:mod:`~sdr_di.sim._numba_ifgen`) with the data x NH symbols of the epochs in the chunk;
+4. the kernel sums the satellites, adds white Gaussian noise (unit variance per component)
+   and quantizes.
+
+Amplitude from C/N0 with noise variance sigma^2 = 1 per component: complex baseband
+``A = sqrt(2 C/N0 / fs)`` (C = A^2, N0 = 2 sigma^2 / fs); real IF ``A = sqrt(4 C/N0 / fs)``
+(C = A^2 / 2, N0 = 2 sigma^2 / fs).
+
+Automatic gain: the quantizer step is set once from the expected input power (noise plus all
+nominal signals), at the step that maximizes the SNR of a uniform quantizer for a Gaussian
+input (Max 1960: 0.9957 sigma for 4 levels, 0.5860 for 8, 0.3352 for 16, 0.1881 for 32,
+0.1041 for 64, 0.0568 for 128, 0.0308 for 256; beyond 8 bits a 4-sigma full scale). Like a
+front-end AGC with a slow loop, it does not follow the C/N0 changes of outages.
+
+Sample 0 is at receiver-clock time ``(week, sow)`` of the scenario start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Iterator
+
+import numpy as np
+
+from ..constants import CHIP_RATE_B3I, F_B3I, SECONDS_PER_WEEK, is_geo
+from ..errors import NoEphemerisError, ScenarioError
+from ..io.sample_formats import get_format, pack_iq_int4, quantizer_levels
+from ..orbits.ephemeris import Ephemeris, Klobuchar
+from ..scenario.schema import Scenario
+from ..signal.codes import NH20_BITS, b3i_code
+from ..signal.navmsg import NavBits, nav_bits
+from ._numba_ifgen import LUT_COS, LUT_SIN, synthesize_chunk
+from .geometry import ReceiverPath, satellite_delays
+
+#: Noise streams per chunk (fixed, so files do not depend on the machine's core count).
+N_NOISE_STREAMS = 4
+#: Optimal uniform-quantizer step / sigma for 2**bits levels (Max 1960), bits 1..8.
+_MAX_STEP = {1: None, 2: 0.9957, 3: 0.5860, 4: 0.3352, 5: 0.1881, 6: 0.1041, 7: 0.0568,
+             8: 0.0308}
+
+
+def quantizer_gain(bits: int, sigma: float) -> float:
+    """Gain [LSB per unit input] of the automatic gain control for ``bits`` bits.
+
+    Parameters
+    ----------
+    bits : int
+        Quantization bits (mid-tread grid ``-L..L``).
+    sigma : float
+        Expected RMS of each input component (noise plus signals).
+    """
+    if bits == 1:
+        return 1.0 / sigma
+    if bits in _MAX_STEP:
+        return 1.0 / (_MAX_STEP[bits] * sigma)
+    return quantizer_levels(bits) / (4.0 * sigma)
+
+
+def cn0_to_amplitude(cn0_dbhz: float, fs: float, complex_baseband: bool) -> float:
+    """Signal amplitude for a C/N0 [dB-Hz] with unit noise variance per component."""
+    cn0 = 10.0 ** (cn0_dbhz / 10.0)
+    return math.sqrt((2.0 if complex_baseband else 4.0) * cn0 / fs)
+
+
+@dataclasses.dataclass
+class SatelliteSignal:
+    """One simulated satellite: its record, message stream and strength."""
+
+    prn: int
+    eph: Ephemeris
+    nav: NavBits
+    cn0_dbhz: float
+    amplitude: float
+    elevation_deg: float = float("nan")
+    azimuth_deg: float = float("nan")
+
+    @property
+    def is_d1(self) -> bool:
+        return not is_geo(self.prn)
+
+
+def _week_seconds_between(week_a: int, sow_a: float, week_b: int, sow_b: float) -> float:
+    return (week_a - week_b) * SECONDS_PER_WEEK + (sow_a - sow_b)
+
+
+def select_satellites(sc: Scenario, nav, path: ReceiverPath,
+                      iono: Klobuchar | None) -> list[tuple[int, Ephemeris, float, float]]:
+    """Choose the simulated satellites: (prn, record, elevation [rad], azimuth [rad]).
+
+    ``prns = "auto"``: the ``count`` highest satellites above the elevation mask at the start
+    that have a healthy record valid then. An explicit list: each PRN must have a record
+    (:class:`~sdr_di.errors.NoEphemerisError`) and be above the horizon.
+    """
+    mask = math.radians(sc.satellites.elevation_mask_deg)
+    zero = np.zeros(1)
+    cands = []
+    prns = sc.satellites.prns if sc.satellites.prns is not None else tuple(nav.prns)
+    for prn in prns:
+        try:
+            eph = nav.select(prn, sc.week, sc.sow)
+        except NoEphemerisError:
+            if sc.satellites.prns is not None:
+                raise
+            continue
+        d = satellite_delays(eph, path, zero, sc.sow, zero, None, False)
+        cands.append((prn, eph, float(d.el[0]), float(d.az[0])))
+    if sc.satellites.prns is not None:
+        low = [f"C{p:02d} ({math.degrees(e):.1f} deg)" for p, _, e, _ in cands if e < 0]
+        if low:
+            raise ScenarioError(f"satellites below the horizon at the start: {', '.join(low)}")
+        return cands
+    up = sorted((c for c in cands if c[2] >= mask), key=lambda c: -c[2])
+    if len(up) < sc.satellites.count:
+        raise ScenarioError(
+            f"only {len(up)} BDS satellites with ephemeris are above "
+            f"{sc.satellites.elevation_mask_deg:g} deg at the start; the scenario asks for "
+            f"{sc.satellites.count}")
+    return up[: sc.satellites.count]
+
+
+class IfGenerator:
+    """Streams quantized IF chunks for a scenario.
+
+    Parameters
+    ----------
+    sc : Scenario
+        Validated scenario.
+    sats : list of SatelliteSignal
+        Simulated satellites.
+    path : ReceiverPath
+        Receiver truth trajectory.
+    iono : Klobuchar or None
+        Ionosphere coefficients used (None: no ionosphere).
+    """
+
+    def __init__(self, sc: Scenario, sats: list[SatelliteSignal], path: ReceiverPath,
+                 iono: Klobuchar | None):
+        self.sc = sc
+        self.sats = sats
+        self.path = path
+        self.iono = iono if sc.signal.ionosphere == "klobuchar" else None
+        sig = sc.signal
+        self.fs = sig.sampling_rate_hz
+        self.n_per_node = int(round(self.fs / 1000.0))
+        self.node_dt = self.n_per_node / self.fs
+        self.fmt = get_format(sig.sample_format)
+        self.ncomp = 2 if sig.complex_baseband else 1
+        self.level = quantizer_levels(sig.quantization_bits)
+        sig_pow = sum(s.amplitude**2 / 2.0 for s in sats)
+        self.sigma_in = math.sqrt(1.0 + sig_pow)
+        self.gain = quantizer_gain(sig.quantization_bits, self.sigma_in)
+        self.n_nodes_total = int(math.ceil(sc.duration_s / self.node_dt - 1e-9))
+        self.n_samples = self.n_nodes_total * self.n_per_node
+        self.codes = np.stack([b3i_code(s.prn) for s in sats]).astype(np.float32)
+        self.nh = 1.0 - 2.0 * NH20_BITS.astype(np.float32)
+        self.chunk_nodes = sig.chunk_ms
+
+    # -- geometry on the node grid ------------------------------------------------------
+    def node_times(self, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Receiver time s [s], true time t [s] and clock bias b [s] of nodes ``j``."""
+        s = j * self.node_dt
+        ck = self.sc.clock
+        t = (s - ck.bias_s) / (1.0 + ck.drift_s_s)
+        return s, t, ck.bias_s + ck.drift_s_s * t
+
+    def node_state(self, j0: int, n: int) -> dict[str, np.ndarray]:
+        """Kernel inputs for node intervals ``j0 .. j0 + n - 1``."""
+        j = np.arange(j0, j0 + n + 1, dtype=np.float64)
+        s, t, b = self.node_times(j)
+        sig = self.sc.signal
+        n_sat = len(self.sats)
+        chip0 = np.empty((n_sat, n))
+        ms0 = np.empty((n_sat, n), np.int64)
+        dchip = np.empty((n_sat, n))
+        ph0 = np.empty((n_sat, n))
+        dph = np.empty((n_sat, n))
+        amp = np.empty((n_sat, n), np.float32)
+        sym_lists, bases = [], np.empty(n_sat, np.int64)
+        for k, sat in enumerate(self.sats):
+            d = satellite_delays(sat.eph, self.path, t, self.sc.sow, b, self.iono,
+                                 sig.troposphere == "saastamoinen")
+            x = _week_seconds_between(self.sc.week, self.sc.sow, sat.nav.week, sat.nav.t0)
+            u_ms = (x + s - d.d_code) * 1000.0  # code epochs since the first nav bit
+            ms = np.floor(u_ms).astype(np.int64)
+            chip0[k] = ((u_ms - ms) * 10230.0)[:-1]
+            ms0[k] = ms[:-1]
+            du = np.diff(s) - np.diff(d.d_code)
+            dchip[k] = du * CHIP_RATE_B3I / self.n_per_node
+            phi = sig.if_hz * s - F_B3I * d.d_carr
+            ph0[k] = np.mod(phi[:-1], 1.0)
+            dph[k] = (sig.if_hz * np.diff(s) - F_B3I * np.diff(d.d_carr)) / self.n_per_node
+            amp[k] = sat.amplitude * self.outage_factor(sat.prn, t[:-1])
+            m = np.arange(ms.min(), ms.max() + 2)
+            if sat.is_d1:
+                bits = sat.nav.bits[m // 20]
+                sym = (1.0 - 2.0 * bits) * self.nh[m % 20]
+            else:
+                sym = 1.0 - 2.0 * sat.nav.bits[m // 2].astype(np.float32)
+            sym_lists.append(sym.astype(np.float32))
+            bases[k] = m[0]
+        width = max(len(x) for x in sym_lists)
+        sym = np.ones((n_sat, width), np.float32)
+        for k, x in enumerate(sym_lists):
+            sym[k, : len(x)] = x
+        return dict(chip0=chip0, ms0=ms0, dchip=dchip, ph0=ph0, dph=dph, amp=amp, sym=sym,
+                    sym_base=bases, s=s, t=t)
+
+    def outage_factor(self, prn: int, t: np.ndarray) -> np.ndarray:
+        """Amplitude factor (0 = blocked) of the outage schedule at true times ``t``."""
+        f = np.ones_like(t)
+        for o in self.sc.outages:
+            if o.prn is None or o.prn == prn:
+                inside = (t >= o.start_s) & (t < o.end_s)
+                f[inside] *= 0.0 if math.isinf(o.attenuation_db) else 10 ** (-o.attenuation_db / 20)
+        return f
+
+    # -- sample streaming --------------------------------------------------------------
+    def noise_streams(self, chunk_index: int) -> tuple:
+        """Independent noise generators of one chunk (seeded from scenario seed and index)."""
+        ss = np.random.SeedSequence([self.sc.seed, 0x1F5D1, chunk_index])
+        return tuple(np.random.Generator(np.random.SFC64(c)) for c in ss.spawn(N_NOISE_STREAMS))
+
+    def chunks(self, n_nodes: int | None = None) -> Iterator[np.ndarray]:
+        """Yield quantized chunks in the container layout of the sample format.
+
+        Each chunk is ``(n, 2)`` / ``(n, 1)`` int8 or int16, or ``(n,)`` uint8 for ``iq_int4``.
+
+        Parameters
+        ----------
+        n_nodes : int, optional
+            Generate only the first ``n_nodes`` node intervals (~ms); default the whole file.
+        """
+        total = self.n_nodes_total if n_nodes is None else min(n_nodes, self.n_nodes_total)
+        dtype = np.int16 if self.fmt.dtype.itemsize == 2 else np.int8
+        for ci, j0 in enumerate(range(0, total, self.chunk_nodes)):
+            n = min(self.chunk_nodes, total - j0)
+            st = self.node_state(j0, n)
+            out = np.empty((n * self.n_per_node, self.ncomp), dtype)
+            synthesize_chunk(out, self.noise_streams(ci), self.n_per_node, self.codes,
+                             st["chip0"], st["ms0"], st["dchip"], st["ph0"], st["dph"],
+                             st["amp"], st["sym"], st["sym_base"], LUT_COS, LUT_SIN,
+                             np.float32(self.gain), self.level)
+            if self.fmt.name == "iq_int4":
+                yield pack_iq_int4(out[:, 0], out[:, 1])
+            else:
+                yield out
+
+    def start_summary(self) -> list[dict]:
+        """Per-satellite state at sample 0 for the sidecar."""
+        st = self.node_state(0, 1)
+        rows = []
+        for k, sat in enumerate(self.sats):
+            doppler = st["dph"][k, 0] * self.fs - self.sc.signal.if_hz
+            rows.append(dict(prn=sat.prn, nav="D1" if sat.is_d1 else "D2",
+                             cn0_dbhz=sat.cn0_dbhz, elevation_deg=round(sat.elevation_deg, 3),
+                             azimuth_deg=round(sat.azimuth_deg, 3),
+                             doppler_hz=round(float(doppler), 3),
+                             code_phase_chips=round(float(st["chip0"][k, 0]), 4),
+                             toe=sat.eph.toe, week=sat.eph.week))
+        return rows
+
+
+def build_satellites(sc: Scenario, nav, path: ReceiverPath,
+                     iono: Klobuchar | None) -> list[SatelliteSignal]:
+    """Select satellites and build their navigation-message streams."""
+    chosen = select_satellites(sc, nav, path, iono)
+    sats = []
+    for prn, eph, el, az in chosen:
+        cn0 = sc.satellites.cn0_per_prn.get(prn, sc.satellites.cn0_dbhz)
+        bits = nav_bits(eph, sc.week, sc.sow - 1.0, sc.duration_s + 2.0, iono=iono)
+        amp = cn0_to_amplitude(cn0, sc.signal.sampling_rate_hz, sc.signal.complex_baseband)
+        sats.append(SatelliteSignal(prn, eph, bits, cn0, amp, math.degrees(el), math.degrees(az)))
+    return sats
