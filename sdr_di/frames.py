@@ -123,3 +123,34 @@ def elevation_azimuth(r_rx_e, r_sat_e) -> tuple[np.ndarray, np.ndarray]:
     el = np.arctan2(enu[..., 2], np.hypot(enu[..., 0], enu[..., 1]))
     az = np.arctan2(enu[..., 0], enu[..., 1]) % (2 * np.pi)
     return el, az
+
+
+def transport_rate_n(lat, h, v_n) -> np.ndarray:
+    """Transport rate omega_en^n [rad/s] (..., 3): rotation of ENU w.r.t. ECEF, in ENU.
+
+    ``omega_en^n = (-v_N / (R_M + h), v_E / (R_N + h), v_E tan(lat) / (R_N + h))`` for
+    geodetic latitude ``lat`` [rad], ellipsoidal height ``h`` [m] and ENU velocity ``v_n``
+    [m/s] (..., 3). Singular at the poles (ENU itself is).
+    """
+    lat = np.asarray(lat, float)
+    h = np.asarray(h, float)
+    v = np.asarray(v_n, float)
+    R_M, R_N = radii_of_curvature(lat)
+    ve, vn = v[..., 0], v[..., 1]
+    return np.stack(
+        [-vn / (R_M + h), ve / (R_N + h), ve * np.tan(lat) / (R_N + h)], axis=-1
+    )
+
+
+def skew(v) -> np.ndarray:
+    """Cross-product matrix [v x] (..., 3, 3) of a vector (..., 3): ``skew(a) @ b = a x b``."""
+    v = np.asarray(v, float)
+    z = np.zeros_like(v[..., 0])
+    return np.stack(
+        [
+            np.stack([z, -v[..., 2], v[..., 1]], axis=-1),
+            np.stack([v[..., 2], z, -v[..., 0]], axis=-1),
+            np.stack([-v[..., 1], v[..., 0], z], axis=-1),
+        ],
+        axis=-2,
+    )
