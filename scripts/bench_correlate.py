@@ -1,0 +1,101 @@
+#!/usr/bin/env python
+"""Correlator throughput: sample-channels per second of the numba E/P/L kernel.
+
+Usage::
+
+    python scripts/bench_correlate.py [--channels 7] [--fs 25e6] [--ms 1] [--seconds 2]
+                                      [--threads 1 2] [--real]
+
+For each thread count, correlates ``--channels`` channels (E/P/L, complex64 input unless
+``--real``) over 1-ms coherent intervals at ``--fs`` for ``--seconds`` seconds of data (random
+samples, random code phases and Dopplers, as in tracking) and prints the wall time, the
+throughput in sample-channels per second and the real-time factor (data seconds processed per
+wall second for all the channels). Numba compilation is excluded (warm-up call first).
+
+``run(args)`` is the entry point for a later ``scripts/bench.py correlate`` dispatcher; ``args``
+needs the attributes ``channels``, ``fs``, ``ms``, ``seconds``, ``threads`` and ``real``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numba
+import numpy as np
+
+from sdr_di.receiver.correlator import correlate_table, padded_replicas
+
+
+def _one_rate(x: np.ndarray, table: np.ndarray, n_int: int, n_intervals: int, fs: float,
+              rng: np.random.Generator) -> float:
+    n_ch = table.shape[0]
+    theta = rng.uniform(0, 10230, n_ch)
+    rate = 10.23e6 * (1 + rng.uniform(-3e-6, 3e-6, n_ch))
+    phi = rng.uniform(0, 1, n_ch)
+    fc = rng.uniform(-5e3, 5e3, n_ch)
+    t0 = time.perf_counter()
+    for j in range(n_intervals):
+        off = (j * n_int) % (x.size - n_int + 1)
+        r = correlate_table(x[off:off + n_int], table, 10230, theta, rate, phi, fc, n_int, fs)
+        theta, phi = r.code_phase_end, r.carrier_phase_end
+    return time.perf_counter() - t0
+
+
+def run(args: argparse.Namespace) -> list[dict]:
+    """Run the benchmark and print a table; returns the rows (dicts)."""
+    rng = np.random.default_rng(1)
+    fs = float(args.fs)
+    n_int = int(round(fs * args.ms * 1e-3))
+    n_ch = int(args.channels)
+    n_block = n_int * 50
+    if args.real:
+        x = rng.normal(size=n_block).astype(np.float32)
+    else:
+        x = (rng.normal(size=n_block) + 1j * rng.normal(size=n_block)).astype(np.complex64)
+    table = padded_replicas(rng.choice(np.array([-1, 1], np.int8), size=(n_ch, 10230)))
+    n_intervals = max(1, int(round(args.seconds * 1e3 / args.ms)))
+    max_threads = numba.config.NUMBA_NUM_THREADS
+    threads = [t for t in args.threads if 1 <= t <= max_threads] or [numba.get_num_threads()]
+    print(f"machine: {os.cpu_count()} cores, numba threads available: {max_threads}")
+    print(f"correlator: {n_ch} channels x E/P/L, {'real' if args.real else 'complex'} input, "
+          f"fs = {fs / 1e6:g} MHz, {args.ms:g} ms intervals, {args.seconds:g} s of data")
+    print(f"{'threads':>7} {'wall s':>8} {'Msample-ch/s':>13} {'x real time':>12}")
+    rows = []
+    old = numba.get_num_threads()
+    try:
+        for t in threads:
+            numba.set_num_threads(t)
+            _one_rate(x, table, n_int, 2, fs, rng)  # compile / warm up
+            wall = _one_rate(x, table, n_int, n_intervals, fs, rng)
+            sc = n_intervals * n_int * n_ch / wall
+            rt = n_intervals * n_int / fs / wall
+            rows.append({"threads": t, "wall_s": wall, "sample_channels_per_s": sc,
+                         "real_time_factor": rt})
+            print(f"{t:7d} {wall:8.3f} {sc / 1e6:13.1f} {rt:12.3f}")
+    finally:
+        numba.set_num_threads(old)
+    return rows
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of the correlator benchmark (shared with a ``bench.py`` sub-command)."""
+    parser.add_argument("--channels", type=int, default=7)
+    parser.add_argument("--fs", type=float, default=25e6, help="sample rate [Hz]")
+    parser.add_argument("--ms", type=float, default=1.0, help="coherent interval [ms]")
+    parser.add_argument("--seconds", type=float, default=2.0, help="data duration [s]")
+    parser.add_argument("--threads", type=int, nargs="+",
+                        default=sorted({1, numba.config.NUMBA_NUM_THREADS}))
+    parser.add_argument("--real", action="store_true", help="real (float32) input")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(parser)
+    run(parser.parse_args(argv))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,505 @@
+"""Chunked, memory-mapped reader of IF sample files (every format of the sample registry).
+
+:class:`IfSource` opens a headerless IF file described by a ``sdr-di-if/1`` sidecar
+(:meth:`IfSource.from_sidecar`) or by explicit options (foreign recordings: GNSS-SDR,
+GNU Radio, rtl_sdr-style files...). Layouts come from :mod:`sdr_di.io.sample_formats`, the one
+registry shared with the generator; this module only adds the reader-side conversions.
+
+Reading
+-------
+Each :meth:`IfSource.read` maps just the byte range it needs with :class:`numpy.memmap`,
+converts it to ``complex64`` (I/Q formats) or ``float32`` (real formats) and drops the map, so
+the resident memory is bounded by the requested block whatever the file length (a single
+whole-file map would keep every touched page resident while it lives). Values are the stored
+integers (no scaling): a 4-bit ``iq_int8`` file gives I and Q in -7..7.
+
+Spectrum inversion (``spectrum_inverted=True``)
+    * complex formats: the samples are conjugated, so the returned stream is non-inverted and
+      ``if_hz`` is the IF of that corrected stream (a satellite with Doppler ``fd`` appears at
+      ``if_hz + fd``); on disk it sits at ``-(if_hz + fd)``.
+    * real formats: conjugation does nothing, so the spectrum is mirrored about ``fs/4``
+      instead by multiplying sample ``k`` (file index) by ``(-1)**k``: a component at ``f``
+      moves to ``fs/2 - f``. The declared ``if_hz`` is where the carrier sits in the recorded
+      (inverted) spectrum, as front-end data sheets give it; the reader reports the IF of the
+      corrected stream, ``IfSource.if_hz = fs/2 - declared``, and keeps the declared value in
+      ``IfSource.declared_if_hz``. Correlators and acquisition must use ``IfSource.if_hz``.
+
+What is checked (each failure raises :class:`~sdr_di.errors.SampleFormatError` with one line
+naming the file)
+----------------------------------------------------------------------------------------------
+* unknown sample format name (the registry's error, prefixed with the file);
+* missing file (also a sidecar whose ``if_file`` does not exist), unreadable file, empty file,
+  file shorter than one sample;
+* file holding fewer samples than the sidecar's ``n_samples`` (truncated copy or recording);
+* a trailing partial sample (file size not a multiple of the sample size) is **not** an error:
+  a :class:`IfFileWarning` names the number of trailing bytes, and only whole samples are read
+  (front ends stopped mid-buffer produce such files; the lost fraction of a sample is
+  harmless). A file longer than the sidecar's ``n_samples`` also warns and is read up to
+  ``n_samples``;
+* sampling rate not positive/finite; IF outside the Nyquist band (|IF| < fs/2 for complex,
+  0 <= IF <= fs/2 for real);
+* a heuristic check of the declared layout on up to three 64 KiB windows of the file
+  (start, middle, end; ``check_format=False`` skips it). It looks at how the bytes split into
+  the declared containers and flags only patterns that genuine data of the declared format
+  cannot produce:
+
+  - 16-bit declared (``iq_int16``/``real_int16``) on 8-bit data: the low byte of each word is
+    a narrow, peaked distribution (circular mean of the low byte > 0.2, i.e. not the uniform
+    low byte of wide 16-bit data), the high byte has the same spread as the low byte, and the
+    high byte is not the sign extension of the low byte (< 60 %; genuine 16-bit data narrow
+    enough to have a peaked low byte has |v| < 128 on > 80 % of words);
+  - 8-bit declared (``iq_int8``/``real_int8``) on 16-bit little-endian data: the odd byte is
+    the sign extension of the even byte on > 90 % of pairs with less than half its spread
+    (narrow 16-bit data), or the even bytes are flat (circular mean < 0.05) while the odd
+    bytes are peaked (> 0.3) (wide 16-bit data); genuine I/Q components or consecutive real
+    samples share one distribution (same spread, sign extension on < 40 % of pairs);
+  - 8-bit declared on packed 4-bit ``iq_int4`` data: the same test as the first on the two
+    nibbles of each byte;
+  - ``iq_int4`` declared on 8-bit data with small values: the high nibble is the sign
+    extension of the low nibble on > 90 % of bytes, with less than half its spread;
+  - an integer format declared on float32 data (``gr_complex``): >= 99 % of the 4-byte words
+    read as float32 are finite with magnitude in [1e-10, 1e10];
+  - ``gr_complex`` declared on integer data: > 1 % non-finite words, or < 90 % of the nonzero
+    words with magnitude in [1e-20, 1e20].
+
+  Windows with fewer than 4096 byte pairs, or nearly all-zero data, are not judged.
+  **Not detected**: I/Q versus real of the same container (``iq_int8`` vs ``real_int8``...:
+  identical byte statistics), big-endian 16-bit data, offset-binary (unsigned) samples,
+  8-bit data whose noise spans more than about +-100 LSB declared as 16-bit, wrong sampling
+  rate or IF (acquisition finds nothing, or finds satellites at wrong Doppler/code rates).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from ..constants import F_B3I, SECONDS_PER_WEEK
+from ..errors import SampleFormatError
+from ..io.sample_formats import SampleFormat, get_format, unpack_iq_int4
+from ..io.sidecar import read_sidecar
+
+__all__ = ["IfSource", "IfFileWarning", "check_format_statistics"]
+
+
+class IfFileWarning(UserWarning):
+    """Suspicious but readable IF file (partial trailing sample, longer than declared)."""
+
+
+# 256-entry table built with the registry's unpack: packed iq_int4 byte -> complex64.
+_I4, _Q4 = unpack_iq_int4(np.arange(256, dtype=np.uint8))
+_IQ_INT4_LUT = (_I4.astype(np.float32) + 1j * _Q4.astype(np.float32)).astype(np.complex64)
+
+_CHECK_WINDOW_BYTES = 65536
+_CHECK_MIN_PAIRS = 4096
+
+
+class IfSource:
+    """A recorded IF sample stream, read in blocks through short-lived memory maps.
+
+    Parameters
+    ----------
+    path : str or Path
+        Headerless IF file.
+    sampling_rate_hz : float
+        Sample rate ``fs`` [Hz].
+    if_hz : float
+        Intermediate frequency of the carrier [Hz] (0 for complex baseband). For a real
+        format with ``spectrum_inverted`` this is where the carrier sits in the recorded
+        spectrum; see the module notes.
+    sample_format : str
+        Name or alias in :mod:`sdr_di.io.sample_formats`.
+    spectrum_inverted : bool, optional
+        The front end inverts the spectrum (high-side LO...). Corrected on reading.
+    start_week, start_sow : int, float, optional
+        BDT week and seconds of week of sample 0 (receiver clock), when known.
+    n_samples : int, optional
+        Expected number of samples (the sidecar's): a shorter file is an error, a longer one
+        warns and is read up to ``n_samples``.
+    check_format : bool, optional
+        Run the layout heuristic (module notes) when opening. Default True.
+    carrier_hz : float, optional
+        RF carrier the IF corresponds to [Hz], for code-Doppler scaling. Default B3I.
+    meta : dict, optional
+        The sidecar contents, kept as :attr:`meta`.
+
+    Raises
+    ------
+    SampleFormatError
+        See the module notes.
+    """
+
+    def __init__(self, path: str | os.PathLike, sampling_rate_hz: float, if_hz: float,
+                 sample_format: str, spectrum_inverted: bool = False,
+                 start_week: int | None = None, start_sow: float | None = None, *,
+                 n_samples: int | None = None, check_format: bool = True,
+                 carrier_hz: float = F_B3I, meta: dict[str, Any] | None = None):
+        self.path = Path(path)
+        try:
+            self.format: SampleFormat = get_format(sample_format)
+        except SampleFormatError as exc:
+            raise SampleFormatError(f"IF file {self.path}: {exc}") from None
+        fs = float(sampling_rate_hz)
+        if not (math.isfinite(fs) and fs > 0.0):
+            raise SampleFormatError(f"IF file {self.path}: sampling rate {sampling_rate_hz!r} Hz "
+                                    "is not a positive number")
+        fif = float(if_hz)
+        if self.format.is_complex:
+            ok = math.isfinite(fif) and abs(fif) < fs / 2.0
+            band = f"|IF| < fs/2 = {fs / 2:g} Hz"
+        else:
+            ok = math.isfinite(fif) and 0.0 <= fif <= fs / 2.0
+            band = f"0 <= IF <= fs/2 = {fs / 2:g} Hz for real samples"
+        if not ok:
+            raise SampleFormatError(f"IF file {self.path}: IF {if_hz!r} Hz outside {band}")
+        self.sampling_rate_hz = fs
+        self.declared_if_hz = fif
+        self.spectrum_inverted = bool(spectrum_inverted)
+        self._mirror = self.spectrum_inverted and not self.format.is_complex
+        self.if_hz = fs / 2.0 - fif if self._mirror else fif
+        self.start_week = None if start_week is None else int(start_week)
+        self.start_sow = None if start_sow is None else float(start_sow)
+        self.carrier_hz = float(carrier_hz)
+        self.meta = meta
+
+        try:
+            size = self.path.stat().st_size
+        except FileNotFoundError:
+            raise SampleFormatError(f"IF file {self.path}: not found") from None
+        except OSError as exc:
+            raise SampleFormatError(f"IF file {self.path}: cannot stat ({exc.strerror or exc})"
+                                    ) from None
+        if not self.path.is_file():
+            raise SampleFormatError(f"IF file {self.path}: not a regular file")
+        if not os.access(self.path, os.R_OK):
+            raise SampleFormatError(f"IF file {self.path}: not readable")
+        bps = self.format.bytes_per_sample
+        if size == 0:
+            raise SampleFormatError(f"IF file {self.path}: empty file")
+        whole, rest = divmod(size, bps)
+        if whole == 0:
+            raise SampleFormatError(f"IF file {self.path}: {size} bytes, shorter than one "
+                                    f"{self.format.name} sample ({bps} bytes)")
+        if rest:
+            warnings.warn(f"IF file {self.path}: size {size} bytes is not a whole number of "
+                          f"{self.format.name} samples ({bps} bytes each); ignoring the "
+                          f"{rest} trailing byte(s) of a partial sample", IfFileWarning,
+                          stacklevel=2)
+        if n_samples is not None:
+            n_samples = int(n_samples)
+            if whole < n_samples:
+                raise SampleFormatError(
+                    f"IF file {self.path}: holds {whole} samples, the sidecar says {n_samples} "
+                    f"(truncated file: {n_samples - whole} samples missing)")
+            if whole > n_samples:
+                warnings.warn(f"IF file {self.path}: holds {whole} samples, more than the "
+                              f"sidecar's {n_samples}; reading the first {n_samples}",
+                              IfFileWarning, stacklevel=2)
+                whole = n_samples
+        self._n = int(whole)
+        if check_format:
+            problem = check_format_statistics(self.path, self.format, self._n)
+            if problem:
+                raise SampleFormatError(f"IF file {self.path}: declared {self.format.name} but "
+                                        f"{problem} (pass check_format=False to read anyway)")
+
+    # -- construction from a sidecar ---------------------------------------------------------
+    @classmethod
+    def from_sidecar(cls, path: str | os.PathLike, check_format: bool = True) -> "IfSource":
+        """Open the IF file described by a ``sdr-di-if/1`` sidecar.
+
+        Parameters
+        ----------
+        path : str or Path
+            The sidecar JSON; its ``if_file`` is relative to the sidecar's folder.
+        check_format : bool, optional
+            Run the layout heuristic.
+
+        Raises
+        ------
+        SampleFormatError
+            Unreadable or malformed sidecar, missing IF file, truncated IF file, unknown or
+            implausible format.
+        """
+        path = Path(path)
+        meta = read_sidecar(path)
+        if_path = Path(meta["if_file"])
+        if not if_path.is_absolute():
+            if_path = path.parent / if_path
+        if not if_path.exists():
+            raise SampleFormatError(f"sidecar {path}: IF file {if_path} not found")
+        start = meta.get("start") or {}
+        return cls(if_path, meta["sampling_rate_hz"], meta["if_hz"], meta["sample_format"],
+                   spectrum_inverted=bool(meta.get("spectrum_inverted", False)),
+                   start_week=start.get("week"), start_sow=start.get("sow"),
+                   n_samples=meta["n_samples"], check_format=check_format,
+                   carrier_hz=float(meta.get("carrier_hz", F_B3I)), meta=meta)
+
+    # -- properties ---------------------------------------------------------------------------
+    @property
+    def n_samples(self) -> int:
+        """Whole samples readable from the file."""
+        return self._n
+
+    @property
+    def duration_s(self) -> float:
+        """File duration ``n_samples / fs`` [s]."""
+        return self._n / self.sampling_rate_hz
+
+    @property
+    def is_complex(self) -> bool:
+        """True for I/Q formats (``read`` returns complex64), False for real (float32)."""
+        return self.format.is_complex
+
+    @property
+    def dtype(self) -> np.dtype:
+        """Element type of the blocks returned by :meth:`read`."""
+        return np.dtype(np.complex64 if self.format.is_complex else np.float32)
+
+    def sample_time(self, k: float) -> tuple[int, float]:
+        """BDT (week, seconds of week) of sample ``k`` on the receiver clock.
+
+        Raises
+        ------
+        SampleFormatError
+            The start time is unknown.
+        """
+        if self.start_week is None or self.start_sow is None:
+            raise SampleFormatError(f"IF file {self.path}: start time unknown")
+        sow = self.start_sow + k / self.sampling_rate_hz
+        dw = math.floor(sow / SECONDS_PER_WEEK)
+        return self.start_week + dw, sow - dw * SECONDS_PER_WEEK
+
+    def __repr__(self) -> str:
+        return (f"IfSource({str(self.path)!r}, fs={self.sampling_rate_hz:g} Hz, "
+                f"if={self.if_hz:g} Hz, format={self.format.name}, n={self._n}, "
+                f"inverted={self.spectrum_inverted})")
+
+    # -- reading -----------------------------------------------------------------------------
+    def read(self, start_sample: int, n: int) -> np.ndarray:
+        """Read ``n`` samples starting at sample ``start_sample``.
+
+        Parameters
+        ----------
+        start_sample : int
+            Index of the first sample (0-based, file order).
+        n : int
+            Number of samples; ``start_sample + n`` must not exceed :attr:`n_samples`.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``complex64`` (I + jQ) for I/Q formats, ``float32`` for real formats, shape
+            ``(n,)``, stored integer values, spectrum inversion corrected. A fresh array (not a
+            view of the map).
+
+        Raises
+        ------
+        ValueError
+            Range outside the file.
+        """
+        start_sample = int(start_sample)
+        n = int(n)
+        if start_sample < 0 or n < 0 or start_sample + n > self._n:
+            raise ValueError(f"IF file {self.path}: samples [{start_sample}, {start_sample + n})"
+                             f" outside [0, {self._n})")
+        if n == 0:
+            return np.empty(0, self.dtype)
+        bps = self.format.bytes_per_sample
+        raw = np.memmap(self.path, dtype=np.uint8, mode="r", offset=start_sample * bps,
+                        shape=(n * bps,))
+        try:
+            out = _convert(raw, self.format)
+        finally:
+            mm = getattr(raw, "_mmap", None)
+            del raw
+            if mm is not None:
+                try:
+                    mm.close()
+                except BufferError:  # pragma: no cover - a view still alive
+                    pass
+        if self.spectrum_inverted:
+            if self.format.is_complex:
+                np.conjugate(out, out=out)
+            else:
+                out[(1 - start_sample % 2)::2] *= -1.0
+        return out
+
+    def chunks(self, n_per_chunk: int, start: int = 0,
+               stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
+        """Iterate over consecutive blocks of the file.
+
+        Parameters
+        ----------
+        n_per_chunk : int
+            Samples per block (> 0); the last block may be shorter.
+        start : int, optional
+            First sample.
+        stop : int, optional
+            One past the last sample (default: end of file).
+
+        Yields
+        ------
+        (int, numpy.ndarray)
+            Index of the block's first sample and the block (as :meth:`read`). The blocks
+            cover ``[start, stop)`` exactly, without overlap.
+        """
+        n_per_chunk = int(n_per_chunk)
+        if n_per_chunk <= 0:
+            raise ValueError(f"n_per_chunk must be positive, got {n_per_chunk}")
+        stop = self._n if stop is None else min(int(stop), self._n)
+        k = int(start)
+        if k < 0:
+            raise ValueError(f"start must be >= 0, got {start}")
+        while k < stop:
+            m = min(n_per_chunk, stop - k)
+            yield k, self.read(k, m)
+            k += m
+
+
+def _convert(raw: np.ndarray, fmt: SampleFormat) -> np.ndarray:
+    """Raw bytes of whole samples -> complex64 / float32 values."""
+    if fmt.name == "iq_int4":
+        return _IQ_INT4_LUT[raw]
+    if fmt.name == "gr_complex":
+        return raw.view(np.dtype("<f4")).astype(np.float32).view(np.complex64)
+    vals = raw.view(fmt.dtype).astype(np.float32)
+    if fmt.is_complex:
+        return vals.view(np.complex64)
+    return vals
+
+
+# -- layout heuristic ------------------------------------------------------------------------
+
+def _circ_mean(lo_u: np.ndarray, period: int) -> float:
+    """|mean(exp(2 pi j lo / period))|: 0 for a flat distribution, ~1 when peaked near 0."""
+    ang = lo_u.astype(np.float64) * (2.0 * np.pi / period)
+    return float(np.hypot(np.mean(np.cos(ang)), np.mean(np.sin(ang))))
+
+
+def _split_stats(hi: np.ndarray, lo_u: np.ndarray, width: int) -> dict[str, float]:
+    """Statistics of (signed high part, unsigned low part) of containers split in two."""
+    period = 1 << width
+    lo_s = np.where(lo_u >= period // 2, lo_u.astype(np.int32) - period, lo_u.astype(np.int32))
+    ext = np.where(lo_s < 0, -1, 0)
+    hi = hi.astype(np.int32)
+    s_lo = float(np.std(lo_s))
+    s_hi = float(np.std(hi))
+    return {
+        "r_lo": _circ_mean(lo_u, period),
+        "r_hi": _circ_mean(hi & (period - 1), period),
+        "ext": float(np.mean(hi == ext)),
+        "ratio": s_hi / s_lo if s_lo > 0 else math.inf,
+        "s_lo": s_lo,
+        "nonzero": float(np.mean((lo_s != 0) | (hi != 0))),
+    }
+
+
+def _narrow_pairs_in_wide(st: dict[str, float]) -> bool:
+    """Containers declared wide that hold pairs of narrow values."""
+    return (st["nonzero"] > 0.3 and st["r_lo"] > 0.2 and st["ext"] < 0.6
+            and 0.5 < st["ratio"] < 2.0)
+
+
+def _wide_in_narrow(st: dict[str, float]) -> bool:
+    """Pairs of narrow containers that are the halves of wide values."""
+    if st["nonzero"] < 0.5 or st["s_lo"] < 0.5:
+        return False
+    return ((st["ext"] > 0.9 and st["ratio"] < 0.5)
+            or (st["r_lo"] < 0.05 and st["r_hi"] > 0.3))
+
+
+def _float_like(b: np.ndarray) -> bool:
+    n = (b.size // 4) * 4
+    if n < 4 * _CHECK_MIN_PAIRS // 2:
+        return False
+    with np.errstate(invalid="ignore", over="ignore"):
+        v = b[:n].view(np.dtype("<f4")).astype(np.float64)
+        a = np.abs(v)
+        ok = np.isfinite(v) & (a >= 1e-10) & (a <= 1e10)
+    return float(np.mean(ok)) >= 0.99
+
+
+def check_format_statistics(path: str | os.PathLike, fmt: SampleFormat | str,
+                            n_samples: int | None = None) -> str | None:
+    """Heuristic check that the bytes of an IF file fit the declared layout.
+
+    Parameters
+    ----------
+    path : str or Path
+        IF file.
+    fmt : SampleFormat or str
+        Declared format.
+    n_samples : int, optional
+        Whole samples to consider (default: from the file size).
+
+    Returns
+    -------
+    str or None
+        A short description of the implausibility, or None when nothing is flagged (including
+        when there is too little or too uniform data to judge). See the module notes for what
+        is and is not detected.
+    """
+    if isinstance(fmt, str):
+        fmt = get_format(fmt)
+    path = Path(path)
+    bps = fmt.bytes_per_sample
+    if n_samples is None:
+        n_samples = path.stat().st_size // bps
+    total = n_samples * bps
+    win = min(total, _CHECK_WINDOW_BYTES)
+    win -= win % 8  # whole samples of every format and whole float32 pairs
+    if win < 2 * _CHECK_MIN_PAIRS:
+        return None
+    starts = sorted({0, ((total - win) // 2) // 8 * 8, (total - win) // 8 * 8})
+    parts = []
+    with open(path, "rb") as fh:
+        for s in starts:
+            fh.seek(s)
+            parts.append(np.frombuffer(fh.read(win), dtype=np.uint8))
+    b = np.concatenate(parts)
+    if not np.any(b):
+        return None
+    name = fmt.name
+    if name == "gr_complex":
+        with np.errstate(invalid="ignore", over="ignore"):
+            v = b.view(np.dtype("<f4")).astype(np.float64)
+            fin = np.isfinite(v)
+            a = np.abs(v)
+            nz = fin & (a > 0)
+            plaus = nz & (a >= 1e-20) & (a <= 1e20)
+        if np.mean(~fin) > 0.01 or (np.any(nz) and plaus.sum() < 0.9 * nz.sum()):
+            return ("the words are not plausible float32 values (NaN/Inf or extreme "
+                    "exponents): the file looks like integer samples")
+        return None
+    if _float_like(b):
+        return "the data look like float32 samples (gr_complex)"
+    if name in ("iq_int16", "real_int16"):
+        w = b.view(np.dtype("<i2")).astype(np.int32)
+        st = _split_stats(w >> 8, w & 0xFF, 8)
+        if _narrow_pairs_in_wide(st):
+            return ("the low and high bytes of each 16-bit word look like two independent "
+                    "8-bit samples: the file looks like 8-bit samples (iq_int8/real_int8)")
+        return None
+    if name in ("iq_int8", "real_int8"):
+        st = _split_stats(b[1::2].view(np.int8), b[0::2], 8)
+        if _wide_in_narrow(st):
+            return ("odd bytes behave as the high bytes of the even ones: the file looks "
+                    "like 16-bit little-endian samples (iq_int16/real_int16)")
+        st4 = _split_stats(b.view(np.int8) >> 4, b & 0xF, 4)
+        if _narrow_pairs_in_wide(st4):
+            return ("the two nibbles of each byte look like independent 4-bit values: the "
+                    "file looks like packed 4-bit I/Q (iq_int4)")
+        return None
+    if name == "iq_int4":
+        st = _split_stats(b.view(np.int8) >> 4, b & 0xF, 4)
+        if _wide_in_narrow(st):
+            return ("the high nibble is the sign extension of the low nibble: the file looks "
+                    "like 8-bit samples with small values (iq_int8/real_int8)")
+        return None
+    return None

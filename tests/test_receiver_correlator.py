@@ -1,0 +1,144 @@
+"""Multi-channel E/P/L correlator: numba kernel versus a plain numpy reference."""
+
+import numpy as np
+import pytest
+
+from sdr_di.errors import UnknownPrnError
+from sdr_di.receiver.correlator import Correlator, correlate
+from sdr_di.signal.codes import b3i_code
+
+L = 10230
+
+
+def reference_epl(x, codes, theta0, rate, phi0, fc, n, fs, d, start):
+    """Plain numpy E/P/L: float64 phases recomputed from the interval start."""
+    n_ch = codes.shape[0]
+    out = np.zeros((n_ch, 3), complex)
+    for c in range(n_ch):
+        k = np.arange(n[c], dtype=np.float64)
+        th = np.mod(theta0[c], L) + k * (rate[c] / fs)
+        ph = (phi0[c] - np.floor(phi0[c])) + k * (fc[c] / fs)
+        w = np.exp(-2j * np.pi * (ph - np.floor(ph)))
+        seg = x[start[c]:start[c] + n[c]].astype(np.complex128) * w
+        for j, delta in enumerate((d, 0.0, -d)):
+            idx = np.floor(th + delta).astype(np.int64) % L
+            out[c, j] = np.sum(codes[c, idx] * seg)
+    return out
+
+
+def _random_case(rng, n_ch, complex_input, n_block=60_000):
+    codes = rng.choice(np.array([-1, 1], np.int8), size=(n_ch, L))
+    if complex_input:
+        x = (rng.normal(size=n_block) + 1j * rng.normal(size=n_block)).astype(np.complex64)
+    else:
+        x = rng.normal(size=n_block).astype(np.float32)
+    fs = 25e6 if complex_input else 20e6
+    theta0 = rng.uniform(-20000, 30000, n_ch)  # fractional, outside [0, L) too
+    # code Doppler: rate != 10.23e6, up to +-50 ppm (larger than any real code Doppler)
+    rate = 10.23e6 * (1.0 + rng.uniform(-5e-5, 5e-5, n_ch))
+    phi0 = rng.uniform(-3, 3, n_ch)
+    fc = rng.uniform(-6e3, 6e3, n_ch) + (0.0 if complex_input else 5e6)
+    n = rng.integers(20_000, 50_000, n_ch)
+    start = np.array([rng.integers(0, n_block - m + 1) for m in n])
+    return x, codes, theta0, rate, phi0, fc, n, fs, start
+
+
+@pytest.mark.parametrize("complex_input", [True, False])
+@pytest.mark.parametrize("spacing", [0.5, 0.1, 1.0])
+def test_kernel_matches_numpy_reference(complex_input, spacing):
+    rng = np.random.default_rng(11 + int(complex_input) + int(10 * spacing))
+    x, codes, theta0, rate, phi0, fc, n, fs, start = _random_case(rng, 5, complex_input)
+    res = correlate(x, codes, theta0, rate, phi0, fc, n, fs, spacing_chips=spacing,
+                    start_sample=start)
+    ref = reference_epl(x, codes, theta0, rate, phi0, fc, n, fs, spacing, start)
+    got = np.stack([res.early, res.prompt, res.late], axis=1)
+    scale = np.sqrt(n.max())  # sums of n unit-variance terms are ~sqrt(n)
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * scale)
+    # early, prompt and late really differ (the test would not see a swapped offset otherwise)
+    assert np.all(np.abs(res.early - res.late) > 1e-3 * scale)
+    # NCO end states: exactly start + rate * n / fs, from the caller's unreduced values
+    np.testing.assert_array_equal(res.code_phase_end, theta0 + rate * n / fs)
+    np.testing.assert_array_equal(res.carrier_phase_end, phi0 + fc * n / fs)
+
+
+def test_matched_signal_gives_full_prompt_and_symmetric_early_late():
+    """A clean signal with the same NCO parameters: P = a n, E = L = a n (1 - d) (complex)."""
+    rng = np.random.default_rng(3)
+    code = rng.choice(np.array([-1, 1], np.int8), size=L)
+    fs, n = 25e6, 25_000
+    fd = 1234.5
+    rate = 10.23e6 * (1 + fd / 1268.52e6)
+    theta0, phi0 = 1234.37, 0.3
+    k = np.arange(n)
+    th = theta0 + k * rate / fs
+    x = (code[np.floor(th).astype(int) % L] * np.exp(2j * np.pi * (phi0 + k * fd / fs))
+         ).astype(np.complex64)
+    r = correlate(x, code, theta0, rate, phi0, fd, n, fs)
+    assert abs(r.prompt[0] - n) < 1e-3 * n
+    # E/L of a rectangular-chip code at +-0.5 chip: about half of the prompt, symmetric
+    assert abs(abs(r.early[0]) - abs(r.late[0])) < 0.02 * n
+    assert 0.4 * n < abs(r.early[0]) < 0.6 * n
+    # a quarter-cycle carrier phase error rotates P by -90 deg
+    r2 = correlate(x, code, theta0, rate, phi0 + 0.25, fd, n, fs)
+    assert abs(r2.prompt[0] - (-1j * n)) < 1e-3 * n
+    # a code phase error of 0.3 chip: early (or late) power grows on the signal side
+    r3 = correlate(x, code, theta0 - 0.3, rate, phi0, fd, n, fs)
+    assert abs(r3.early[0]) > abs(r3.late[0])
+
+
+def test_chained_intervals_equal_one_long_interval():
+    """Feeding the end states back (as a tracking loop does) equals one long interval."""
+    rng = np.random.default_rng(5)
+    x, codes, *_ = _random_case(rng, 1, True, n_block=80_000)
+    fs, rate, fc = 25e6, 10.23e6 * (1 + 2e-6), 2345.6
+    whole = correlate(x, codes, 17.25, rate, 0.1, fc, 80_000, fs)
+    a = correlate(x, codes, 17.25, rate, 0.1, fc, 30_001, fs)
+    b = correlate(x, codes, a.code_phase_end, rate, a.carrier_phase_end, fc, 49_999, fs,
+                  start_sample=30_001)
+    np.testing.assert_allclose(a.prompt + b.prompt, whole.prompt, rtol=1e-9)
+    np.testing.assert_allclose(a.early + b.early, whole.early, rtol=1e-9)
+
+
+def test_result_independent_of_thread_count():
+    import numba
+
+    rng = np.random.default_rng(8)
+    x, codes, theta0, rate, phi0, fc, n, fs, start = _random_case(rng, 7, True)
+    r1 = correlate(x, codes, theta0, rate, phi0, fc, n, fs, start_sample=start)
+    old = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        r2 = correlate(x, codes, theta0, rate, phi0, fc, n, fs, start_sample=start)
+    finally:
+        numba.set_num_threads(old)
+    np.testing.assert_allclose(r1.prompt, r2.prompt, rtol=1e-12, atol=1e-9)
+
+
+def test_correlator_bank_prns_and_errors():
+    rng = np.random.default_rng(9)
+    table = {p: rng.choice(np.array([-1, 1], np.int8), size=L) for p in (6, 9, 19)}
+    bank = Correlator(25e6, spacing_chips=0.25, code_source=lambda p: table[p])
+    x = (rng.normal(size=30_000) + 1j * rng.normal(size=30_000)).astype(np.complex64)
+    r = bank.correlate(x, [6, 19], [10.0, 20.5], 10.23e6, 0.0, [100.0, -200.0], 25_000)
+    ref = reference_epl(x, np.stack([table[6], table[19]]), np.array([10.0, 20.5]),
+                        np.full(2, 10.23e6), np.zeros(2), np.array([100.0, -200.0]),
+                        np.array([25_000, 25_000]), 25e6, 0.25, np.zeros(2, int))
+    np.testing.assert_allclose(r.prompt, ref[:, 1], rtol=1e-9, atol=1e-6)
+    with pytest.raises(UnknownPrnError, match="64"):
+        bank.correlate(x, [6, 64], 0.0, 10.23e6, 0.0, 0.0, 25_000)
+    with pytest.raises(UnknownPrnError):
+        bank.correlate(x, [0], 0.0, 10.23e6, 0.0, 0.0, 25_000)
+    with pytest.raises(ValueError, match="inside"):
+        bank.correlate(x, [6], 0.0, 10.23e6, 0.0, 0.0, 25_000, start_sample=10_000)
+    with pytest.raises(ValueError, match="spacing"):
+        correlate(x, table[6], 0.0, 10.23e6, 0.0, 0.0, 100, 25e6, spacing_chips=9.0)
+
+
+def test_b3i_codes_through_the_bank():
+    bank = Correlator(25e6)  # default code source: sdr_di.signal.codes.b3i_code
+    c6 = np.asarray(b3i_code(6))
+    n, fs = 25_000, 25e6
+    k = np.arange(n)
+    x = c6[np.floor(100.5 + k * 10.23e6 / fs).astype(int) % L].astype(np.complex64)
+    r = bank.correlate(x, [6, 7], 100.5, 10.23e6, 0.0, 0.0, n)
+    assert abs(r.prompt[0] - n) < 1e-3 * n and abs(r.prompt[1]) < 0.05 * n

@@ -1,0 +1,289 @@
+"""IF reader: every registry format round trip, chunking, memory mapping, error cases."""
+
+import json
+import os
+import resource
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sdr_di.errors import SampleFormatError
+from sdr_di.io.sample_formats import FORMATS, get_format, pack_iq_int4, quantizer_levels
+from sdr_di.receiver.ifreader import IfFileWarning, IfSource, check_format_statistics
+
+#: Max (1960) quantizer step / sigma, as the generator uses (bits > 8: 4-sigma full scale).
+MAX_STEP = {2: 0.9957, 3: 0.5860, 4: 0.3352, 5: 0.1881, 6: 0.1041, 7: 0.0568, 8: 0.0308}
+
+
+def quantized_noise(rng, n, bits, is_complex):
+    """Integer I, Q (or real) values as the generator writes them for ``bits`` bits."""
+    lvl = quantizer_levels(bits)
+    shape = (n, 2) if is_complex else (n, 1)
+    x = rng.normal(size=shape)
+    if bits == 1:
+        q = np.where(x >= 0, 1, -1)
+    else:
+        step = MAX_STEP.get(bits, 4.0 / lvl)
+        q = np.clip(np.floor(x / step + 0.5), -lvl, lvl)
+    return q.astype(np.int64)
+
+
+def encode(fmt_name, vals):
+    """Bytes on disk of integer (n, 2) / (n, 1) values, or complex values for gr_complex."""
+    f = get_format(fmt_name)
+    if fmt_name == "iq_int4":
+        return pack_iq_int4(vals[:, 0], vals[:, 1]).tobytes()
+    if fmt_name == "gr_complex":
+        return np.stack([vals.real, vals.imag], axis=1).astype("<f4").tobytes()
+    return vals.astype(f.dtype).tobytes()
+
+
+def expected(fmt_name, vals):
+    f = get_format(fmt_name)
+    if fmt_name == "gr_complex":
+        return vals.astype(np.complex64)
+    if f.is_complex:
+        return (vals[:, 0] + 1j * vals[:, 1]).astype(np.complex64)
+    return vals[:, 0].astype(np.float32)
+
+
+def random_values(rng, fmt_name, n):
+    f = get_format(fmt_name)
+    if fmt_name == "gr_complex":
+        return (rng.normal(size=n) + 1j * rng.normal(size=n)) * 0.01
+    lo, hi = (-8, 8) if fmt_name == "iq_int4" else (np.iinfo(f.dtype).min,
+                                                     np.iinfo(f.dtype).max + 1)
+    return rng.integers(lo, hi, size=(n, 2 if f.is_complex else 1))
+
+
+def write_sidecar(tmp_path, name, fmt, n, fs=25e6, if_hz=0.0, **extra):
+    meta = {"schema": "sdr-di-if/1", "if_file": f"{name}.bin", "sampling_rate_hz": fs,
+            "if_hz": if_hz, "sample_format": fmt, "n_samples": n,
+            "start": {"week": 1234, "sow": 345600.5}, **extra}
+    p = tmp_path / f"{name}.json"
+    p.write_text(json.dumps(meta))
+    return p
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+def test_round_trip_every_format(tmp_path, fmt):
+    rng = np.random.default_rng(abs(hash(fmt)) % 2**32)
+    n = 10_007
+    vals = random_values(rng, fmt, n)
+    (tmp_path / "a.bin").write_bytes(encode(fmt, vals))
+    src = IfSource.from_sidecar(write_sidecar(tmp_path, "a", fmt, n), check_format=False)
+    exp = expected(fmt, vals)
+    assert src.n_samples == n and src.is_complex == get_format(fmt).is_complex
+    assert src.duration_s == pytest.approx(n / 25e6)
+    got = src.read(0, n)
+    assert got.dtype == (np.complex64 if src.is_complex else np.float32)
+    np.testing.assert_array_equal(got, exp)
+    np.testing.assert_array_equal(src.read(4321, 777), exp[4321:4321 + 777])
+    assert src.read(n, 0).size == 0
+    assert src.sample_time(25e6 * 10) == (1234, pytest.approx(345610.5))
+    # explicit options (foreign file) give the same samples
+    src2 = IfSource(tmp_path / "a.bin", 25e6, 0.0, fmt, check_format=False)
+    np.testing.assert_array_equal(src2.read(100, 50), exp[100:150])
+    with pytest.raises(ValueError, match="outside"):
+        src.read(n - 10, 11)
+
+
+def test_aliases_and_generator_layout(tmp_path):
+    # 4-bit values in iq_int8 as the generator writes them (-7..7 on the mid-tread grid)
+    rng = np.random.default_rng(1)
+    vals = quantized_noise(rng, 20_000, 4, True)
+    (tmp_path / "g.bin").write_bytes(encode("iq_int8", vals))
+    src = IfSource(tmp_path / "g.bin", 25e6, 0.0, "ibyte")
+    assert src.format.name == "iq_int8"
+    np.testing.assert_array_equal(src.read(0, 20_000), expected("iq_int8", vals))
+
+
+@pytest.mark.parametrize("fmt", ["iq_int8", "real_int16", "iq_int4"])
+def test_chunks_cover_the_file_exactly(tmp_path, fmt):
+    rng = np.random.default_rng(2)
+    n = 12_345
+    vals = random_values(rng, fmt, n)
+    (tmp_path / "c.bin").write_bytes(encode(fmt, vals))
+    src = IfSource(tmp_path / "c.bin", 25e6, 0.0, fmt, check_format=False)
+    exp = expected(fmt, vals)
+    starts, parts = zip(*src.chunks(1000))
+    assert starts == tuple(range(0, n, 1000))
+    assert [p.size for p in parts] == [1000] * 12 + [345]
+    np.testing.assert_array_equal(np.concatenate(parts), exp)
+    parts = [p for _, p in src.chunks(999, start=17, stop=5000)]
+    np.testing.assert_array_equal(np.concatenate(parts), exp[17:5000])
+    assert list(src.chunks(10, start=n)) == []
+    with pytest.raises(ValueError):
+        next(src.chunks(0))
+
+
+def test_memory_mapped_reading_of_a_large_sparse_file(tmp_path):
+    """A 16 GiB (sparse) file: opening and reading a block near the end stays small/fast."""
+    path = tmp_path / "big.bin"
+    size = 16 << 30
+    tail = np.arange(-50, 50, dtype=np.int8)
+    with open(path, "wb") as fh:
+        fh.truncate(size)
+        fh.seek(size - tail.size)
+        fh.write(tail.tobytes())
+        fh.seek(1000)
+        fh.write(b"\x05\xfb")
+    st = os.stat(path)
+    if st.st_blocks * 512 > 64 << 20:
+        pytest.skip("file system without sparse files")
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t0 = time.perf_counter()
+    src = IfSource(path, 25e6, 0.0, "iq_int8")
+    n = size // 2
+    assert src.n_samples == n and src.duration_s == pytest.approx(n / 25e6)
+    x = src.read(n - 50, 50)
+    np.testing.assert_array_equal(x.real, tail[0::2])
+    np.testing.assert_array_equal(x.imag, tail[1::2])
+    assert src.read(500, 1)[0] == 5 - 5j
+    it = src.chunks(250_000, start=n // 2)  # lazy: only the blocks asked for are read
+    for _ in range(4):
+        k, blk = next(it)
+        assert blk.size == 250_000 and not np.any(blk)
+    wall = time.perf_counter() - t0
+    rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    assert (rss1 - rss0) * 1024 < 64 << 20  # ru_maxrss in KiB on Linux
+    assert wall < 5.0
+
+
+def test_spectrum_inversion_complex_and_real(tmp_path):
+    fs, n = 20e6, 4000
+    k = np.arange(n)
+    # complex: on disk the conjugate of a +1.5 MHz tone
+    tone = np.exp(2j * np.pi * 1.5e6 * k / fs) * 60
+    vals = np.rint(np.stack([tone.real, -tone.imag], axis=1))
+    (tmp_path / "c.bin").write_bytes(vals.astype(np.int8).tobytes())
+    src = IfSource(tmp_path / "c.bin", fs, 1.5e6, "iq_int8", spectrum_inverted=True,
+                   check_format=False)
+    x = src.read(0, n)
+    np.testing.assert_array_equal(x, (vals[:, 0] + 1j * vals[:, 1]).conj().astype(np.complex64))
+    assert src.if_hz == 1.5e6
+    # real: IF 5 MHz declared, a carrier with Doppler +1 kHz sits at 5 MHz - 1 kHz on disk
+    rec = np.rint(60 * np.cos(2 * np.pi * (5e6 - 1e3) * k / fs))
+    (tmp_path / "r.bin").write_bytes(rec.astype(np.int8).tobytes())
+    src = IfSource(tmp_path / "r.bin", fs, 5e6, "real_int8", spectrum_inverted=True,
+                   check_format=False)
+    assert src.declared_if_hz == 5e6 and src.if_hz == fs / 2 - 5e6
+    x = src.read(0, n).astype(np.float64)
+    f_true = src.if_hz + 1e3  # corrected stream: IF + Doppler
+    for f, big in ((f_true, True), (src.if_hz - 1e3, False)):
+        c = abs(np.sum(x * np.exp(-2j * np.pi * f * k / fs))) / n
+        assert (c > 25) == big, (f, c)
+    # odd start: the (-1)^k pattern follows the file index, not the block
+    np.testing.assert_array_equal(src.read(3, 100), src.read(0, 103)[3:])
+
+
+def test_error_cases(tmp_path: Path):
+    (tmp_path / "empty.bin").write_bytes(b"")
+    with pytest.raises(SampleFormatError, match=r"empty\.bin.*empty file"):
+        IfSource(tmp_path / "empty.bin", 25e6, 0.0, "iq_int8")
+    (tmp_path / "one.bin").write_bytes(b"\x01")
+    with pytest.raises(SampleFormatError, match="shorter than one"):
+        IfSource(tmp_path / "one.bin", 25e6, 0.0, "iq_int16")
+    with pytest.raises(SampleFormatError, match=r"nothere\.bin.*not found"):
+        IfSource(tmp_path / "nothere.bin", 25e6, 0.0, "iq_int8")
+    (tmp_path / "a.bin").write_bytes(np.arange(1001, dtype=np.int8).tobytes())
+    with pytest.raises(SampleFormatError, match=r"a\.bin.*unknown sample format 'int3'"):
+        IfSource(tmp_path / "a.bin", 25e6, 0.0, "int3")
+    with pytest.raises(SampleFormatError, match="sampling rate"):
+        IfSource(tmp_path / "a.bin", 0.0, 0.0, "iq_int8")
+    with pytest.raises(SampleFormatError, match="outside"):
+        IfSource(tmp_path / "a.bin", 20e6, 12e6, "real_int8")
+    with pytest.raises(SampleFormatError, match="outside"):
+        IfSource(tmp_path / "a.bin", 20e6, -1e6, "real_int8")
+    # partial trailing sample: warning with the count, whole samples read
+    with pytest.warns(IfFileWarning, match=r"ignoring the 1 trailing byte"):
+        src = IfSource(tmp_path / "a.bin", 25e6, 0.0, "iq_int8", check_format=False)
+    assert src.n_samples == 500
+    (tmp_path / "b.bin").write_bytes(np.arange(1003, dtype=np.int8).tobytes())
+    with pytest.warns(IfFileWarning, match=r"ignoring the 3 trailing byte"):
+        src = IfSource(tmp_path / "b.bin", 25e6, 0.0, "iq_int16", check_format=False)
+    assert src.n_samples == 250
+    last = np.frombuffer(np.arange(1003, dtype=np.int8).tobytes()[:1000], "<i2")[-2:]
+    assert src.read(249, 1)[0] == last[0] + 1j * last[1]
+    # sidecar: missing IF file, truncated IF file, longer IF file
+    side = write_sidecar(tmp_path, "missing", "iq_int8", 10)
+    with pytest.raises(SampleFormatError, match=r"missing\.json: IF file .*missing\.bin not "):
+        IfSource.from_sidecar(side)
+    (tmp_path / "t.bin").write_bytes(np.ones(2 * 400, np.int8).tobytes())
+    with pytest.raises(SampleFormatError, match=r"t\.bin.*holds 400 samples.*says 500"):
+        IfSource.from_sidecar(write_sidecar(tmp_path, "t", "iq_int8", 500), check_format=False)
+    with pytest.warns(IfFileWarning, match="more than the sidecar's 300"):
+        src = IfSource.from_sidecar(write_sidecar(tmp_path, "t", "iq_int8", 300),
+                                    check_format=False)
+    assert src.n_samples == 300
+    with pytest.raises(SampleFormatError, match="unknown sample format"):
+        IfSource.from_sidecar(write_sidecar(tmp_path, "t", "iq_int9", 400))
+    (tmp_path / "bad.json").write_text("{")
+    with pytest.raises(SampleFormatError, match="not JSON"):
+        IfSource.from_sidecar(tmp_path / "bad.json")
+    src = IfSource(tmp_path / "t.bin", 25e6, 0.0, "iq_int8", check_format=False)
+    with pytest.raises(SampleFormatError, match="start time unknown"):
+        src.sample_time(0)
+
+
+# (actual data, bits, declared) that the heuristic must flag
+WRONG = [
+    ("iq_int8", 4, "iq_int16"), ("iq_int8", 8, "iq_int16"), ("real_int8", 1, "real_int16"),
+    ("iq_int8", 2, "real_int16"),
+    ("iq_int16", 16, "iq_int8"), ("iq_int16", 12, "real_int8"), ("iq_int16", 9, "iq_int8"),
+    ("real_int16", 4, "iq_int8"),
+    ("iq_int4", 4, "iq_int8"), ("iq_int4", 2, "real_int8"), ("iq_int4", 1, "iq_int8"),
+    ("iq_int8", 4, "iq_int4"), ("real_int8", 3, "iq_int4"),
+    ("gr_complex", 0, "iq_int16"), ("gr_complex", 0, "iq_int8"),
+    ("iq_int8", 4, "gr_complex"), ("iq_int16", 16, "gr_complex"),
+]
+# genuine data of the declared format that it must not flag
+RIGHT = [("iq_int8", b) for b in (1, 2, 3, 4, 5, 6, 8)] + \
+        [("real_int8", b) for b in (1, 2, 4, 8)] + \
+        [("iq_int16", b) for b in (1, 4, 8, 9, 10, 12, 16)] + \
+        [("real_int16", b) for b in (2, 8, 11, 16)] + \
+        [("iq_int4", b) for b in (1, 2, 3, 4)] + [("gr_complex", 0)]
+
+
+def _genuine_bytes(rng, fmt, bits, n=60_000):
+    if fmt == "gr_complex":
+        return encode(fmt, (rng.normal(size=n) + 1j * rng.normal(size=n)) * 0.05)
+    return encode(fmt, quantized_noise(rng, n, bits, get_format(fmt).is_complex))
+
+
+@pytest.mark.parametrize("actual,bits,declared", WRONG)
+def test_heuristic_flags_wrong_declared_format(tmp_path, actual, bits, declared):
+    rng = np.random.default_rng(bits + len(actual) + 7 * len(declared))
+    p = tmp_path / "w.bin"
+    p.write_bytes(_genuine_bytes(rng, actual, bits))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IfFileWarning)
+        with pytest.raises(SampleFormatError, match=rf"w\.bin: declared {declared} but"):
+            IfSource(p, 25e6, 0.0, declared)
+        IfSource(p, 25e6, 0.0, declared, check_format=False)  # the user can override
+
+
+@pytest.mark.parametrize("fmt,bits", RIGHT)
+def test_heuristic_accepts_genuine_data(tmp_path, fmt, bits):
+    rng = np.random.default_rng(100 + bits)
+    p = tmp_path / "ok.bin"
+    p.write_bytes(_genuine_bytes(rng, fmt, bits))
+    assert check_format_statistics(p, fmt) is None
+    IfSource(p, 25e6, 0.0, fmt)
+
+
+def test_heuristic_with_strong_signal_and_small_files(tmp_path):
+    # a strong CW on top of 4-bit noise in iq_int8 is still genuine 8-bit data
+    rng = np.random.default_rng(4)
+    n = 60_000
+    k = np.arange(n)
+    x = rng.normal(size=(n, 2)) + 2 * np.stack([np.cos(0.01 * k), np.sin(0.01 * k)], 1)
+    q = np.clip(np.floor(x / 0.6 + 0.5), -7, 7).astype(np.int8)
+    (tmp_path / "s.bin").write_bytes(q.tobytes())
+    assert check_format_statistics(tmp_path / "s.bin", "iq_int8") is None
+    # too little data: not judged
+    (tmp_path / "tiny.bin").write_bytes(_genuine_bytes(rng, "iq_int8", 4, n=1000))
+    assert check_format_statistics(tmp_path / "tiny.bin", "iq_int16") is None
