@@ -170,6 +170,8 @@ class NavData:
         Records dropped as duplicates of another (PRN, week, toe).
     n_conflicts : int
         Duplicate groups whose parameters differ (the kept record is the rule's choice).
+    iono_gps : Klobuchar or None
+        GPS Klobuchar coefficients of the same header (``GPSA``/``GPSB``), None when absent.
     """
 
     records: dict[int, list[Ephemeris]]
@@ -180,6 +182,7 @@ class NavData:
     n_records_read: int = 0
     n_duplicates: int = 0
     n_conflicts: int = 0
+    iono_gps: Klobuchar | None = None
 
     def __post_init__(self) -> None:
         if not self.sources:
@@ -325,8 +328,9 @@ def _f(text: str) -> float:
     return float(text.strip().replace("D", "E").replace("d", "e"))
 
 
-def _parse_header(lines: list[str], path: Path) -> tuple[float, int, Klobuchar | None]:
-    """Validate the header; return (version, index of first body line, BDS Klobuchar)."""
+def _parse_header(lines: list[str], path: Path
+                  ) -> tuple[float, int, Klobuchar | None, Klobuchar | None]:
+    """Validate the header; return (version, first body line, BDS and GPS Klobuchar)."""
     first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
     if first is None:
         raise EphemerisError(f"navigation file {path}: empty file")
@@ -347,14 +351,14 @@ def _parse_header(lines: list[str], path: Path) -> tuple[float, int, Klobuchar |
             f"navigation file {path}: no BDS records (RINEX navigation file for system {system!r})")
 
     end = None
-    bdsa = bdsb = None
+    coeffs: dict[str, tuple[float, ...]] = {}
     for i in range(first + 1, len(lines)):
         ln = lines[i]
         label = ln[60:80].strip()
         if label == "END OF HEADER":
             end = i + 1
             break
-        if label == "IONOSPHERIC CORR" and ln[:4] in ("BDSA", "BDSB"):
+        if label == "IONOSPHERIC CORR" and ln[:4] in ("BDSA", "BDSB", "GPSA", "GPSB"):
             try:
                 vals = tuple(_f(ln[5 + 12 * k:17 + 12 * k]) for k in range(4))
             except ValueError:
@@ -363,18 +367,18 @@ def _parse_header(lines: list[str], path: Path) -> tuple[float, int, Klobuchar |
             if not all(math.isfinite(v) for v in vals):
                 raise EphemerisError(
                     f"navigation file {path}: non-finite {ln[:4]} IONOSPHERIC CORR line {i + 1}")
-            if ln[:4] == "BDSA":
-                bdsa = vals
-            else:
-                bdsb = vals
+            coeffs[ln[:4]] = vals
     if end is None:
         raise EphemerisError(f"navigation file {path}: no END OF HEADER line")
-    if (bdsa is None) != (bdsb is None):
-        raise EphemerisError(
-            f"navigation file {path}: header has {'BDSA' if bdsa else 'BDSB'} without "
-            f"{'BDSB' if bdsa else 'BDSA'} IONOSPHERIC CORR")
-    iono = Klobuchar(alpha=bdsa, beta=bdsb) if bdsa is not None else None
-    return version, end, iono
+    sets = []
+    for sysname in ("BDS", "GPS"):
+        a, b = coeffs.get(sysname + "A"), coeffs.get(sysname + "B")
+        if (a is None) != (b is None):
+            have, miss = (sysname + "A", sysname + "B") if a else (sysname + "B", sysname + "A")
+            raise EphemerisError(
+                f"navigation file {path}: header has {have} without {miss} IONOSPHERIC CORR")
+        sets.append(Klobuchar(alpha=a, beta=b) if a is not None else None)
+    return version, end, sets[0], sets[1]
 
 
 def _crosscheck_header(text: str, iono: Klobuchar | None, path: Path) -> None:
@@ -565,14 +569,15 @@ def load_nav(path: str | Path, crosscheck: bool = False) -> NavData:
     path = Path(path)
     text = _read_text(path)
     lines = text.splitlines()
-    version, body, iono = _parse_header(lines, path)
+    version, body, iono, iono_gps = _parse_header(lines, path)
     _crosscheck_header(text, iono, path)
     recs = _parse_body(lines, body, path)
     if not recs:
         raise EphemerisError(f"navigation file {path}: no BDS records (RINEX {version:.2f})")
     records, n_dup, n_conf = _dedup(recs)
     nav = NavData(records=records, iono=iono, path=path, sources=(path,), version=version,
-                  n_records_read=len(recs), n_duplicates=n_dup, n_conflicts=n_conf)
+                  n_records_read=len(recs), n_duplicates=n_dup, n_conflicts=n_conf,
+                  iono_gps=iono_gps)
     if crosscheck:
         crosscheck_with_georinex(nav)
     return nav
@@ -590,12 +595,13 @@ def merge_nav(navs: Sequence[NavData]) -> NavData:
     # keep argument order for equal keys: _dedup is stable (dict insertion order per group)
     records, n_dup, n_conf = _dedup(pooled)
     iono = next((n.iono for n in navs if n.iono is not None), None)
+    iono_gps = next((n.iono_gps for n in navs if n.iono_gps is not None), None)
     sources = tuple(p for n in navs for p in n.sources)
     return NavData(records=records, iono=iono, path=navs[0].path, sources=sources,
                    version=navs[0].version,
                    n_records_read=sum(n.n_records_read for n in navs),
                    n_duplicates=sum(n.n_duplicates for n in navs) + n_dup,
-                   n_conflicts=sum(n.n_conflicts for n in navs) + n_conf)
+                   n_conflicts=sum(n.n_conflicts for n in navs) + n_conf, iono_gps=iono_gps)
 
 
 def read_klobuchar(path: str | Path) -> Klobuchar | None:
@@ -606,7 +612,7 @@ def read_klobuchar(path: str | Path) -> Klobuchar | None:
     """
     path = Path(path)
     text = _read_text(path)
-    _, _, iono = _parse_header(text.splitlines(), path)
+    _, _, iono, _ = _parse_header(text.splitlines(), path)
     _crosscheck_header(text, iono, path)
     return iono
 

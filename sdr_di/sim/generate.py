@@ -20,37 +20,58 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..errors import OutputError
+from ..errors import OutputError, ScenarioError
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
 from ..io.sidecar import write_sidecar
+from ..orbits.ephemeris import Klobuchar
 from ..orbits.rinex_nav import load_nav
 from ..scenario.schema import Scenario
-from ..scenario.motion import build_segments
 from ..timebase import bdt_minus_utc, bdt_to_datetime
 from .geometry import ReceiverPath
 from .ifgen import IfGenerator, build_satellites
 from .imu import ImuErrorModel
+from .motion import segment_from_spec
 from .trajectory import generate_trajectory
 
 
 def simulate_truth(sc: Scenario):
-    """Truth trajectory of a scenario at the IMU rate (true time from the start)."""
-    return generate_trajectory(sc.lat, sc.lon, sc.height, np.array(sc.v_n), np.array(sc.att),
-                               build_segments(sc.motion, sc.duration_s), rate_hz=sc.imu.rate_hz)
+    """Truth trajectory of a scenario at the IMU rate (true time from the start).
+
+    Raises
+    ------
+    ScenarioError
+        A motion segment is impossible from the state reached at its start.
+    """
+    where = sc.source or "scenario"
+    try:
+        segments = [segment_from_spec(s) for s in sc.motion]
+        return generate_trajectory(sc.lat, sc.lon, sc.height, np.array(sc.v_n),
+                                   np.array(sc.att), segments, rate_hz=sc.imu.rate_hz,
+                                   duration=sc.duration_s)
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: motion: {exc}") from None
 
 
 def imu_model(sc: Scenario) -> ImuErrorModel:
     """IMU error model of a scenario."""
-    i = sc.imu
-    return ImuErrorModel(
-        accel_scale_factor_ppm=i.accel_scale_factor_ppm,
-        gyro_scale_factor_ppm=i.gyro_scale_factor_ppm,
-        accel_bias_mg=i.accel_bias_mg,
-        gyro_bias_deg_h=i.gyro_bias_deg_h,
-        accel_random_walk=i.accel_random_walk_mps_sqrth,
-        gyro_random_walk=i.gyro_random_walk_deg_sqrth,
-    )
+    return ImuErrorModel.from_spec(sc.imu)
+
+
+def broadcast_iono(nav) -> tuple[Klobuchar | None, str]:
+    """Klobuchar coefficients to simulate with, and where they come from.
+
+    The file's BDS coefficients (``BDSA``/``BDSB``) when present; otherwise the same header's
+    GPS coefficients (``GPSA``/``GPSB``: the same eight-parameter Klobuchar set with the same
+    broadcast scale factors, describing the same day's ionosphere), applied with the BDS
+    model; otherwise none. Whatever is used is also what the D1/D2 messages broadcast, so a
+    receiver decoding the message removes exactly the simulated delay model.
+    """
+    if nav.iono is not None:
+        return nav.iono, "BDSA/BDSB"
+    if nav.iono_gps is not None:
+        return nav.iono_gps, "GPSA/GPSB (file has no BDS coefficients)"
+    return None, "none (file has no Klobuchar coefficients)"
 
 
 def make_generator(sc: Scenario, truth=None) -> IfGenerator:
@@ -58,9 +79,11 @@ def make_generator(sc: Scenario, truth=None) -> IfGenerator:
     nav = load_nav(sc.satellites.ephemeris)
     truth = simulate_truth(sc) if truth is None else truth
     path = ReceiverPath(truth.t, truth.r_e, truth.v_e)
-    iono = nav.iono if sc.signal.ionosphere == "klobuchar" else None
+    iono, source = broadcast_iono(nav) if sc.signal.ionosphere == "klobuchar" else (None, "off")
     sats = build_satellites(sc, nav, path, iono)
-    return IfGenerator(sc, sats, path, iono)
+    gen = IfGenerator(sc, sats, path, iono)
+    gen.iono_source = source
+    return gen
 
 
 def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None,
@@ -123,6 +146,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "receiver_clock": {"bias_s": sc.clock.bias_s, "drift_s_s": sc.clock.drift_s_s},
             "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain},
             "ionosphere": "klobuchar" if gen.iono is not None else "none",
+            "klobuchar_source": gen.iono_source,
             "klobuchar": None if gen.iono is None else {"alpha": list(gen.iono.alpha),
                                                         "beta": list(gen.iono.beta)},
             "troposphere": sc.signal.troposphere,

@@ -151,6 +151,8 @@ class IfGenerator:
         self.sats = sats
         self.path = path
         self.iono = iono if sc.signal.ionosphere == "klobuchar" else None
+        #: Where the Klobuchar coefficients come from (set by the builder; for the sidecar).
+        self.iono_source = "given"
         sig = sc.signal
         self.fs = sig.sampling_rate_hz
         self.n_per_node = int(round(self.fs / 1000.0))

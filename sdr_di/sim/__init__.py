@@ -1,0 +1,1 @@
+"""Simulation: trajectory truth, IMU model, signal geometry and the IF generator."""
