@@ -815,3 +815,20 @@ class EphemerisAssembler:
             beta=tuple(value(f"beta{k}") for k in range(4)),
         )
         return eph, klob
+
+
+def broadcast_klobuchar(iono: Klobuchar) -> Klobuchar:
+    """The Klobuchar coefficients as a receiver decodes them: each rounded to its ICD LSB.
+
+    The IF generator simulates the ionosphere with these values, so the delay model in the
+    signal and in the broadcast message are identical.
+
+    Raises
+    ------
+    NavMessageError
+        A coefficient does not fit its 8-bit field.
+    """
+    names = ("alpha0", "alpha1", "alpha2", "alpha3", "beta0", "beta1", "beta2", "beta3")
+    values = [F.PARAMS[n].from_raw(F.PARAMS[n].to_raw(v))
+              for n, v in zip(names, (*iono.alpha, *iono.beta))]
+    return Klobuchar(alpha=tuple(values[:4]), beta=tuple(values[4:]))

@@ -27,6 +27,7 @@ from ..io.sidecar import write_sidecar
 from ..orbits.ephemeris import Klobuchar
 from ..orbits.rinex_nav import load_nav
 from ..scenario.schema import Scenario
+from ..signal.navmsg import broadcast_klobuchar
 from ..timebase import bdt_minus_utc, bdt_to_datetime
 from .geometry import ReceiverPath
 from .ifgen import IfGenerator, build_satellites
@@ -65,12 +66,13 @@ def broadcast_iono(nav) -> tuple[Klobuchar | None, str]:
     GPS coefficients (``GPSA``/``GPSB``: the same eight-parameter Klobuchar set with the same
     broadcast scale factors, describing the same day's ionosphere), applied with the BDS
     model; otherwise none. Whatever is used is also what the D1/D2 messages broadcast, so a
-    receiver decoding the message removes exactly the simulated delay model.
+    receiver decoding the message removes exactly the simulated delay model (coefficients
+    rounded to their ICD LSB, :func:`~sdr_di.signal.navmsg.broadcast_klobuchar`).
     """
     if nav.iono is not None:
-        return nav.iono, "BDSA/BDSB"
+        return broadcast_klobuchar(nav.iono), "BDSA/BDSB"
     if nav.iono_gps is not None:
-        return nav.iono_gps, "GPSA/GPSB (file has no BDS coefficients)"
+        return broadcast_klobuchar(nav.iono_gps), "GPSA/GPSB (file has no BDS coefficients)"
     return None, "none (file has no Klobuchar coefficients)"
 
 
