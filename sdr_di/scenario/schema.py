@@ -417,7 +417,7 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     bits = sg.int_("quantization_bits", 4, lo=1, hi=16)
     iono = sg.str_("ionosphere", "klobuchar", ("klobuchar", "none"))
     tropo = sg.str_("troposphere", "saastamoinen", ("saastamoinen", "none"))
-    chunk_ms = sg.int_("chunk_ms", 50, lo=1, hi=1000)
+    chunk_ms = sg.int_("chunk_ms", 200, lo=1, hi=1000)
     sg.check_unknown()
     is_complex = kind == "complex"
     if fmt.startswith("iq") != is_complex:
