@@ -50,6 +50,19 @@ BDT_MINUS_GPST = -14.0
 BDT_WEEK_OFFSET = 1356
 
 
+def check_prn(prn) -> int:
+    """Return ``prn`` as an int if it is a B3I PRN (1..63), else raise ``UnknownPrnError``."""
+    from .errors import UnknownPrnError
+
+    try:
+        p = int(prn)
+    except (TypeError, ValueError):
+        raise UnknownPrnError(f"unknown BDS PRN {prn!r} (valid: 1..63)") from None
+    if p != prn or not 1 <= p <= 63:
+        raise UnknownPrnError(f"unknown BDS PRN {prn!r} (valid: 1..63)")
+    return p
+
+
 def is_geo(prn: int) -> bool:
     """Return True for a GEO PRN (D2 message, GEO orbit computation)."""
     return int(prn) in GEO_PRNS

@@ -13,7 +13,7 @@ import pytest
 from sdr_di.cli import main
 from sdr_di.io.sample_formats import unpack_iq_int4
 from sdr_di.io.sidecar import read_sidecar
-from sdr_di.scenario import DEFAULT_SCENARIO, REPO_ROOT
+from sdr_di.scenario import DEFAULT_SCENARIO
 
 DUR = "0.02"
 

@@ -89,8 +89,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..constants import BDT_WEEK_OFFSET, SECONDS_PER_WEEK, is_geo
-from ..errors import EphemerisError, NoEphemerisError, UnknownPrnError
+from ..constants import BDT_WEEK_OFFSET, SECONDS_PER_WEEK, check_prn, is_geo
+from ..errors import EphemerisError, NoEphemerisError
 from ..timebase import bdt_to_datetime, datetime_to_bdt
 from .ephemeris import Ephemeris, Klobuchar
 
@@ -232,7 +232,7 @@ class NavData:
         NoEphemerisError
             No healthy record of ``prn`` has a toe within ``max_age_s`` of the time.
         """
-        prn = _check_prn(prn)
+        prn = check_prn(prn)
         if max_age_s is None:
             max_age_s = DEFAULT_MAX_AGE_GEO_S if is_geo(prn) else DEFAULT_MAX_AGE_S
         t = int(week) * SECONDS_PER_WEEK + float(sow)
@@ -268,14 +268,6 @@ def _toe_abs(eph: Ephemeris) -> float:
     return eph.week * SECONDS_PER_WEEK + eph.toe
 
 
-def _check_prn(prn) -> int:
-    try:
-        p = int(prn)
-    except (TypeError, ValueError):
-        raise UnknownPrnError(f"unknown BDS PRN {prn!r}: valid PRNs are 1..63") from None
-    if p != prn or not 1 <= p <= 63:
-        raise UnknownPrnError(f"unknown BDS PRN {prn!r}: valid PRNs are 1..63")
-    return p
 
 
 # --------------------------------------------------------------------------------------

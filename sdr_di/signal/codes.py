@@ -25,8 +25,7 @@ import importlib.resources
 
 import numpy as np
 
-from ..constants import CODE_LENGTH_B3I, GEO_PRNS
-from ..errors import UnknownPrnError
+from ..constants import CODE_LENGTH_B3I, GEO_PRNS, check_prn
 
 __all__ = [
     "G1_TAPS",
@@ -63,16 +62,6 @@ _DATA = "data"
 _G2_CSV = "BDS_B3I_G2_initial_phases.csv"
 
 
-def _check_prn(prn: int) -> int:
-    try:
-        p = int(prn)
-    except (TypeError, ValueError):
-        raise UnknownPrnError(f"PRN {prn!r} is not an integer in 1..63") from None
-    if p != prn or not 1 <= p <= 63:
-        raise UnknownPrnError(f"PRN {prn!r} is outside the B3I range 1..63")
-    return p
-
-
 @functools.lru_cache(maxsize=1)
 def reference_table() -> tuple[dict[str, str], ...]:
     """Rows of the shipped G2 initial-phase table (one dict per PRN 1..63, CSV column names)."""
@@ -85,7 +74,7 @@ def reference_table() -> tuple[dict[str, str], ...]:
 
 def g2_initial_phase(prn: int) -> tuple[int, ...]:
     """G2 initial register contents of ``prn`` as 13 bits, stage 1 first."""
-    row = reference_table()[_check_prn(prn) - 1]
+    row = reference_table()[check_prn(prn) - 1]
     return tuple(int(c) for c in row["g2_initial_phase_stage1_to_stage13"])
 
 
@@ -151,7 +140,7 @@ def b3i_code_bits(prn: int) -> np.ndarray:
     UnknownPrnError
         ``prn`` outside 1..63.
     """
-    p = _check_prn(prn)
+    p = check_prn(prn)
     g2 = lfsr13(g2_initial_phase(p), G2_TAPS, CODE_LENGTH_B3I)
     code = np.bitwise_xor(_g1(), g2)
     code.setflags(write=False)
@@ -175,4 +164,4 @@ def b3i_code(prn: int) -> np.ndarray:
 def nav_type(prn: int) -> str:
     """Navigation message type broadcast on B3I by ``prn``: ``'D2'`` for GEO (PRN 1-5, 59-63),
     ``'D1'`` otherwise (MEO/IGSO, with the NH20 secondary code)."""
-    return "D2" if _check_prn(prn) in GEO_PRNS else "D1"
+    return "D2" if check_prn(prn) in GEO_PRNS else "D1"

@@ -58,7 +58,8 @@ from ..errors import NavMessageError
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from ..timebase import bdt_minus_utc, bdt_to_datetime, datetime_to_bdt, wrap_week_seconds
 from . import fields as F
-from .codes import NH20, _check_prn, nav_type as _nav_type
+from ..constants import check_prn
+from .codes import NH20, nav_type as _nav_type
 from .fields import PARAMS, PI_ICD
 from .words import PREAMBLE, SUBFRAME_BITS, build_info, decode_words, encode_words, parse_header
 
@@ -394,7 +395,7 @@ def _context(eph: Ephemeris, iono: Klobuchar | None, almanac: Mapping[int, Ephem
     alm = {prn: _almanac_or_empty(eph, toa)}
     health = {prn: 0 if eph.healthy else _UNHEALTHY}
     for p, other in (almanac or {}).items():
-        p = _check_prn(p)
+        p = check_prn(p)
         if p == prn:
             continue
         if other.prn != p:
@@ -443,7 +444,7 @@ def nav_bits(
         Bad interval, ephemeris more than half a week from the interval (its week could not be
         recovered from the broadcast WN), or a parameter outside its ICD field range.
     """
-    prn = _check_prn(eph.prn)
+    prn = check_prn(eph.prn)
     nav = _nav_type(prn)
     week = int(week)
     sow_start = float(sow_start)
@@ -749,7 +750,7 @@ class EphemerisAssembler:
     """
 
     def __init__(self, prn: int) -> None:
-        self.prn = _check_prn(prn)
+        self.prn = check_prn(prn)
         self.nav_type = _nav_type(self.prn)
         self._parts: dict[int, dict] = {}
         self._done_group: int | None = None
