@@ -4,6 +4,7 @@
 Usage::
 
     python scripts/bench.py generate [--durations 10 60] [--out DIR] [--keep]
+    python scripts/bench.py correlate [options of scripts/bench_correlate.py]
 
 ``generate``: runs ``sdr-di generate`` on the default scenario (7 satellites, 25 MHz, 4-bit)
 for each duration in a fresh process, and prints wall time, samples per second, real-time
@@ -69,6 +70,12 @@ def main(argv: list[str] | None = None) -> None:
     g.add_argument("--out", default=None, help="output directory (default: a temp dir)")
     g.add_argument("--keep", action="store_true", help="keep the generated files")
     g.set_defaults(func=bench_generate)
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_correlate
+
+    c = sub.add_parser("correlate", help="E/P/L correlator throughput (sample-channels/s)")
+    bench_correlate.add_arguments(c)
+    c.set_defaults(func=bench_correlate.run)
     args = parser.parse_args(argv)
     args.func(args)
 
