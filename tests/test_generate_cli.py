@@ -36,6 +36,7 @@ def test_generate_writes_consistent_outputs(tmp_path, capsys):
     assert meta["n_samples"] == 500_000 and meta["sampling_rate_hz"] == 25e6
     assert (tmp_path / "default.bin").stat().st_size == meta["n_samples"] * 2
     assert len(meta["satellites"]) == 7 and meta["start"]["week"] == 755
+    assert meta["start"]["sow"] == 360000.0 + 2.5 * 3600
     x = np.fromfile(tmp_path / "default.bin", np.int8)
     assert x.min() >= -7 and x.max() <= 7  # 4-bit mid-tread grid
     # automatic gain: noise-dominated input at ~3 LSB RMS (Max step 0.3352 sigma)
