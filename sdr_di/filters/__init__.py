@@ -1,0 +1,51 @@
+"""Integration filters: EKF, UKF, CKF and pluggable adaptive rules (DESIGN sections 1, 4).
+
+Generic Kalman-filter layer of the receiver's 17-state integration filter and of the loosely
+coupled runs. Everything runs at filter rate in plain numpy/scipy (no numba).
+
+Build a filter by name::
+
+    from sdr_di.filters import make_filter
+    kf = make_filter("ff-aukf", process_model, measurement_model, x0, P0, Q0, R0=None, dt=0.1)
+    kf.predict()                       # x^-, P^- (f(x, dt) of the process model)
+    kf.update(z, R=R_k)                # z = [drho_1..N, drho_dot_1..N], R_k from pre-filters
+    kf.x, kf.P, kf.y, kf.S, kf.K, kf.residual, kf.log_likelihood, kf.rule.adaptation_time_s
+
+Names (:data:`FILTER_NAMES`): ``ekf``, ``ukf``, ``ckf``, ``ff-aukf``, ``rae-aukf``,
+``ml-q-ukf``, ``sage-husa-ukf``, ``q-scaling-ekf``, ``q-scaling-ukf``, ``ml-r-ckf``.
+
+Modules
+-------
+``models``        :class:`ProcessModel` (``f``, ``F``, ``f_batch``), :class:`MeasurementModel`
+                  (``h``, ``H``, ``h_batch``), linear and function wrappers
+``base``          :class:`KalmanFilterBase`: common interface, validation, correction
+``ekf``           :class:`EKF`
+``sigma_points``  scaled unscented and cubature point sets
+``sigma_filter``  :class:`SigmaPointFilter` and its :class:`UKF` / :class:`CKF`
+``adaptive``      one module per paper rule (see :mod:`sdr_di.filters.adaptive`)
+``registry``      :func:`make_filter`
+``state``         17-state layout indices and measurement blocks
+``errors``        :class:`FilterError`, :class:`CovarianceError`
+"""
+
+from .adaptive import (AdaptiveRule, ForgettingFactorAUKF, MLMeasurementNoiseCKF,
+                       MLProcessNoiseUKF, ProcessNoiseScaling, SageHusaUKF, SageWindowAUKF)
+from .base import KalmanFilterBase, MeasurementPrediction
+from .ekf import EKF
+from .errors import CovarianceError, FilterError
+from .models import (FunctionMeasurementModel, FunctionProcessModel, LinearMeasurementModel,
+                     LinearProcessModel, MeasurementModel, ProcessModel, numerical_jacobian)
+from .registry import FILTER_NAMES, filter_options, make_filter
+from .sigma_filter import CKF, UKF, SigmaPointFilter
+from .sigma_points import CubaturePoints, MerweScaledSigmaPoints, SigmaPoints
+
+__all__ = [
+    "make_filter", "FILTER_NAMES", "filter_options",
+    "KalmanFilterBase", "MeasurementPrediction", "EKF", "UKF", "CKF", "SigmaPointFilter",
+    "SigmaPoints", "MerweScaledSigmaPoints", "CubaturePoints",
+    "ProcessModel", "MeasurementModel", "LinearProcessModel", "LinearMeasurementModel",
+    "FunctionProcessModel", "FunctionMeasurementModel", "numerical_jacobian",
+    "AdaptiveRule", "ForgettingFactorAUKF", "SageWindowAUKF", "MLProcessNoiseUKF",
+    "SageHusaUKF", "ProcessNoiseScaling", "MLMeasurementNoiseCKF",
+    "FilterError", "CovarianceError",
+]

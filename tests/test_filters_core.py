@@ -1,0 +1,279 @@
+"""Core filters (EKF, UKF, CKF): exactness on a linear-Gaussian problem, interface, numerics,
+bad input."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sdr_di.errors import SdrDiError
+from sdr_di.filters import (EKF, FILTER_NAMES, UKF, CovarianceError, CubaturePoints,
+                            FilterError, FunctionMeasurementModel, FunctionProcessModel,
+                            LinearMeasurementModel, LinearProcessModel,
+                            MerweScaledSigmaPoints, make_filter)
+
+
+def _random_spd(rng, n, scale=1.0, jitter=0.1):
+    a = rng.normal(size=(n, n))
+    return scale * (a @ a.T / n + jitter * np.eye(n))
+
+
+def _linear_problem(seed=7, n=5):
+    rng = np.random.default_rng(seed)
+    dt = 0.5
+    F = np.eye(n)
+    F[0:2, 2:4] = dt * np.eye(2)                      # constant velocity in 2-D ...
+    F = F + 0.05 * rng.normal(size=(n, n))            # ... plus a random coupling
+    Q = _random_spd(rng, n, 0.05)
+    P0 = _random_spd(rng, n, 4.0)
+    x0 = rng.normal(size=n) * 3.0
+    return rng, F, Q, P0, x0
+
+
+def _textbook_kf(x, P, F, Q, H, R, z):
+    """Plain textbook Kalman filter step (Gelb): predict then update."""
+    x = F @ x
+    P = F @ P @ F.T + Q
+    S = H @ P @ H.T + R
+    K = P @ H.T @ np.linalg.inv(S)
+    x = x + K @ (z - H @ x)
+    I_KH = np.eye(len(x)) - K @ H
+    P = I_KH @ P @ I_KH.T + K @ R @ K.T               # Joseph form
+    return x, P
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf"])
+def test_linear_gaussian_matches_exact_kalman_filter(name):
+    rng, F, Q, P0, x0 = _linear_problem()
+    n = len(x0)
+    kf = make_filter(name, LinearProcessModel(F), None, x0, P0, Q)
+    x, P = x0.copy(), P0.copy()
+    for k in range(60):
+        m = int(rng.integers(1, 7))                   # measurement count changes every epoch
+        H = rng.normal(size=(m, n))
+        R = _random_spd(rng, m, 0.5)
+        z = rng.normal(size=m) * 3.0
+        x, P = _textbook_kf(x, P, F, Q, H, R, z)
+        kf.predict()
+        kf.update(z, R, LinearMeasurementModel(H))
+        np.testing.assert_allclose(kf.x, x, rtol=0, atol=1e-9 * max(1.0, np.abs(x).max()))
+        np.testing.assert_allclose(kf.P, P, rtol=0, atol=1e-9 * max(1.0, np.abs(P).max()))
+        assert np.array_equal(kf.P, kf.P.T)           # symmetric after every step
+
+
+def test_ukf_small_alpha_still_close_but_loses_digits():
+    """alpha = 1e-3 is accepted; it is exact to ~1e-8 (documented precision loss)."""
+    rng, F, Q, P0, x0 = _linear_problem(seed=3)
+    n = len(x0)
+    kf = UKF(LinearProcessModel(F), None, x0, P0, Q, alpha=1e-3)
+    x, P = x0.copy(), P0.copy()
+    for _ in range(20):
+        H = rng.normal(size=(3, n))
+        R = _random_spd(rng, 3)
+        z = rng.normal(size=3)
+        x, P = _textbook_kf(x, P, F, Q, H, R, z)
+        kf.predict()
+        kf.update(z, R, LinearMeasurementModel(H))
+    np.testing.assert_allclose(kf.x, x, atol=1e-6)
+    np.testing.assert_allclose(kf.P, P, atol=1e-6)
+
+
+def test_sigma_point_sets():
+    ut = MerweScaledSigmaPoints()                     # documented defaults 0.5, 2, 0
+    assert (ut.alpha, ut.beta, ut.kappa) == (0.5, 2.0, 0.0)
+    n = 17
+    xi = ut.unit_points(n)
+    wm, wc = ut.weights(n)
+    assert xi.shape == (2 * n + 1, n) and math.isclose(wm.sum(), 1.0)
+    lam = 0.25 * n - n
+    assert math.isclose(wm[0], lam / (n + lam)) and math.isclose(wc[0], wm[0] + 1 - 0.25 + 2)
+    assert math.isclose(np.abs(xi[1:]).max(), math.sqrt(n + lam))
+    # weighted points reproduce mean 0 and identity covariance
+    np.testing.assert_allclose(wm @ xi, 0, atol=1e-12)
+    np.testing.assert_allclose((xi.T * wm) @ xi, np.eye(n), atol=1e-12)
+    ck = CubaturePoints()
+    xi = ck.unit_points(n)
+    wm, wc = ck.weights(n)
+    assert xi.shape == (2 * n, n) and np.allclose(wm, 1 / (2 * n))
+    np.testing.assert_allclose((xi.T * wm) @ xi, np.eye(n), atol=1e-12)
+
+
+def test_interface_attributes_innovation_residual_likelihood():
+    rng, F, Q, P0, x0 = _linear_problem(seed=11)
+    n = len(x0)
+    H = rng.normal(size=(4, n))
+    R = _random_spd(rng, 4)
+    for name in ("ekf", "ukf", "ckf"):
+        kf = make_filter(name, LinearProcessModel(F), LinearMeasurementModel(H), x0, P0, Q, R)
+        kf.predict()
+        x_prior, P_prior = kf.x.copy(), kf.P.copy()
+        np.testing.assert_array_equal(kf.x_prior, x_prior)
+        z = rng.normal(size=4)
+        kf.update(z)
+        S = H @ P_prior @ H.T + R
+        np.testing.assert_allclose(kf.y, z - H @ x_prior, atol=1e-10)
+        np.testing.assert_allclose(kf.S, S, atol=1e-10)
+        np.testing.assert_allclose(kf.S_inv, np.linalg.inv(S), atol=1e-10)
+        np.testing.assert_allclose(kf.K, P_prior @ H.T @ np.linalg.inv(S), atol=1e-10)
+        np.testing.assert_allclose(kf.residual, z - H @ kf.x, atol=1e-10)
+        np.testing.assert_array_equal(kf.x_post, kf.x)
+        y = kf.y
+        ll = -0.5 * (4 * math.log(2 * math.pi) + math.log(np.linalg.det(S))
+                     + y @ np.linalg.solve(S, y))
+        assert math.isclose(kf.log_likelihood, ll, rel_tol=1e-10)
+        assert math.isclose(kf.nis, y @ np.linalg.solve(S, y), rel_tol=1e-10)
+        assert kf.epoch == 1 and kf.name == name
+
+
+def test_empty_measurement_vector_leaves_state():
+    _, F, Q, P0, x0 = _linear_problem()
+    for name in FILTER_NAMES:
+        kf = make_filter(name, LinearProcessModel(F), LinearMeasurementModel(np.zeros((0, 5))),
+                         x0, P0, Q)
+        kf.predict()
+        x, P = kf.x.copy(), kf.P.copy()
+        kf.update(np.zeros(0))                        # all channels lost
+        np.testing.assert_array_equal(kf.x, x)
+        np.testing.assert_array_equal(kf.P, P)
+        assert kf.y.size == 0 and kf.epoch == 0
+
+
+def test_ekf_default_jacobians_are_central_differences_of_the_model():
+    def f(x, dt):
+        return np.array([x[0] + dt * x[1], x[1] - dt * 0.1 * np.sin(x[0])])
+
+    def h(x):
+        return np.array([np.hypot(x[0], 2.0)])
+
+    pm = FunctionProcessModel(f, dim_x=2)
+    mm = FunctionMeasurementModel(h)
+    x = np.array([0.3, -0.2])
+    F_ana = np.array([[1.0, 0.1], [-0.1 * 0.1 * np.cos(0.3), 1.0]])
+    np.testing.assert_allclose(pm.F(x, 0.1), F_ana, atol=1e-9)
+    np.testing.assert_allclose(mm.H(x), [[0.3 / np.hypot(0.3, 2.0), 0.0]], atol=1e-9)
+    kf = EKF(pm, mm, x, np.eye(2), 0.01 * np.eye(2), np.eye(1), dt=0.1)
+    kf.predict()
+    kf.update([2.1])
+    assert np.all(np.isfinite(kf.x))
+
+
+# --------------------------------------------------------------------------- bad input
+def test_unknown_filter_name_lists_valid_names():
+    with pytest.raises(FilterError) as exc:
+        make_filter("kalman", LinearProcessModel(np.eye(2)), None, np.zeros(2), np.eye(2),
+                    np.eye(2))
+    msg = str(exc.value)
+    assert "kalman" in msg
+    for name in FILTER_NAMES:
+        assert name in msg
+    assert isinstance(exc.value, SdrDiError)
+    assert set(FILTER_NAMES) == {"ekf", "ukf", "ckf", "ff-aukf", "rae-aukf", "ml-q-ukf",
+                                 "sage-husa-ukf", "q-scaling-ekf", "q-scaling-ukf", "ml-r-ckf"}
+
+
+def test_unknown_option_rejected():
+    with pytest.raises(FilterError, match="unknown option.*windw"):
+        make_filter("ff-aukf", LinearProcessModel(np.eye(2)), None, np.zeros(2), np.eye(2),
+                    np.eye(2), windw=3)
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf", "ff-aukf"])
+def test_non_positive_definite_P0_rejected_at_construction(name):
+    pm = LinearProcessModel(np.eye(3))
+    P0 = np.diag([1.0, 0.0, 1.0])
+    with pytest.raises(FilterError, match="P0 is not positive definite"):
+        make_filter(name, pm, None, np.zeros(3), P0, np.eye(3))
+    P0 = np.array([[1.0, 2.0, 0.0], [2.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(FilterError, match="P0 is not positive definite"):
+        make_filter(name, pm, None, np.zeros(3), P0, np.eye(3))
+    with pytest.raises(FilterError, match="P0 is not symmetric"):
+        make_filter(name, pm, None, np.zeros(3), np.triu(np.ones((3, 3))) + np.eye(3),
+                    np.eye(3))
+    with pytest.raises(FilterError, match="P0 is 2x2 but 3x3"):
+        make_filter(name, pm, None, np.zeros(3), np.eye(2), np.eye(3))
+
+
+def test_other_bad_construction_input():
+    pm = LinearProcessModel(np.eye(3))
+    with pytest.raises(FilterError, match="Q0 is not positive semi-definite"):
+        make_filter("ukf", pm, None, np.zeros(3), np.eye(3), -np.eye(3))
+    with pytest.raises(FilterError, match="x0 has 2 states but the process model has 3"):
+        make_filter("ukf", pm, None, np.zeros(2), np.eye(2), np.eye(2))
+    with pytest.raises(FilterError, match="x0 contains NaN"):
+        make_filter("ekf", pm, None, [0.0, np.nan, 0.0], np.eye(3), np.eye(3))
+    with pytest.raises(FilterError, match="R0 is not positive definite"):
+        make_filter("ckf", pm, None, np.zeros(3), np.eye(3), np.eye(3), R0=-np.eye(2))
+    with pytest.raises(FilterError, match="alpha"):
+        make_filter("ukf", pm, None, np.zeros(3), np.eye(3), np.eye(3), alpha=0.0)
+    with pytest.raises(FilterError, match="psd_fallback"):
+        make_filter("ukf", pm, None, np.zeros(3), np.eye(3), np.eye(3), psd_fallback="fix")
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf", "ff-aukf", "ml-r-ckf"])
+def test_wrong_size_or_bad_z_and_R(name):
+    pm = LinearProcessModel(np.eye(3))
+    mm = LinearMeasurementModel(np.eye(4, 3))
+    kf = make_filter(name, pm, mm, np.zeros(3), np.eye(3), 0.1 * np.eye(3), R0=np.eye(4))
+    kf.predict()
+    with pytest.raises(FilterError, match="z has 5 elements but the measurement model "
+                                          "predicts 4"):
+        kf.update(np.zeros(5))
+    with pytest.raises(FilterError, match="z has 3 elements"):
+        kf.update(np.zeros(3))
+    with pytest.raises(FilterError, match="NaN"):
+        kf.update([0.0, np.nan, 0.0, 0.0])
+    with pytest.raises(FilterError, match="1-D"):
+        kf.update(np.zeros((4, 1)))
+    with pytest.raises(FilterError, match="R has shape"):
+        kf.update(np.zeros(4), R=np.eye(3))
+    with pytest.raises(FilterError, match="non-positive variance"):
+        kf.update(np.zeros(4), R=np.zeros(4))
+    kf.update(np.zeros(4))                            # the filter is still usable
+    assert kf.epoch == 1
+
+
+def test_missing_R_when_count_changes():
+    kf = make_filter("ukf", LinearProcessModel(np.eye(2)), None, np.zeros(2), np.eye(2),
+                     np.eye(2), R0=np.eye(2))
+    kf.predict()
+    with pytest.raises(FilterError, match="pass R for this epoch"):
+        kf.update(np.zeros(3), measurement_model=LinearMeasurementModel(np.ones((3, 2))))
+    kf2 = make_filter("ukf", LinearProcessModel(np.eye(2)), None, np.zeros(2), np.eye(2),
+                      np.eye(2))
+    with pytest.raises(FilterError, match="no R given"):
+        kf2.update(np.zeros(2), measurement_model=LinearMeasurementModel(np.eye(2)))
+
+
+# --------------------------------------------------------------------------- numerics
+def test_covariance_failure_names_filter_and_step():
+    pm = LinearProcessModel(np.eye(2))
+    mm = LinearMeasurementModel(np.eye(2))
+    bad_R = np.array([[1.0, 3.0], [3.0, 1.0]])        # positive variances, indefinite
+    for name in ("ekf", "ukf", "ckf"):
+        kf = make_filter(name, pm, mm, np.zeros(2), 1e-6 * np.eye(2), 1e-6 * np.eye(2))
+        kf.predict()
+        with pytest.raises(CovarianceError) as exc:
+            kf.update(np.zeros(2), R=bad_R)
+        e = exc.value
+        assert (e.filter_name, e.step, e.matrix) == (name, "update", "S")
+        assert e.min_eigenvalue < 0 and name in str(e) and "update" in str(e)
+    # a negative-definite Q in predict makes P indefinite: the sigma points cannot be drawn
+    kf = make_filter("ukf", pm, mm, np.zeros(2), np.eye(2), np.eye(2))
+    kf.predict(Q=-3.0 * np.eye(2))
+    with pytest.raises(CovarianceError, match="ukf update .* covariance P is not positive"):
+        kf.update(np.zeros(2), R=np.eye(2))
+    kf.P = np.diag([1.0, -1.0])
+    with pytest.raises(CovarianceError, match="ukf predict"):
+        kf.predict()
+
+
+def test_clip_fallback_is_recorded():
+    pm = LinearProcessModel(np.eye(2))
+    mm = LinearMeasurementModel(np.eye(2))
+    kf = make_filter("ckf", pm, mm, np.zeros(2), np.eye(2), np.eye(2), psd_fallback="clip")
+    kf.P = np.array([[1.0, 2.0], [2.0, 1.0]])
+    kf.predict()
+    kf.update(np.ones(2), R=np.eye(2))
+    assert kf.numerics_events and kf.numerics_events[0]["step"] == "predict"
+    assert kf.numerics_events[0]["matrix"] == "P" and kf.numerics_events[0]["min_eigenvalue"] < 0
+    assert np.all(np.linalg.eigvalsh(kf.P) > 0) and np.all(np.isfinite(kf.x))
