@@ -32,7 +32,7 @@ from .adaptive import (AdaptiveRule, ForgettingFactorAUKF, MLMeasurementNoiseCKF
                        MLProcessNoiseUKF, ProcessNoiseScaling, SageHusaUKF, SageWindowAUKF)
 from .base import KalmanFilterBase, MeasurementPrediction
 from .ekf import EKF
-from .errors import CovarianceError, FilterError
+from ..errors import CovarianceError, FilterError
 from .models import (FunctionMeasurementModel, FunctionProcessModel, LinearMeasurementModel,
                      LinearProcessModel, MeasurementModel, ProcessModel, numerical_jacobian)
 from .registry import FILTER_NAMES, filter_options, make_filter

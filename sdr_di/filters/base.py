@@ -49,7 +49,7 @@ UKF/CKF)::
 Numerics
 --------
 A covariance that is not positive definite where a Cholesky factor is needed (``P`` for the
-sigma points, ``S`` in the update) raises :class:`~sdr_di.filters.errors.CovarianceError`
+sigma points, ``S`` in the update) raises :class:`~sdr_di.errors.CovarianceError`
 naming the filter, the step and the smallest eigenvalue (``psd_fallback='raise'``, the
 default), or, with ``psd_fallback='clip'``, is replaced by the nearest matrix with eigenvalues
 clipped to ``1e-12 * max|eigenvalue|`` and the repair is appended to ``numerics_events``.
@@ -65,7 +65,7 @@ import numpy as np
 
 from ._linalg import (cholesky_lower, clip_eigenvalues, min_eigenvalue,
                       spd_inverse_from_cholesky, symmetrize)
-from .errors import CovarianceError, FilterError
+from ..errors import CovarianceError, FilterError
 from .models import MeasurementModel, ProcessModel
 
 __all__ = ["KalmanFilterBase", "MeasurementPrediction"]

@@ -28,7 +28,7 @@ from .adaptive import (ForgettingFactorAUKF, MLMeasurementNoiseCKF, MLProcessNoi
                        ProcessNoiseScaling, SageHusaUKF, SageWindowAUKF)
 from .base import KalmanFilterBase
 from .ekf import EKF
-from .errors import FilterError
+from ..errors import FilterError
 from .models import MeasurementModel, ProcessModel
 from .sigma_filter import CKF, UKF
 

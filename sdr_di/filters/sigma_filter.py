@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import KalmanFilterBase, MeasurementPrediction
-from .errors import FilterError
+from ..errors import FilterError
 from .models import MeasurementModel
 from .sigma_points import CubaturePoints, MerweScaledSigmaPoints, SigmaPoints
 

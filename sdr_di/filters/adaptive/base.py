@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from ..errors import FilterError
+from ...errors import FilterError
 
 __all__ = ["AdaptiveRule", "default_q_floor"]
 

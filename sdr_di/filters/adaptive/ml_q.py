@@ -40,7 +40,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from .._linalg import floor_pd
-from ..errors import FilterError
+from ...errors import FilterError
 from .base import AdaptiveRule
 
 __all__ = ["MLProcessNoiseUKF"]

@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-from ..errors import FilterError
+from ...errors import FilterError
 from .base import AdaptiveRule
 
 __all__ = ["MLMeasurementNoiseCKF", "ml_r_objective"]

@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from ..errors import FilterError
+from ...errors import FilterError
 from .base import AdaptiveRule
 
 __all__ = ["ProcessNoiseScaling"]

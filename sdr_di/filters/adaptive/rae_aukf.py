@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import FilterError
+from ...errors import FilterError
 from .base import AdaptiveRule
 
 __all__ = ["SageWindowAUKF"]

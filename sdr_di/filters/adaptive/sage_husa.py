@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._linalg import floor_pd
-from ..errors import FilterError
+from ...errors import FilterError
 from .base import AdaptiveRule
 
 __all__ = ["SageHusaUKF"]
