@@ -5,6 +5,7 @@ Usage::
 
     python scripts/bench.py generate [--durations 10 60] [--out DIR] [--keep]
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
+    python scripts/bench.py filters [options of scripts/bench_filters.py]
 
 ``generate``: runs ``sdr-di generate`` on the default scenario (7 satellites, 25 MHz, 4-bit)
 for each duration in a fresh process, and prints wall time, samples per second, real-time
@@ -76,6 +77,11 @@ def main(argv: list[str] | None = None) -> None:
     c = sub.add_parser("correlate", help="E/P/L correlator throughput (sample-channels/s)")
     bench_correlate.add_arguments(c)
     c.set_defaults(func=bench_correlate.run)
+    import bench_filters
+
+    f = sub.add_parser("filters", help="filter step time, 17 states, 2N measurements")
+    bench_filters.add_arguments(f)
+    f.set_defaults(func=bench_filters.run)
     args = parser.parse_args(argv)
     args.func(args)
 

@@ -316,9 +316,8 @@ def _sweep(args) -> list[dict]:
     return rows
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of this benchmark (shared with ``scripts/bench.py filters``)."""
     parser.add_argument("--epochs", type=int, default=400, help="timed epochs (default 400)")
     parser.add_argument("--warmup", type=int, default=50,
                         help="untimed epochs first (default 50, at least 30)")
@@ -329,6 +328,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeat", type=int, default=3, help="runs per filter, best kept")
     parser.add_argument("--no-sweep", dest="sweep", action="store_false",
                         help="skip the channels/window sweep of ff-aukf vs rae-aukf")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_arguments(parser)
     run(parser.parse_args(argv))
 
 
