@@ -1,0 +1,379 @@
+"""Nonlinear 17-state INS/clock error model (paper 004 eq 1-5; paper 000 eq 1-7) as a
+:class:`~sdr_di.filters.models.ProcessModel`.
+
+State layout (DESIGN section 4, :mod:`sdr_di.filters.state`), errors = *computed minus true*
+(the convention of :meth:`sdr_di.ins.mechanization.StrapdownINS.correct`)::
+
+    0-2   phi        misalignment [rad] (ENU), C_b^n' = C_n^n' C_b^n,  C_n^n' = exp(-[phi x])
+    3-5   dv         velocity error [m/s] (ENU)
+    6-8   dp         (dlat [rad], dlon [rad], dh [m])
+    9-11  eps        residual gyro bias [rad/s] (measured - true, after the INS compensation)
+    12-14 nabla      residual accel bias [m/s^2]
+    15    db_clk     receiver clock bias error [m]
+    16    dd_clk     receiver clock drift error [m/s]
+
+Continuous model (eq 2 with large misalignment; eq 3; eq 4). With the computed (INS)
+navigation state ``(L^, lambda^, h^, v^, C_b^n')`` and the true one ``= computed - error``:
+
+* attitude (eq 2, first line)::
+
+      phi' = C_w^-1 [ (I - C_n^n') w^_in + C_n^n' dw_in - C_b^n' eps ]
+
+  ``phi`` is a *rotation vector* (so the INS feedback ``C_b^n <- exp([phi x]) C_b^n`` is exact
+  for any angle); for it the matrix that maps ``phi'`` to the relative angular velocity is the
+  right Jacobian of SO(3), ``C_w = J_r(phi)``, and
+  ``C_w^-1 = I + [phi x]/2 + (1/|phi|^2 - (1 + cos|phi|)/(2 |phi| sin|phi|)) [phi x]^2``.
+  (Paper 004 uses Euler-angle errors with the corresponding ``C_w``; both reduce to
+  ``C_w = I``, ``I - C_n^n' = [phi x]`` for small angles, the linear psi-angle model.)
+* velocity (eq 2, second line; paper 000 eq 1)::
+
+      dv' = (I - C_n^n'^T) C_b^n' f^ + C_n^n'^T C_b^n' nabla
+            - (2 w^_ie + w^_en) x dv - (2 dw_ie + dw_en) x v + dg
+
+  ``f^`` = compensated specific force the INS used (IMU average over the interval),
+  ``dg = g(L^, h^) - g(L, h)`` on the Up axis (normal gravity; the paper omits it, it is the
+  term that makes the vertical channel unstable).
+* position (eq 2, last three lines), evaluated as the exact difference
+  ``dL' = v^_N/(R_M(L^)+h^) - v_N/(R_M(L)+h)``, ``dlambda' = v^_E/((R_N(L^)+h^) cos L^) -
+  v_E/((R_N(L)+h) cos L)``, ``dh' = dv_U``; likewise ``dw_ie``, ``dw_en`` are exact
+  differences of the rates at the computed and true states. The first-order expansion of these
+  differences is eq 2 exactly.
+* sensor biases: random constants (eq 3), ``eps' = 0``, ``nabla' = 0``.
+* clock (eq 4): ``db' = dd + w_b``, ``dd' = -dd / tau_clk + w_d``.
+
+Discretization (eq 5): improved Euler (Heun; paper 000 Remark 1) over the filter interval
+``h``: ``x_k = x + h/2 [g0(x) + g1(x + h g0(x))]`` where ``g0`` uses the navigation state at
+the start of the interval and ``g1`` the one at its end, both with the IMU average over the
+interval (:meth:`InsErrorModel.set_interval`). Vectorized over sigma points (``f_batch``);
+the EKF Jacobian ``F`` is central differences of ``f_batch`` with per-state steps (one batched
+call of 2 n rows), checked in the tests against the analytic small-error Jacobian
+:func:`linear_error_matrix`.
+
+Process noise (:func:`process_noise`, discrete, per interval ``h``), decisions documented here:
+
+* attitude: angle random walk ``N_g^2 h`` [rad^2] (white gyro noise ``w_g``; the noise enters
+  as ``-C_b^n' w_g`` which keeps an isotropic covariance);
+* velocity: velocity random walk ``N_a^2 h`` [(m/s)^2];
+* position: 0;
+* gyro / accel bias: eq 3 models random constants; a small random walk reaching the 1-sigma
+  bias spec in ``bias_time_s`` (default 3600 s) is added so the bias covariance does not
+  collapse: ``q = b_spec^2 h / bias_time_s``;
+* clock (eq 4): oscillator of Allan-variance coefficients ``h0``, ``h_-2`` (default TCXO
+  ``h0 = 2e-19``, ``h_-2 = 2e-20``; Brown and Hwang), ``S_b = c^2 h0 / 2`` [m^2/s],
+  ``S_d = 2 pi^2 c^2 h_-2`` [m^2/s^3], ``tau_clk = 3600`` s; discrete
+  ``[[S_b h + S_d h^3/3, S_d h^2/2], [S_d h^2/2, S_d h]]`` (the Markov damping is neglected
+  in Q since ``h << tau_clk``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..constants import OMEGA_E
+from ..filters.models import ProcessModel, numerical_jacobian
+from ..frames import radii_of_curvature, skew
+from .gravity import normal_gravity
+
+__all__ = ["NavState", "InsErrorModel", "process_noise", "ClockModel", "linear_error_matrix",
+           "rotvec_to_dcm", "dcm_to_rotvec", "N_STATES"]
+
+N_STATES = 17
+C_LIGHT = 299792458.0
+
+#: Central-difference steps per state for the numerical Jacobian (state units).
+JACOBIAN_STEPS = np.array([1e-6] * 3 + [1e-4] * 3 + [1e-9, 1e-9, 1e-3] + [1e-7] * 3
+                          + [1e-5] * 3 + [1e-2, 1e-3])
+
+
+@dataclasses.dataclass
+class NavState:
+    """Computed (INS) navigation state at one instant.
+
+    Attributes
+    ----------
+    llh : (3,) array
+        lat [rad], lon [rad], h [m].
+    v_n : (3,) array
+        ENU velocity [m/s].
+    C_b_n : (3, 3) array
+        Body (Right-Front-Up) to ENU rotation.
+    """
+
+    llh: np.ndarray
+    v_n: np.ndarray
+    C_b_n: np.ndarray
+
+    @classmethod
+    def from_ins(cls, ins) -> "NavState":
+        """Snapshot of a :class:`~sdr_di.ins.mechanization.StrapdownINS`."""
+        return cls(np.array(ins.llh, float), np.array(ins.v_n, float), np.array(ins.C_b_n))
+
+
+@dataclasses.dataclass(frozen=True)
+class ClockModel:
+    """Receiver clock of eq 4 (documented defaults: TCXO).
+
+    Attributes
+    ----------
+    h0, h_2 : float
+        Allan-variance coefficients (white frequency, random-walk frequency) [s, 1/s].
+    tau_s : float
+        Markov time constant of the drift error [s].
+    """
+
+    h0: float = 2e-19
+    h_2: float = 2e-20
+    tau_s: float = 3600.0
+
+    @property
+    def S_b(self) -> float:
+        """Bias white-noise PSD [m^2/s]."""
+        return C_LIGHT**2 * self.h0 / 2.0
+
+    @property
+    def S_d(self) -> float:
+        """Drift white-noise PSD [m^2/s^3]."""
+        return 2.0 * math.pi**2 * C_LIGHT**2 * self.h_2
+
+    def Q(self, dt: float) -> np.ndarray:
+        """Discrete clock noise covariance over ``dt`` [s] (2, 2)."""
+        Sb, Sd = self.S_b, self.S_d
+        return np.array([[Sb * dt + Sd * dt**3 / 3.0, Sd * dt**2 / 2.0],
+                         [Sd * dt**2 / 2.0, Sd * dt]])
+
+
+def rotvec_to_dcm(phi: np.ndarray) -> np.ndarray:
+    """``exp([phi x])`` for rotation vectors ``phi`` (..., 3) (Rodrigues)."""
+    phi = np.asarray(phi, float)
+    th2 = np.sum(phi * phi, axis=-1)[..., None, None]
+    th = np.sqrt(th2)
+    small = th2 < 1e-12
+    safe = np.where(small, 1.0, th)
+    a = np.where(small, 1.0 - th2 / 6.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(safe)) / np.where(small, 1.0, th2))
+    K = skew(phi)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def dcm_to_rotvec(C: np.ndarray) -> np.ndarray:
+    """Rotation vector ``phi`` with ``exp([phi x]) = C`` (angle < pi), (..., 3)."""
+    C = np.asarray(C, float)
+    tr = np.trace(C, axis1=-2, axis2=-1)
+    cth = np.clip((tr - 1.0) / 2.0, -1.0, 1.0)
+    th = np.arccos(cth)
+    w = np.stack([C[..., 2, 1] - C[..., 1, 2], C[..., 0, 2] - C[..., 2, 0],
+                  C[..., 1, 0] - C[..., 0, 1]], axis=-1)
+    s = np.sin(th)
+    k = np.where(th < 1e-6, 0.5 + th**2 / 12.0, th / (2.0 * np.where(th < 1e-6, 1.0, s)))
+    return k[..., None] * w
+
+
+def _inv_right_jacobian(phi: np.ndarray) -> np.ndarray:
+    """``C_w^-1 = J_r(phi)^-1`` (..., 3, 3)."""
+    th2 = np.sum(phi * phi, axis=-1)[..., None, None]
+    th = np.sqrt(th2)
+    small = th2 < 1e-8
+    ths = np.where(small, 1.0, th)
+    c = np.where(small, 1.0 / 12.0 + th2 / 720.0,
+                 1.0 / np.where(small, 1.0, th2) - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
+    K = skew(phi)
+    return np.eye(3) + 0.5 * K + c * (K @ K)
+
+
+def _rates(lat, h, v):
+    """w_ie^n, w_en^n (..., 3) and radii, vectorized."""
+    R_M, R_N = radii_of_curvature(lat)
+    sl, cl = np.sin(lat), np.cos(lat)
+    z = np.zeros_like(lat)
+    w_ie = np.stack([z, OMEGA_E * cl, OMEGA_E * sl], axis=-1)
+    w_en = np.stack([-v[..., 1] / (R_M + h), v[..., 0] / (R_N + h),
+                     v[..., 0] * sl / cl / (R_N + h)], axis=-1)
+    return w_ie, w_en, R_M, R_N
+
+
+def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.ndarray,
+                     clock: ClockModel) -> np.ndarray:
+    """Continuous error dynamics ``xdot = fbar(x)`` (eq 2-4) for rows of ``X`` (p, 17).
+
+    ``f_b`` is the compensated specific force [m/s^2] the INS integrates (``w_ib_b`` does not
+    enter: the attitude error equation only needs ``C_b^n'`` and the nav-frame rates).
+    """
+    X = np.atleast_2d(X)
+    phi, dv, dp = X[:, 0:3], X[:, 3:6], X[:, 6:9]
+    eps, nab = X[:, 9:12], X[:, 12:15]
+    Cb = nav.C_b_n
+    lat_c, h_c = nav.llh[0], nav.llh[2]
+    v_c = nav.v_n
+    # computed-state quantities (scalars/3-vectors)
+    wie_c, wen_c, RM_c, RN_c = _rates(np.array(lat_c), np.array(h_c), v_c)
+    win_c = wie_c + wen_c
+    # true state = computed - error
+    lat_t = lat_c - dp[:, 0]
+    h_t = h_c - dp[:, 2]
+    v_t = v_c - dv
+    wie_t, wen_t, RM_t, RN_t = _rates(lat_t, h_t, v_t)
+    d_wie = wie_c - wie_t
+    d_wen = wen_c - wen_t
+    A = rotvec_to_dcm(-phi)                                  # C_n^n' (p, 3, 3)
+    At = np.swapaxes(A, -1, -2)
+    I = np.eye(3)
+    # attitude (eq 2, line 1)
+    u = (np.einsum("pij,j->pi", I - A, win_c) + np.einsum("pij,pj->pi", A, d_wie + d_wen)
+         - eps @ Cb.T)
+    phi_dot = np.einsum("pij,pj->pi", _inv_right_jacobian(phi), u)
+    # velocity (eq 2, line 2)
+    Cf = Cb @ f_b
+    dv_dot = (np.einsum("pij,j->pi", I - At, Cf) + np.einsum("pij,pj->pi", At, nab @ Cb.T)
+              - np.cross(2.0 * wie_c + wen_c, dv) - np.cross(2.0 * d_wie + d_wen, v_t))
+    g_c = float(normal_gravity(lat_c, h_c))
+    dv_dot[:, 2] -= g_c - normal_gravity(lat_t, h_t)
+    # position (eq 2, lines 3-5)
+    dlat = v_c[1] / (RM_c + h_c) - v_t[:, 1] / (RM_t + h_t)
+    dlon = (v_c[0] / ((RN_c + h_c) * math.cos(lat_c))
+            - v_t[:, 0] / ((RN_t + h_t) * np.cos(lat_t)))
+    out = np.zeros_like(X)
+    out[:, 0:3] = phi_dot
+    out[:, 3:6] = dv_dot
+    out[:, 6] = dlat
+    out[:, 7] = dlon
+    out[:, 8] = dv[:, 2]
+    # clock (eq 4)
+    out[:, 15] = X[:, 16]
+    out[:, 16] = -X[:, 16] / clock.tau_s
+    return out
+
+
+class InsErrorModel(ProcessModel):
+    """Discrete nonlinear 17-state error model (eq 5) for one filter interval.
+
+    Call :meth:`set_interval` before each ``predict`` with the INS state at the start and the
+    end of the interval and the IMU averages over it; then ``f(x, dt)`` is the improved-Euler
+    step (paper 000 Remark 1) of :func:`error_derivative`.
+
+    Parameters
+    ----------
+    clock : ClockModel, optional
+        Clock model of eq 4 (default :class:`ClockModel`).
+    """
+
+    dim_x = N_STATES
+
+    def __init__(self, clock: ClockModel | None = None) -> None:
+        self.clock = clock or ClockModel()
+        self.nav0: NavState | None = None
+        self.nav1: NavState | None = None
+        self.f_b = np.zeros(3)
+        self.w_ib_b = np.zeros(3)
+
+    def set_interval(self, nav0: NavState, nav1: NavState, f_b, w_ib_b) -> None:
+        """Navigation state at the interval start/end and compensated IMU averages."""
+        self.nav0, self.nav1 = nav0, nav1
+        self.f_b = np.asarray(f_b, float).reshape(3)
+        self.w_ib_b = np.asarray(w_ib_b, float).reshape(3)
+
+    def f_batch(self, X: np.ndarray, dt: float) -> np.ndarray:
+        if self.nav0 is None:
+            raise RuntimeError("InsErrorModel: call set_interval() before propagating")
+        X = np.atleast_2d(np.asarray(X, float))
+        g0 = error_derivative(X, self.nav0, self.f_b, self.w_ib_b, self.clock)
+        g1 = error_derivative(X + dt * g0, self.nav1, self.f_b, self.w_ib_b, self.clock)
+        return X + 0.5 * dt * (g0 + g1)
+
+    def f(self, x: np.ndarray, dt: float) -> np.ndarray:
+        return self.f_batch(np.asarray(x, float)[None, :], dt)[0]
+
+    def F(self, x: np.ndarray, dt: float) -> np.ndarray:
+        """Jacobian by central differences of one batched ``f_batch`` call."""
+        x = np.asarray(x, float)
+        n = x.size
+        E = np.diag(JACOBIAN_STEPS)
+        Y = self.f_batch(np.vstack([x + E, x - E]), dt)
+        return ((Y[:n] - Y[n:]) / (2.0 * JACOBIAN_STEPS[:, None])).T
+
+    def F_numerical(self, x: np.ndarray, dt: float, scale: float = 1.0) -> np.ndarray:
+        """Reference Jacobian with :func:`numerical_jacobian` (steps scaled by ``scale``)."""
+        return numerical_jacobian(lambda v: self.f(v, dt), x, step=JACOBIAN_STEPS * scale)
+
+
+def linear_error_matrix(nav: NavState, f_b, clock: ClockModel | None = None) -> np.ndarray:
+    """Analytic small-error Jacobian ``d fbar / d x`` at ``x = 0`` (classical psi model).
+
+    ``phi' = -w_in x phi + dw_in(dv, dp) - C eps``,
+    ``dv' = (C f) x phi + C nabla + v x (2 dw_ie + dw_en) - (2 w_ie + w_en) x dv + dg``,
+    position rows of eq 2; ``dg = 2 g / R * dh`` (Up; R = sqrt(R_M R_N)).
+    """
+    clock = clock or ClockModel()
+    lat, h = float(nav.llh[0]), float(nav.llh[2])
+    vE, vN, vU = nav.v_n
+    C = nav.C_b_n
+    R_M, R_N = (float(r) for r in radii_of_curvature(lat))
+    sl, cl = math.sin(lat), math.cos(lat)
+    tl = sl / cl
+    RMh, RNh = R_M + h, R_N + h
+    w_ie = np.array([0.0, OMEGA_E * cl, OMEGA_E * sl])
+    w_en = np.array([-vN / RMh, vE / RNh, vE * tl / RNh])
+    # d(w_ie)/d(dp), d(w_en)/d(dv), d(w_en)/d(dp)
+    Mie_p = np.zeros((3, 3))
+    Mie_p[1, 0] = -OMEGA_E * sl
+    Mie_p[2, 0] = OMEGA_E * cl
+    Men_v = np.array([[0, -1 / RMh, 0], [1 / RNh, 0, 0], [tl / RNh, 0, 0]])
+    Men_p = np.array([[0, 0, vN / RMh**2], [0, 0, -vE / RNh**2],
+                      [vE / (cl * cl * RNh), 0, -vE * tl / RNh**2]])
+    F = np.zeros((N_STATES, N_STATES))
+    F[0:3, 0:3] = -skew(w_ie + w_en)
+    F[0:3, 3:6] = Men_v
+    F[0:3, 6:9] = Mie_p + Men_p
+    F[0:3, 9:12] = -C
+    F[3:6, 0:3] = skew(C @ np.asarray(f_b, float))
+    # -(2 dw_ie + dw_en) x v = v x (2 dw_ie + dw_en)
+    F[3:6, 3:6] = -skew(2 * w_ie + w_en) + skew(nav.v_n) @ Men_v
+    F[3:6, 6:9] = skew(nav.v_n) @ (2 * Mie_p + Men_p)
+    g = float(normal_gravity(lat, h))
+    F[5, 8] += 2.0 * g / math.sqrt(R_M * R_N)
+    F[5, 6] -= float(normal_gravity(lat + 1e-6, h) - normal_gravity(lat - 1e-6, h)) / 2e-6
+    F[3:6, 12:15] = C
+    F[6, 4] = 1 / RMh
+    F[6, 8] = -vN / RMh**2
+    F[7, 3] = 1 / (RNh * cl)
+    F[7, 6] = vE * tl / (RNh * cl)
+    F[7, 8] = -vE / (RNh**2 * cl)
+    F[8, 5] = 1.0
+    F[15, 16] = 1.0
+    F[16, 16] = -1.0 / clock.tau_s
+    return F
+
+
+def process_noise(dt: float, *, gyro_random_walk_si: float, accel_random_walk_si: float,
+                  gyro_bias_si: float = 0.0, accel_bias_si: float = 0.0,
+                  bias_time_s: float | None = 3600.0, clock: ClockModel | None = None,
+                  with_clock: bool = True) -> np.ndarray:
+    """Discrete process-noise covariance (17, 17) over ``dt`` [s] (module docstring).
+
+    Parameters
+    ----------
+    gyro_random_walk_si : float
+        Angle random walk [rad/sqrt(s)].
+    accel_random_walk_si : float
+        Velocity random walk [(m/s)/sqrt(s)].
+    gyro_bias_si, accel_bias_si : float
+        1-sigma bias specs [rad/s], [m/s^2] for the bias random walk.
+    bias_time_s : float or None
+        Time for the bias random walk to reach the spec (None: biases are pure constants).
+    clock : ClockModel, optional
+    with_clock : bool
+        False leaves the clock block at a tiny value (loosely coupled runs have no clock
+        measurement; keeps ``Q`` positive semi-definite and ``P`` bounded).
+    """
+    q = np.zeros(N_STATES)
+    q[0:3] = gyro_random_walk_si**2 * dt
+    q[3:6] = accel_random_walk_si**2 * dt
+    if bias_time_s:
+        q[9:12] = gyro_bias_si**2 * dt / bias_time_s
+        q[12:15] = accel_bias_si**2 * dt / bias_time_s
+    Q = np.diag(q)
+    clock = clock or ClockModel()
+    Q[15:17, 15:17] = clock.Q(dt) if with_clock else np.diag([1e-6, 1e-8]) * dt
+    return Q
