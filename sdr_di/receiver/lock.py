@@ -1,0 +1,174 @@
+"""C/N0 estimation and lock detectors on prompt correlator outputs.
+
+C/N0: moments method (M2M4)
+---------------------------
+For ``K`` prompts ``P_k = s_k + n_k`` with constant signal power ``|s|^2 = P_d`` (any phase,
+any data sign) and complex Gaussian noise of power ``P_n``, ``M2 = mean |P|^2 = P_d + P_n``
+and ``M4 = mean |P|^4 = P_d^2 + 4 P_d P_n + 2 P_n^2``, so ``P_d = sqrt(2 M2^2 - M4)``,
+``P_n = M2 - P_d`` and ``C/N0 = P_d / (P_n T)`` for prompts of ``T`` seconds (Pauluzzi &
+Beaulieu 2000). Insensitive to carrier phase and data/NH signs, so it works before the PLL
+locks and before bit synchronization; the scalar receiver applies it to the 1 ms prompts of a
+sliding window (default 100 ms). It is biased high at low SNR (below ~25 dB-Hz with 1 ms
+prompts) and returns NaN when ``2 M2^2 <= M4`` (noise only, typically).
+
+C/N0 with the noise power measured on the input (used by the scalar receiver)
+-------------------------------------------------------------------------
+The noise of a prompt summed over ``N`` samples has power ``N E|x|^2`` (signals are far below
+the noise in each sample: 4e-4 of it per satellite at 40 dB-Hz and 25 MHz), so the receiver
+measures ``E|x|^2`` on the samples it reads and the signal power is ``P_d = M2 - P_n``
+(:func:`prompt_signal_power`, :func:`cn0_known_noise`). Lower variance than M2M4 (0.4 dB
+rather than 1 dB for 100 prompts at 35 dB-Hz) and, on noise alone, NaN or below 25 dB-Hz
+(three sigma of ``M2`` for 100 prompts) where M2M4 reads above 28 dB-Hz on a quarter of
+100 ms windows: the C/N0 code-lock test (28 dB-Hz) is trustworthy.
+
+Carrier lock (normalized I^2 - Q^2)
+----------------------------------
+``cos 2 phi`` estimated as ``mean(I^2 - Q^2) / P_d`` over the same window (the noise terms of
+``I^2 - Q^2`` average out, and dividing by the M2M4 signal power rather than ``I^2 + Q^2``
+keeps the metric near ``cos 2 phi`` whatever the SNR). Data-sign insensitive. Near 1 when the
+Costas loop is locked (either half-cycle), near 0 (random sign) when not.
+
+Code lock
+---------
+C/N0 above a threshold. :class:`LockCounter` adds the hysteresis (a state changes only after
+``n`` consecutive contrary decisions).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "LockCounter",
+    "carrier_lock_metric",
+    "cn0_known_noise",
+    "cn0_m2m4",
+    "m2m4_powers",
+    "prompt_signal_power",
+]
+
+
+def m2m4_powers(prompts: np.ndarray) -> tuple[float, float]:
+    """Signal and noise power ``(P_d, P_n)`` of complex prompts by the moments method.
+
+    Returns ``(nan, M2)`` when the moments are inconsistent with a positive signal power.
+    """
+    p2 = (prompts.real * prompts.real + prompts.imag * prompts.imag)
+    m2 = float(np.mean(p2))
+    m4 = float(np.mean(p2 * p2))
+    d = 2.0 * m2 * m2 - m4
+    if not (d > 0.0 and m2 > 0.0):
+        return math.nan, m2
+    pd = math.sqrt(d)
+    return pd, m2 - pd
+
+
+def prompt_signal_power(prompts: np.ndarray, noise_power: float) -> float:
+    """``M2 - P_n``: signal power of complex prompts whose noise power is known (may be
+    negative for noise alone)."""
+    p = np.asarray(prompts)
+    return float(np.mean(p.real * p.real + p.imag * p.imag)) - float(noise_power)
+
+
+def cn0_known_noise(prompts: np.ndarray, noise_power: float, t_coh_s: float) -> float:
+    """C/N0 [dB-Hz] of complex prompts of ``t_coh_s`` seconds with known noise power per
+    prompt (NaN when the signal power is not positive)."""
+    pd = prompt_signal_power(prompts, noise_power)
+    if not (pd > 0.0 and noise_power > 0.0):
+        return math.nan
+    return 10.0 * math.log10(pd / (noise_power * t_coh_s))
+
+
+def cn0_m2m4(prompts: np.ndarray, t_coh_s: float) -> float:
+    """C/N0 [dB-Hz] of complex prompts of ``t_coh_s`` seconds (M2M4, module notes).
+
+    Parameters
+    ----------
+    prompts : numpy.ndarray
+        Complex prompt correlator outputs (at least 2; 50-100 recommended).
+    t_coh_s : float
+        Integration time of each prompt [s].
+
+    Returns
+    -------
+    float
+        C/N0 [dB-Hz], NaN when the signal power estimate is not positive, 99 when the noise
+        estimate is not (a very strong signal).
+    """
+    p = np.asarray(prompts)
+    if p.size < 2:
+        return math.nan
+    pd, pn = m2m4_powers(p)
+    if not (pd > 0.0) or not (pn > 0.0):
+        return math.nan if not pd > 0.0 else 99.0
+    return 10.0 * math.log10(pd / (pn * t_coh_s))
+
+
+def carrier_lock_metric(prompts: np.ndarray, signal_power: float | None = None) -> float:
+    """Estimate of ``cos 2 phi`` of complex prompts (module notes), clipped to [-1, 1].
+
+    Parameters
+    ----------
+    prompts : numpy.ndarray
+        Complex prompts (any data signs).
+    signal_power : float, optional
+        ``P_d`` from :func:`m2m4_powers` of the same prompts; computed when omitted. Without a
+        positive signal power the classical ``sum(I^2 - Q^2) / sum(I^2 + Q^2)`` is returned.
+    """
+    p = np.asarray(prompts)
+    if p.size == 0:
+        return 0.0
+    i2 = p.real * p.real
+    q2 = p.imag * p.imag
+    nbd = float(np.mean(i2 - q2))
+    if signal_power is None:
+        signal_power, _ = m2m4_powers(p)
+    if signal_power is not None and signal_power > 0.0:
+        den = signal_power
+    else:
+        den = float(np.mean(i2 + q2))
+    if not den > 0.0:
+        return 0.0
+    return max(-1.0, min(1.0, nbd / den))
+
+
+class LockCounter:
+    """Lock decision with hysteresis.
+
+    Parameters
+    ----------
+    n_lock : int
+        Consecutive positive tests needed to declare lock.
+    n_unlock : int
+        Consecutive negative tests needed to declare loss of lock.
+    """
+
+    __slots__ = ("_count", "locked", "n_lock", "n_unlock")
+
+    def __init__(self, n_lock: int, n_unlock: int):
+        self.n_lock = max(1, int(n_lock))
+        self.n_unlock = max(1, int(n_unlock))
+        self.locked = False
+        self._count = 0
+
+    def reset(self, locked: bool = False) -> None:
+        self.locked = bool(locked)
+        self._count = 0
+
+    @property
+    def count(self) -> int:
+        """Consecutive tests contrary to the current state."""
+        return self._count
+
+    def update(self, ok: bool) -> bool:
+        """Feed one test outcome; returns the (possibly changed) lock state."""
+        if ok == self.locked:
+            self._count = 0
+            return self.locked
+        self._count += 1
+        if self._count >= (self.n_lock if ok else self.n_unlock):
+            self.locked = ok
+            self._count = 0
+        return self.locked

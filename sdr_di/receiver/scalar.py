@@ -1,0 +1,550 @@
+"""Scalar software receiver: acquisition, then all channels tracked over an IF file in chunks.
+
+:class:`ScalarReceiver` drives :class:`~sdr_di.receiver.channel.Channel` objects over an
+:class:`~sdr_di.receiver.ifreader.IfSource`:
+
+1. **Acquisition** of the requested PRNs on the first ``noncoherent`` ms (default 40 x 1 ms)
+   with :func:`~sdr_di.receiver.acquisition.acquire` (:func:`acquire_at`):
+
+   * below about 1.4 samples per chip the FFT delay grid (one lag per sample) leaves holes
+     of up to half a sample between lags (a whole chip at 5 MHz: no correlation at all), so
+     the block is zero-stuffed by ``u = ceil(10.23e6 / (0.7 fs))`` (``acq_upsample``) and
+     searched at ``u fs``: the zero samples add nothing to any correlation, the lags fall
+     every ``1 / (u fs)`` (worst-case misalignment 0.35 chip) and code phases still refer to
+     the original samples;
+   * the fine Doppler of ``acquire`` (from the squared prompts) is exact modulo 500 Hz; at
+     low C/N0 the coarse peak can sit in a neighbouring bin, which a 1 ms PLL/FLL cannot pull
+     in. :func:`acquire_at` picks the best of ``fd`` and ``fd +- 500 Hz`` by the mean
+     epoch-aligned prompt power.
+2. **Tracking**: a sample buffer is read from the file in chunks (``chunk_ms``, default
+   100 ms; memory bounded by the chunk size whatever the file length). At each step every
+   tracking channel whose next *block* of epochs (one epoch before bit synchronization, one
+   coherent interval after: 10 ms for D1, 2 ms for D2 by default) starts before the earliest
+   block end is correlated: all epochs of all those channels in **one** call of the numba
+   E/P/L kernel :func:`~sdr_di.receiver._numba_correlate.correlate_epl` (per-row NCO
+   parameters and intervals; replica tables cached per channel set, carrier rotation tables
+   per channel). Each channel then updates its loops and synchronization
+   (:meth:`Channel.process_block`). The input noise power per sample (mean ``|x|^2`` of each
+   chunk) is handed to the channels for their C/N0 estimators.
+3. **Output epochs** every ``epoch_interval_s`` (sample ``start + round(k dt fs)``, k >= 1):
+   once every tracking channel has passed the epoch's sample, ``on_epoch(sample,
+   observations, ephemerides)`` is called with a
+   :class:`~sdr_di.receiver.tracking.ChannelObservation` of each channel in
+   ``PULL_IN``/``TRACK`` and the latest decoded ``{prn: Ephemeris}``.
+4. **Loss and re-acquisition**: a channel that loses code lock goes ``LOST`` (its NCO coasts
+   at the last Doppler); every ``reacq_interval_ms`` a narrow search around the last Doppler
+   runs on the samples at the current processing point (``REACQUIRE``) until the signal is
+   found (``PULL_IN``). PRNs not found by the initial acquisition are searched again (all
+   together) every ``retry_acquisition_s`` when that is set (default: never).
+
+Processing cost (measured on the 2-core development machine, 10 s of the default scenario:
+7 D1 channels, 25 MHz complex 4-bit samples, ``on_epoch`` at 5 Hz): about 0.95-1.05 s of
+tracking per second of file, of which the correlator kernel takes ~0.75-0.85 s (4.2 ns per
+sample and channel with 2 threads, 8 ns with 1), the channels' Python work 0.07 s (loops,
+lock detection, sync, decoding, logging), reading and converting the samples 0.04 s; the
+initial acquisition of 7 PRNs takes ~1.5 s once (~6 s for all 63). Reaching 2x real time
+needs a kernel near 2 ns per sample and channel: a prototype with the same signature
+(carrier wipe-off of each 256-sample block into float32 buffers in a separate pass, code
+index as ``int(theta + offset)`` on a non-negative argument instead of ``floor``, the block
+split at the code wrap instead of a per-sample branch, float32 partial sums per block added
+into float64) measured 2.0 ns with 2 threads / 4.1 ns with 1. ``ScalarReceiver.profile``
+gives the breakdown of every run.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Iterable
+
+import numba
+import numpy as np
+
+from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I
+from ..orbits.ephemeris import Ephemeris
+from ._numba_correlate import correlate_epl
+from .acquisition import AcquisitionResult, acquire
+from .channel import Channel
+from .correlator import (
+    CARRIER_BLOCK,
+    CODE_PAD,
+    check_prn,
+    correlate_table,
+    padded_replicas,
+)
+from .ifreader import IfSource
+from .tracking import ChannelObservation, ChannelState, TrackingConfig, TrackingLog
+
+__all__ = ["ScalarReceiver", "acquire_at", "acquisition_upsampling"]
+
+OnEpoch = Callable[[int, list[ChannelObservation], dict[int, Ephemeris]], None]
+
+
+def acquisition_upsampling(sampling_rate_hz: float) -> int:
+    """Zero-stuffing factor of the acquisition search (module notes)."""
+    return max(1, math.ceil(CHIP_RATE_B3I / (0.7 * float(sampling_rate_hz)) - 1e-9))
+
+
+def acquire_at(source: IfSource, sample: int, prns: Iterable[int], *, upsample: int | None = None,
+               **kwargs) -> list[AcquisitionResult]:
+    """Acquire ``prns`` on the samples of ``source`` from ``sample`` (code phases at ``sample``).
+
+    Zero-stuffs the block by ``upsample`` (default :func:`acquisition_upsampling`) before
+    :func:`~sdr_di.receiver.acquisition.acquire`; keyword arguments go to ``acquire``.
+
+    Raises
+    ------
+    ValueError
+        Not enough samples left in the file.
+    """
+    fs = source.sampling_rate_hz
+    u = acquisition_upsampling(fs) if upsample is None else max(1, int(upsample))
+    m_ms = int(kwargs.get("coherent_ms", 1))
+    k_nc = int(kwargs.get("noncoherent", 20))
+    n = k_nc * round(m_ms * fs * 1e-3)
+    if sample + n > source.n_samples:
+        raise ValueError(f"{source.path}: acquisition needs samples [{sample}, {sample + n}), "
+                         f"the file has {source.n_samples}")
+    x = source.read(sample, n)
+    xa = x
+    if u > 1:
+        xa = np.zeros(n * u, dtype=x.dtype)
+        xa[::u] = x
+    kwargs.setdefault("carrier_hz", source.carrier_hz)
+    res = acquire(xa, fs * u, source.if_hz, prns, **kwargs)
+    if m_ms == 1:
+        for r in res:
+            if r.detected:
+                _resolve_doppler(r, x, fs, source.if_hz, kwargs["carrier_hz"])
+    return res
+
+
+def _resolve_doppler(r: AcquisitionResult, x: np.ndarray, fs: float, if_hz: float,
+                     carrier_hz: float) -> None:
+    """Remove the +-500 Hz ambiguity of the acquisition's fine Doppler (in place).
+
+    ``acquire`` refines the Doppler from the squared 1 ms prompts, which is exact modulo
+    500 Hz; when noise put the coarse peak in a neighbouring 500 Hz bin the result is off by
+    one bin. The mean 1 ms prompt power (code-epoch aligned) at ``fd`` and ``fd +- 500 Hz``
+    tells them apart (a 500 Hz error costs 3.9 dB of prompt power).
+    """
+    from ..signal.codes import b3i_code
+
+    tab1 = padded_replicas(np.asarray(b3i_code(r.prn)))
+    cands = (r.doppler_hz, r.doppler_hz - 500.0, r.doppler_hz + 500.0)
+    rate = CHIP_RATE_B3I * (1.0 + r.doppler_hz / carrier_hz)
+    dchip = rate / fs
+    per = CODE_LENGTH_B3I / dchip
+    first = ((CODE_LENGTH_B3I - r.code_phase_chips) % CODE_LENGTH_B3I) / dchip
+    n_ep = int((x.size - per - first) // per)
+    if n_ep < 4:
+        return
+    starts = np.ceil(first + per * np.arange(n_ep)).astype(np.int64)
+    n = math.floor(per)
+    th = r.code_phase_chips + starts * dchip
+    rows_th, rows_ph, rows_fc = [], [], []
+    for fd in cands:
+        fc = if_hz + fd
+        rows_th.append(th)
+        rows_ph.append(fc * starts / fs)
+        rows_fc.append(np.full(n_ep, fc))
+    table = np.repeat(tab1, 3 * n_ep, axis=0)
+    res = correlate_table(x, table, CODE_LENGTH_B3I, np.concatenate(rows_th), rate,
+                          np.concatenate(rows_ph), np.concatenate(rows_fc), n, fs, 0.5,
+                          np.tile(starts, 3))
+    power = np.abs(res.prompt.reshape(3, n_ep)) ** 2
+    best = int(np.argmax(power.mean(axis=1)))
+    if best:
+        r.doppler_hz = float(cands[best])
+
+
+class _Bank:
+    """Replica and carrier-rotation tables of the channel slots, and the kernel call."""
+
+    def __init__(self, n_slots: int, spacing: float, threads: int | None = None):
+        self.spacing = float(spacing)
+        self.max_threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
+        self.fixed_threads = None if threads is None else max(1, min(int(threads),
+                                                                      self.max_threads))
+        # auto: cost [s per sample-row] of 1 thread / all threads, explored now and then
+        self._cost = {1: 0.0, self.max_threads: 0.0}
+        self._warm: set[int] = set()
+        self._calls = 0
+        self.rows: dict[int, np.ndarray] = {}
+        self.tables: OrderedDict[tuple, np.ndarray] = OrderedDict()
+        self.rot_re = np.ones((n_slots, CARRIER_BLOCK))
+        self.rot_im = np.zeros((n_slots, CARRIER_BLOCK))
+        self.rot_dphi = [math.nan] * n_slots
+        self.all_slots = tuple(range(n_slots))
+        self._m = np.arange(CARRIER_BLOCK, dtype=np.float64)
+
+    def table(self, key: tuple, prns: list[int], reps: list[int]) -> np.ndarray:
+        """Replica rows: PRN ``prns[j]`` repeated ``reps[j]`` times (cached by ``key``)."""
+        tab = self.tables.get(key)
+        if tab is None:
+            rows = []
+            for p, r in zip(prns, reps):
+                row = self.rows.get(p)
+                if row is None:
+                    from ..signal.codes import b3i_code
+
+                    row = padded_replicas(np.asarray(b3i_code(p)))[0]
+                    self.rows[p] = row
+                rows.extend([row] * r)
+            tab = np.ascontiguousarray(np.stack(rows))
+            self.tables[key] = tab
+            if len(self.tables) > 32:
+                self.tables.popitem(last=False)
+        else:
+            self.tables.move_to_end(key)
+        return tab
+
+    def _pick_threads(self) -> int:
+        """Thread count of the next kernel call.
+
+        Parallel regions of ~1 ms are cheap on idle cores but very slow when another
+        process competes for them (a worker thread descheduled at the barrier stalls the
+        region for a time slice: measured 5x slower than one thread on a loaded 2-core
+        machine). Unless fixed, the bank measures both settings (1 thread and all threads,
+        re-exploring the slower one for 2 calls in every 64) and uses the faster. The first call
+        of each setting (thread pool start-up) is not counted.
+        """
+        if self.fixed_threads is not None:
+            t = self.fixed_threads
+        elif self.max_threads == 1:
+            t = 1
+        else:
+            c1, cm = self._cost[1], self._cost[self.max_threads]
+            if c1 == 0.0:
+                t = 1
+            elif cm == 0.0:
+                t = self.max_threads
+            else:
+                best = 1 if c1 <= cm else self.max_threads
+                other = self.max_threads if best == 1 else 1
+                t = other if self._calls % 64 < 2 else best
+        self._calls += 1
+        if numba.get_num_threads() != t:
+            numba.set_num_threads(t)
+        return t
+
+    def _record(self, threads: int, cost: float) -> None:
+        if threads not in self._cost:
+            return
+        if threads not in self._warm:  # first call of a setting: thread start-up, skip
+            self._warm.add(threads)
+            return
+        old = self._cost[threads]
+        self._cost[threads] = cost if old == 0.0 else 0.7 * old + 0.3 * cost
+
+    def _rot(self, slot: int, dphi: float) -> None:
+        if self.rot_dphi[slot] == dphi:
+            return
+        a = self._m * dphi
+        a -= np.floor(a)
+        a *= 2.0 * math.pi
+        self.rot_re[slot] = np.cos(a)
+        self.rot_im[slot] = -np.sin(a)
+        self.rot_dphi[slot] = dphi
+
+    def correlate(self, x: np.ndarray, buf0: int, slots: tuple[int, ...], chans: list) -> list:
+        """Correlate every row of the channels' blocks; returns per-channel lists of
+        ``(E, P, L)`` complex triples."""
+        params: list[tuple] = []
+        reps = []
+        for c, s in zip(chans, slots):
+            blk = c.block
+            params.extend(blk)
+            reps.append(len(blk))
+            self._rot(s, blk[0][5])
+        n_rows = len(params)
+        par = np.array(params, dtype=np.float64).T.copy()
+        start = par[0].astype(np.int64) - buf0
+        nsamp = par[1].astype(np.int64)
+        if n_rows == len(slots):
+            if slots == self.all_slots:
+                rot_re, rot_im = self.rot_re, self.rot_im
+            else:
+                idx = list(slots)
+                rot_re, rot_im = self.rot_re[idx], self.rot_im[idx]
+        else:
+            idx = np.repeat(np.array(slots), reps)
+            rot_re, rot_im = self.rot_re[idx], self.rot_im[idx]
+        key = (slots, tuple(reps))
+        tab = self.table(key, [c.prn for c in chans], reps)
+        threads = self._pick_threads()
+        nblk = max(1, (int(nsamp.max()) + CARRIER_BLOCK - 1) // CARRIER_BLOCK)
+        n_sub = 1 if threads <= 1 else int(min(max(1, math.ceil(4 * threads / n_rows)), nblk))
+        out = np.empty((n_rows, 3, 2))
+        t0 = time.perf_counter()
+        correlate_epl(x, tab, CODE_PAD, CODE_LENGTH_B3I, start, nsamp, par[2], par[3], par[4],
+                      par[5], rot_re, rot_im, self.spacing, n_sub, out)
+        self._record(threads, (time.perf_counter() - t0) / float(nsamp.sum()))
+        o = out.tolist()
+        res = []
+        j = 0
+        for r in reps:
+            res.append([(complex(*v[0]), complex(*v[1]), complex(*v[2])) for v in o[j:j + r]])
+            j += r
+        return res
+
+
+class ScalarReceiver:
+    """Acquisition + scalar tracking of every channel over an IF file (module notes).
+
+    Parameters
+    ----------
+    config : TrackingConfig, optional
+        Loop and detector parameters of every channel.
+    acquisition : dict, optional
+        Keyword arguments for :func:`~sdr_di.receiver.acquisition.acquire` (defaults:
+        ``noncoherent=40``, ``doppler_range_hz=5000``, ``pfa=1e-3``).
+    chunk_ms : int, optional
+        Samples read from the file per refill [ms]. Default 100.
+    log : bool, optional
+        Keep per-ms tracking logs (about 140 bytes per channel and ms). Default True.
+    log_every_ms : int, optional
+        Log one epoch in this many. Default 1.
+    acq_upsample : int, optional
+        Zero-stuffing factor of acquisition (default automatic, see module notes).
+    retry_acquisition_s : float, optional
+        Search again for PRNs not found, this often [s]. Default None (never).
+    threads : int, optional
+        Threads of the tracking correlator kernel. Default None: chosen at run time between
+        1 and numba's thread count by measured speed (see ``_Bank._pick_threads``: short
+        parallel regions collapse when other processes load the cores).
+
+    Attributes (after :meth:`run`)
+    ------------------------------
+    channels : dict
+        ``{prn: Channel}`` of every requested PRN.
+    acquisition_results : list of AcquisitionResult
+        The initial acquisition.
+    ephemerides : dict
+        ``{prn: Ephemeris}`` decoded.
+    klobuchar : Klobuchar or None
+        Latest decoded ionosphere coefficients.
+    profile : dict
+        Seconds per stage (``acquisition``, ``read``, ``correlate``, ``channels``,
+        ``callback``, ``tracking``, ``total``), ``steps`` (kernel calls), ``processed_s``
+        (file seconds), ``realtime_factor`` (processed seconds per wall second of
+        ``tracking``, which includes the re-acquisitions) and ``kernel_s_per_msample`` (kernel
+        seconds per million sample-epochs, per thread setting).
+    """
+
+    def __init__(self, config: TrackingConfig | None = None, *, acquisition: dict | None = None,
+                 chunk_ms: int = 100, log: bool = True, log_every_ms: int = 1,
+                 acq_upsample: int | None = None, retry_acquisition_s: float | None = None,
+                 threads: int | None = None):
+        self.config = config or TrackingConfig()
+        self.acq_kwargs = {"noncoherent": 40, "doppler_range_hz": 5000.0, "pfa": 1e-3}
+        if acquisition:
+            self.acq_kwargs.update(acquisition)
+        if int(chunk_ms) < 2:
+            raise ValueError(f"chunk_ms must be >= 2, got {chunk_ms}")
+        self.chunk_ms = int(chunk_ms)
+        self.log = bool(log)
+        self.log_every_ms = int(log_every_ms)
+        self.acq_upsample = acq_upsample
+        self.retry_acquisition_s = retry_acquisition_s
+        self.threads = threads
+        self.channels: dict[int, Channel] = {}
+        self.acquisition_results: list[AcquisitionResult] = []
+        self.ephemerides: dict[int, Ephemeris] = {}
+        self.klobuchar = None
+        self.profile: dict[str, float] = {}
+
+    # -- helpers -----------------------------------------------------------------------------
+    def _acquire(self, source: IfSource, sample: int, prns: list[int],
+                 **over) -> list[AcquisitionResult]:
+        kw = dict(self.acq_kwargs)
+        kw.update(over)
+        return acquire_at(source, sample, prns, upsample=self.acq_upsample, **kw)
+
+    def _acq_len(self, fs: float) -> int:
+        return int(self.acq_kwargs.get("noncoherent", 20)) * \
+            int(self.acq_kwargs.get("coherent_ms", 1)) * round(fs * 1e-3)
+
+    def _collect_ephemerides(self) -> dict[int, Ephemeris]:
+        for c in self.channels.values():
+            if c.ephemeris is not None:
+                self.ephemerides[c.prn] = c.ephemeris
+                if c.klobuchar is not None:
+                    self.klobuchar = c.klobuchar
+        return dict(self.ephemerides)
+
+    # -- main loop ---------------------------------------------------------------------------
+    def run(self, source: IfSource, prns: Iterable[int] | None = None,
+            on_epoch: OnEpoch | None = None, epoch_interval_s: float = 0.1, *,
+            start_sample: int = 0, stop_sample: int | None = None) -> dict[int, TrackingLog]:
+        """Acquire and track ``prns`` over ``source``.
+
+        Parameters
+        ----------
+        source : IfSource
+            The IF file.
+        prns : iterable of int, optional
+            PRNs to search (default all 63).
+        on_epoch : callable, optional
+            ``on_epoch(sample_index, observations, ephemerides)`` at every output epoch.
+        epoch_interval_s : float, optional
+            Output epoch interval [s]. Default 0.1.
+        start_sample, stop_sample : int, optional
+            Samples to process (default the whole file).
+
+        Returns
+        -------
+        dict
+            ``{prn: TrackingLog}`` of every PRN that was tracked at some point (an empty dict
+            when ``log=False``).
+        """
+        t_total = time.perf_counter()
+        fs = source.sampling_rate_hz
+        prn_list = [check_prn(p) for p in (range(1, 64) if prns is None else prns)]
+        prn_list = list(dict.fromkeys(prn_list))
+        start = int(start_sample)
+        stop = source.n_samples if stop_sample is None else min(int(stop_sample),
+                                                                  source.n_samples)
+        if not 0 <= start < stop:
+            raise ValueError(f"empty sample range [{start}, {stop})")
+        if not epoch_interval_s > 0:
+            raise ValueError(f"epoch_interval_s must be > 0, got {epoch_interval_s}")
+        rx_time = None
+        if source.start_week is not None and source.start_sow is not None:
+            rx_time = source.sample_time
+        cfg = self.config
+        chans = [Channel(p, fs, source.if_hz, cfg, carrier_hz=source.carrier_hz,
+                         rx_time=rx_time, log=self.log, log_every_ms=self.log_every_ms)
+                 for p in prn_list]
+        self.channels = {c.prn: c for c in chans}
+        self.ephemerides = {}
+        self.klobuchar = None
+        slot_of = {id(c): i for i, c in enumerate(chans)}
+        bank = _Bank(len(chans), cfg.spacing_chips, self.threads)
+        threads_before = numba.get_num_threads()
+        prof = {"acquisition": 0.0, "read": 0.0, "correlate": 0.0, "channels": 0.0, "callback": 0.0,
+                    "steps": 0}
+        n_acq = self._acq_len(fs)
+        reacq_step = max(1, round(cfg.reacq_interval_ms * 1e-3 * fs))
+        retry_step = None if self.retry_acquisition_s is None else \
+            max(1, round(float(self.retry_acquisition_s) * fs))
+
+        # initial acquisition
+        t0 = time.perf_counter()
+        self.acquisition_results = []
+        if start + n_acq <= stop:
+            self.acquisition_results = self._acquire(source, start, prn_list)
+        for c, r in zip(chans, self.acquisition_results):
+            if r.detected:
+                c.start(start, r.code_phase_chips, r.doppler_hz, r.cn0_dbhz)
+            elif retry_step is not None:
+                c.next_reacq_sample = start + retry_step
+        prof["acquisition"] += time.perf_counter() - t0
+
+        n1 = round(fs * 1e-3)
+        chunk = max(2 * n1, round(self.chunk_ms * 1e-3 * fs))
+        x = np.empty(0, dtype=source.dtype)
+        buf0 = buf1 = start
+        k_out = 1
+        next_out = start + round(k_out * epoch_interval_s * fs)
+        t_now = start
+        t_track = time.perf_counter()
+        while True:
+            act = [c for c in chans if c.tracking]
+            if act:
+                t_now = max(t_now, min(c.next_start for c in act))
+            # output epochs every channel has passed
+            while next_out < t_now and next_out < stop:
+                t0 = time.perf_counter()
+                if on_epoch is not None:
+                    obs = [c.observation_at(next_out) for c in act]
+                    on_epoch(next_out, obs, self._collect_ephemerides())
+                prof["callback"] += time.perf_counter() - t0
+                k_out += 1
+                next_out = start + round(k_out * epoch_interval_s * fs)
+            # (re-)acquisition attempts due now
+            due = [c for c in chans if not c.tracking and not c.finished
+                   and c.next_reacq_sample is not None and c.next_reacq_sample <= t_now]
+            started = False
+            if due:
+                t0 = time.perf_counter()
+                if t_now + n_acq > stop:
+                    for c in due:
+                        c.next_reacq_sample = None
+                    due = []
+                # PRNs never found: one full search for all of them (shared FFTs)
+                cold = [c for c in due if c.state == ChannelState.ACQUIRE]
+                results = []
+                if cold:
+                    results = list(zip(cold, self._acquire(source, t_now,
+                                                           [c.prn for c in cold])))
+                # lost channels: narrow search around each one's last Doppler
+                for c in due:
+                    if c.state == ChannelState.ACQUIRE:
+                        continue
+                    c.begin_reacquisition(t_now)
+                    centre, half = c.reacquire_search(t_now)
+                    results.append((c, self._acquire(source, t_now, [c.prn],
+                                                     doppler_center_hz=centre,
+                                                     doppler_range_hz=half)[0]))
+                for c, r in results:
+                    step = retry_step if c.state == ChannelState.ACQUIRE else reacq_step
+                    if r.detected:
+                        c.reacquired(t_now, r.code_phase_chips, r.doppler_hz, r.cn0_dbhz)
+                        started = True
+                    else:
+                        c.next_reacq_sample = None if step is None else t_now + step
+                prof["acquisition"] += time.perf_counter() - t0
+            if started:
+                continue
+            if not act:
+                due = [c.next_reacq_sample for c in chans
+                       if not c.finished and c.next_reacq_sample is not None]
+                if not due or min(due) + n_acq > stop:
+                    break
+                t_now = max(t_now, min(due))
+                continue
+            horizon = min(c.block_end for c in act)
+            batch = [c for c in act if c.next_start < horizon]
+            need_end = max(c.block_end for c in batch)
+            if need_end > buf1:
+                if need_end > stop:
+                    for c in batch:
+                        if c.block_end > stop:
+                            c.finished = True
+                    continue
+                t0 = time.perf_counter()
+                # read afresh from the earliest sample still needed: re-reading the short
+                # overlap (< 2 coherent blocks) is cheaper than concatenating the new chunk
+                n_read = min(max(chunk, need_end - t_now), stop - t_now)
+                x = source.read(t_now, n_read)
+                buf0 = t_now
+                buf1 = t_now + n_read
+                # input noise power per sample, for the channels' C/N0 estimators
+                npow = float(np.vdot(x, x).real) / max(1, x.size)
+                for c in chans:
+                    c.noise_power_per_sample = npow
+                prof["read"] += time.perf_counter() - t0
+                continue
+            t0 = time.perf_counter()
+            slots = tuple(slot_of[id(c)] for c in batch)
+            res = bank.correlate(x, buf0, slots, batch)
+            t1 = time.perf_counter()
+            for c, o in zip(batch, res):
+                c.process_block(o)
+            t2 = time.perf_counter()
+            prof["correlate"] += t1 - t0
+            prof["channels"] += t2 - t1
+            prof["steps"] += 1
+        self._collect_ephemerides()
+        numba.set_num_threads(threads_before)
+        prof["kernel_s_per_msample"] = {t: c * 1e6 for t, c in bank._cost.items()}
+        end = time.perf_counter()
+        prof["tracking"] = end - t_track
+        prof["total"] = end - t_total
+        prof["processed_s"] = (min(t_now, stop) - start) / fs
+        prof["realtime_factor"] = prof["processed_s"] / prof["tracking"] \
+            if prof["tracking"] > 0 else math.inf
+        self.profile = prof
+        return {c.prn: c.log for c in chans if c.n_acquisitions > 0 and c.log is not None}
