@@ -1,0 +1,21 @@
+"""INS/GNSS integration: measurement models, loosely coupled runner, noise schedules, metrics.
+
+``measurements``  deep/tight pseudorange + rate model (paper 004 eq 6-12), loose position /
+                  velocity model (papers 000/003 eq 13-14)
+``noise``         simulated GNSS solution noise with scheduled variance windows
+``metrics``       attitude / velocity / position errors, RMSE = sqrt(mean ||e||^2), max
+``loose``         closed-loop loosely coupled run (``sdr-di lc``)
+
+The process model is :class:`sdr_di.ins.error_model.InsErrorModel`.
+"""
+
+from .loose import LcResult, LcSettings, load_lc_scenario, run_loose, run_loose_scenario
+from .measurements import (LooseMeasurementModel, RangeRateMeasurementModel,
+                           loose_measurement, predicted_observables)
+from .metrics import nav_errors, rmse_max, summarize
+from .noise import GnssNoise, NoiseWindow
+
+__all__ = ["LcResult", "LcSettings", "load_lc_scenario", "run_loose", "run_loose_scenario",
+           "LooseMeasurementModel", "RangeRateMeasurementModel", "loose_measurement",
+           "predicted_observables", "nav_errors", "rmse_max", "summarize", "GnssNoise",
+           "NoiseWindow"]

@@ -1,0 +1,358 @@
+"""Closed-loop loosely coupled INS/GNSS runs (papers 000, 003; DESIGN section 1).
+
+Data flow of :func:`run_loose`::
+
+    IMU (rate f_imu) --> StrapdownINS --(every 1/f_gnss s)--> filter predict (17-state
+    nonlinear error model, :class:`~sdr_di.ins.error_model.InsErrorModel`, improved Euler over
+    the interval with the INS state at its ends and the compensated IMU average)
+    GNSS position/velocity = truth + noise (:class:`~.noise.GnssNoise`, scheduled variance)
+    --> z = INS - GNSS (eq 13) --> filter update with the filter's R --> feedback:
+    ``ins.correct(phi, dv, dp, eps, nabla)`` and the 15 navigation/IMU error states reset to 0.
+
+Decisions
+---------
+* Filter rate = GNSS rate (default 1 Hz, papers 000/003). The IMU rate is the scenario's.
+* Filter ``Q`` = ``q_scale`` x :func:`~sdr_di.ins.error_model.process_noise` of the
+  scenario's IMU spec (random walks; bias random walk reaching the spec in ``bias_time_s``);
+  ``q_scale = 16`` reproduces paper 000's wrong ``Q``. The clock states are carried (same
+  layout as deep mode) but unobserved; their ``Q`` is tiny.
+* Filter ``R`` = ``r_scale`` x nominal GNSS variances; the true noise follows the schedule
+  (``r_windows``: paper 003's 16 R during 500-700 s). The filter is never told the schedule.
+* ``P0`` = diag of the squared ``p0_sigma_*`` (default: the initial errors, floored) and of
+  the bias specs; a non-positive-definite ``P0`` is rejected by the filter
+  (:class:`~sdr_di.errors.FilterError`).
+* The INS starts from truth plus the initial errors (attitude error as a rotation vector,
+  ``C(computed) = exp(-[phi x]) C(true)``).
+
+Scenario files: the usual scenario tables plus an optional ``[lc]`` table read here (the
+scenario schema rejects unknown tables, so ``[lc]`` is removed before validation). Keys (all
+optional): ``filter``, ``gnss_rate_hz``, ``sigma_pos_h_m``, ``sigma_pos_v_m``,
+``sigma_vel_mps``, ``r_windows = [[t0, t1, factor], ...]``, ``q_scale``, ``r_scale``,
+``init_att_err_arcmin`` (3: E, N, U), ``init_vel_err_mps`` (3), ``init_pos_err_m`` (3: E, N, U),
+``p0_sigma_att_arcmin``, ``p0_sigma_vel_mps``, ``p0_sigma_pos_m`` (3 each), ``bias_time_s``,
+``imu_draw`` ("gaussian" or "fixed").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ImuDataError, ScenarioError
+from ..filters import make_filter
+from ..frames import radii_of_curvature
+from ..ins.error_model import InsErrorModel, NavState, process_noise, rotvec_to_dcm
+from ..ins.mechanization import StrapdownINS
+from ..scenario.schema import Scenario, parse_scenario
+from ..sim.imu import ImuErrorModel
+from .measurements import LooseMeasurementModel, loose_measurement
+from .metrics import nav_errors, summarize
+from .noise import GnssNoise, NoiseWindow
+
+__all__ = ["LcSettings", "LcResult", "load_lc_scenario", "run_loose", "run_loose_scenario",
+           "make_inputs"]
+
+ARCMIN = math.radians(1.0 / 60.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class LcSettings:
+    """Settings of a loosely coupled run (see the module docstring for the ``[lc]`` keys)."""
+
+    filter: str = "ekf"
+    gnss_rate_hz: float = 1.0
+    noise: GnssNoise = GnssNoise()
+    q_scale: float = 1.0
+    r_scale: float = 1.0
+    init_att_err_arcmin: tuple = (3.0, 3.0, 10.0)
+    init_vel_err_mps: tuple = (0.3, 0.3, 0.3)
+    init_pos_err_m: tuple = (5.0, 5.0, 8.0)
+    p0_sigma_att_arcmin: tuple | None = None
+    p0_sigma_vel_mps: tuple | None = None
+    p0_sigma_pos_m: tuple | None = None
+    bias_time_s: float = 3600.0
+    imu_draw: str = "gaussian"
+    filter_options: dict = dataclasses.field(default_factory=dict)
+
+    def replace(self, **kw) -> "LcSettings":
+        return dataclasses.replace(self, **kw)
+
+
+def _vec3(v, where):
+    if (not isinstance(v, list) or len(v) != 3 or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+            for x in v)):
+        raise ScenarioError(f"{where}: expected 3 finite numbers, got {v!r}")
+    return tuple(float(x) for x in v)
+
+
+def _parse_lc(table, where: str) -> LcSettings:
+    if not isinstance(table, dict):
+        raise ScenarioError(f"{where}: [lc] must be a table")
+    t = dict(table)
+    kw: dict = {}
+
+    def num(key, lo_open=0.0):
+        v = t.pop(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                or v <= lo_open:
+            raise ScenarioError(f"{where}: [lc].{key}: expected a number > {lo_open:g}, "
+                                f"got {v!r}")
+        return float(v)
+
+    if "filter" in t:
+        v = t.pop("filter")
+        if not isinstance(v, str):
+            raise ScenarioError(f"{where}: [lc].filter: expected a filter name")
+        kw["filter"] = v
+    for key in ("gnss_rate_hz", "q_scale", "r_scale", "bias_time_s"):
+        if key in t:
+            kw[key] = num(key)
+    noise_kw = {}
+    for key, name in (("sigma_pos_h_m", "sigma_h_m"), ("sigma_pos_v_m", "sigma_v_m"),
+                      ("sigma_vel_mps", "sigma_vel_mps")):
+        if key in t:
+            noise_kw[name] = num(key)
+    windows = []
+    if "r_windows" in t:
+        rw = t.pop("r_windows")
+        if not isinstance(rw, list):
+            raise ScenarioError(f"{where}: [lc].r_windows: expected [[t0, t1, factor], ...]")
+        for i, w in enumerate(rw):
+            a, b, c = _vec3(w, f"{where}: [lc].r_windows[{i}]")
+            try:
+                windows.append(NoiseWindow(a, b, c))
+            except ValueError as exc:
+                raise ScenarioError(f"{where}: [lc].r_windows[{i}]: {exc}") from None
+    kw["noise"] = GnssNoise(windows=tuple(windows), **noise_kw)
+    for key in ("init_att_err_arcmin", "init_vel_err_mps", "init_pos_err_m",
+                "p0_sigma_att_arcmin", "p0_sigma_vel_mps", "p0_sigma_pos_m"):
+        if key in t:
+            v = _vec3(t.pop(key), f"{where}: [lc].{key}")
+            if key.startswith("p0") and min(v) < 0:
+                raise ScenarioError(f"{where}: [lc].{key}: standard deviations must be >= 0")
+            kw[key] = v
+    if "imu_draw" in t:
+        v = t.pop("imu_draw")
+        if v not in ("gaussian", "fixed"):
+            raise ScenarioError(f"{where}: [lc].imu_draw: 'gaussian' or 'fixed', got {v!r}")
+        kw["imu_draw"] = v
+    if t:
+        raise ScenarioError(f"{where}: [lc]: unknown key(s) {', '.join(map(repr, sorted(t)))}")
+    return LcSettings(**kw)
+
+
+def load_lc_scenario(path: str | Path) -> tuple[Scenario, LcSettings]:
+    """Read a scenario TOML with an optional ``[lc]`` table.
+
+    Raises
+    ------
+    ScenarioError
+        Unreadable file, bad scenario or bad ``[lc]`` key.
+    """
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_bytes().decode("utf-8"))
+    except OSError as exc:
+        raise ScenarioError(f"scenario {path}: cannot read ({exc.strerror or exc})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"scenario {path}: not valid TOML ({exc})") from None
+    lc = raw.pop("lc", {})
+    sc = parse_scenario(raw, source=path, base_dir=path.parent)
+    return sc, _parse_lc(lc, str(path))
+
+
+@dataclasses.dataclass
+class LcResult:
+    """Time series (one row per filter epoch, after feedback) and settings of a run.
+
+    Attributes
+    ----------
+    t : (n,) epoch times [s]
+    att_err : (n, 3) attitude error [deg] (E, N, U rotation vector)
+    vel_err : (n, 3) velocity error [m/s] (ENU)
+    pos_err : (n, 3) position error [m] (E, N, U)
+    r_diag : (n, 6) the filter's R used at each update (after adaptation)
+    r_true : (n, 6) the true noise variances
+    q_diag : (n, 17) the filter's Q used in each predict
+    nis : (n,) normalized innovation squared
+    filter_name : str
+    elapsed_s : float
+    """
+
+    t: np.ndarray
+    att_err: np.ndarray
+    vel_err: np.ndarray
+    pos_err: np.ndarray
+    r_diag: np.ndarray
+    r_true: np.ndarray
+    q_diag: np.ndarray
+    nis: np.ndarray
+    filter_name: str
+    elapsed_s: float = 0.0
+
+    def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
+        """RMSE / max of attitude [deg], velocity [m/s], position [m] (``t0 <= t <= t1``)."""
+        return summarize(self.t, self.att_err, self.vel_err, self.pos_err, t0, t1)
+
+    def write_csv(self, path: str | Path) -> Path:
+        """Write the error time series (atomic: ``.part`` then rename)."""
+        from ..io.atomic import atomic_open
+
+        path = Path(path)
+        cols = (["t", "att_e_deg", "att_n_deg", "att_u_deg", "vel_e", "vel_n", "vel_u",
+                 "pos_e_m", "pos_n_m", "pos_u_m", "nis"]
+                + [f"r{i}" for i in range(6)] + [f"r_true{i}" for i in range(6)])
+        data = np.column_stack([self.t, self.att_err, self.vel_err, self.pos_err, self.nis,
+                                self.r_diag, self.r_true])
+        with atomic_open(path, "w") as fh:
+            fh.write(f"# sdr-di lc errors, filter {self.filter_name}; attitude deg, "
+                     "velocity m/s, position m (E, N, U), R variances\n")
+            fh.write(",".join(cols) + "\n")
+            np.savetxt(fh, data, delimiter=",", fmt="%.10g")
+        return path
+
+
+def make_inputs(sc: Scenario, settings: LcSettings | None = None):
+    """Truth and measured IMU of a scenario (seeded from the scenario)."""
+    from ..sim.generate import simulate_truth
+
+    settings = settings or LcSettings()
+    truth = simulate_truth(sc)
+    model = ImuErrorModel.from_spec(sc.imu, draw=settings.imu_draw)
+    rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
+    return truth, model.apply(truth, rng), model
+
+
+def _check_inputs(truth, imu) -> None:
+    if len(imu.t) != len(truth.t) or not np.allclose(imu.t, truth.t, atol=1e-6):
+        raise ImuDataError(f"IMU record ({len(imu.t)} samples) and truth ({len(truth.t)} "
+                           "samples) are not on the same time grid")
+    if len(imu.t) < 2:
+        raise ImuDataError("IMU record has fewer than 2 samples")
+
+
+def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
+              seed: int = 0, duration_s: float | None = None) -> LcResult:
+    """Run the closed-loop loosely coupled filter (module docstring).
+
+    Parameters
+    ----------
+    truth : Truth
+        Reference trajectory at the IMU rate (also the source of the simulated GNSS fixes).
+    imu : ImuData
+        Measured IMU on the same time grid.
+    imu_model : ImuErrorModel
+        IMU spec used for ``Q`` and ``P0`` (random walks, bias specs).
+    settings : LcSettings
+    seed : int
+        Seed of the GNSS noise.
+    duration_s : float, optional
+        Stop after this many seconds.
+
+    Raises
+    ------
+    FilterError
+        Unknown filter name, bad option, non-positive-definite ``P0``.
+    ImuDataError
+        IMU and truth not on one grid.
+    """
+    t_start = time.perf_counter()
+    _check_inputs(truth, imu)
+    s = settings
+    dt_imu = float(imu.t[1] - imu.t[0])
+    n_per = int(round(1.0 / (s.gnss_rate_hz * dt_imu)))
+    if n_per < 1:
+        raise ImuDataError("GNSS rate above the IMU rate")
+    dt_f = n_per * dt_imu
+    t_end = imu.t[-1] if duration_s is None else min(imu.t[-1], imu.t[0] + duration_s)
+
+    # ---- filter
+    gyro_rw, accel_rw = imu_model.gyro_random_walk_si, imu_model.accel_random_walk_si
+    gb, ab = imu_model.gyro_bias_si, imu_model.accel_bias_si
+    Q_model = process_noise(dt_f, gyro_random_walk_si=gyro_rw, accel_random_walk_si=accel_rw,
+                            gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=s.bias_time_s,
+                            with_clock=False)
+    # keep Q positive definite on the IMU states even for a perfect IMU
+    floor = np.r_[[1e-14] * 3, [1e-10] * 3, [0.0] * 3, [1e-20] * 3, [1e-16] * 3, 0.0, 0.0]
+    Q0 = s.q_scale * (Q_model + np.diag(floor))
+    R0 = s.r_scale * s.noise.nominal_diag()
+    lat0, h0 = float(truth.llh[0, 0]), float(truth.llh[0, 2])
+    R_M, R_N = (float(r) for r in radii_of_curvature(lat0))
+    att0 = np.array(s.init_att_err_arcmin) * ARCMIN
+    vel0 = np.array(s.init_vel_err_mps)
+    pe, pn, pu = s.init_pos_err_m
+    dp0 = np.array([pn / (R_M + h0), pe / ((R_N + h0) * math.cos(lat0)), pu])
+
+    def _sig(given, init, floor_):
+        v = np.abs(np.array(init, float)) if given is None else np.array(given, float)
+        return np.maximum(v, floor_) if given is None else v
+
+    sa = _sig(s.p0_sigma_att_arcmin, s.init_att_err_arcmin, 1.0) * ARCMIN
+    sv = _sig(s.p0_sigma_vel_mps, s.init_vel_err_mps, 0.1)
+    sp = _sig(s.p0_sigma_pos_m, s.init_pos_err_m, 1.0)
+    p0 = np.r_[sa**2, sv**2, (sp[1] / (R_M + h0))**2, (sp[0] / ((R_N + h0) * math.cos(lat0)))**2,
+               sp[2]**2, [max(gb, 1e-7)**2] * 3, [max(ab, 1e-5)**2] * 3, 1.0, 0.01]
+    process = InsErrorModel()
+    meas = LooseMeasurementModel(truth.llh[0])
+    kf = make_filter(s.filter, process, meas, np.zeros(17), np.diag(p0), Q0, R0, dt=dt_f,
+                     **s.filter_options)
+
+    # ---- INS
+    C0 = rotvec_to_dcm(-att0) @ truth.C_b_n[0]
+    ins = StrapdownINS(truth.llh[0] + dp0, truth.v_n[0] + vel0, C_b_n=C0, t=float(imu.t[0]))
+    ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], dt_imu)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x4C43]))
+
+    rows_t, A, V, P, RD, RT, QD, NIS = [], [], [], [], [], [], [], []
+    k = 0
+    n = len(imu.t)
+    while k + n_per < n and imu.t[k + n_per] <= t_end + 1e-9:
+        nav0 = NavState.from_ins(ins)
+        fs = imu.f_b[k + 1:k + n_per + 1]
+        ws = imu.w_ib_b[k + 1:k + n_per + 1]
+        f_mean = fs.mean(axis=0) - ins.accel_bias
+        w_mean = ws.mean(axis=0) - ins.gyro_bias
+        for j in range(n_per):
+            ins.step(fs[j], ws[j], float(imu.t[k + j + 1] - imu.t[k + j]))
+        k += n_per
+        tk = float(imu.t[k])
+        process.set_interval(nav0, NavState.from_ins(ins), f_mean, w_mean)
+        kf.predict(dt_f)
+        g_llh, g_v = s.noise.sample(tk, truth.llh[k], truth.v_n[k], rng)
+        z = loose_measurement(ins.llh, ins.v_n, g_llh, g_v)
+        meas.set_epoch(ins.llh)
+        kf.update(z)
+        x = kf.x.copy()
+        ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
+        x[:15] = 0.0
+        kf.x = x
+        a, v, p = nav_errors(ins.llh, ins.v_n, ins.C_b_n, truth.llh[k], truth.v_n[k],
+                             truth.C_b_n[k])
+        rows_t.append(tk)
+        A.append(a)
+        V.append(v)
+        P.append(p)
+        RD.append(np.diagonal(kf.R_used).copy())
+        RT.append(s.noise.true_diag(tk))
+        QD.append(np.diagonal(kf.Q_used).copy())
+        NIS.append(kf.nis)
+    return LcResult(t=np.array(rows_t), att_err=np.array(A).reshape(-1, 3),
+                    vel_err=np.array(V).reshape(-1, 3), pos_err=np.array(P).reshape(-1, 3),
+                    r_diag=np.array(RD).reshape(-1, 6), r_true=np.array(RT).reshape(-1, 6),
+                    q_diag=np.array(QD).reshape(-1, 17), nis=np.array(NIS),
+                    filter_name=kf.name, elapsed_s=time.perf_counter() - t_start)
+
+
+def run_loose_scenario(sc: Scenario, settings: LcSettings,
+                       duration_s: float | None = None) -> LcResult:
+    """Simulate truth + IMU from a scenario and run :func:`run_loose` (GNSS seed = scenario)."""
+    if duration_s is not None:
+        sc = sc.with_overrides(duration_s=duration_s)
+    truth, imu, model = make_inputs(sc, settings)
+    return run_loose(truth, imu, model, settings, seed=sc.seed)

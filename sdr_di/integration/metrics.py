@@ -1,0 +1,53 @@
+"""Error metrics of a navigation run (DESIGN section 6: RMSE = sqrt(mean ||e||^2)).
+
+Attitude error is the rotation vector ``phi`` with ``C_b^n(computed) = exp(-[phi x])
+C_b^n(true)`` (the filter's convention), reported in degrees; velocity error in m/s (ENU);
+position error in metres (E, N, U). ``max`` is the largest ``||e||``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..frames import radii_of_curvature
+from ..ins.error_model import dcm_to_rotvec
+
+__all__ = ["nav_errors", "rmse_max", "summarize"]
+
+
+def nav_errors(llh, v_n, C_b_n, llh_true, v_true, C_true):
+    """Errors (computed - true) at one epoch: attitude [deg] (3,), velocity (3,), pos ENU [m]."""
+    att = np.degrees(dcm_to_rotvec(np.asarray(C_true) @ np.asarray(C_b_n).T))
+    lat = float(llh_true[0])
+    R_M, R_N = (float(r) for r in radii_of_curvature(lat))
+    d = np.asarray(llh, float) - np.asarray(llh_true, float)
+    h = float(llh_true[2])
+    pos = np.array([d[1] * (R_N + h) * math.cos(lat), d[0] * (R_M + h), d[2]])
+    return att, np.asarray(v_n, float) - np.asarray(v_true, float), pos
+
+
+def rmse_max(e: np.ndarray) -> tuple[float, float]:
+    """``(sqrt(mean ||e_k||^2), max ||e_k||)`` of rows ``e`` (n, 3); NaN for no rows."""
+    e = np.atleast_2d(np.asarray(e, float))
+    if e.shape[0] == 0:
+        return math.nan, math.nan
+    n2 = np.sum(e * e, axis=1)
+    return float(math.sqrt(np.mean(n2))), float(math.sqrt(np.max(n2)))
+
+
+def summarize(t, att, vel, pos, t0: float | None = None, t1: float | None = None) -> dict:
+    """RMSE and max of attitude [deg], velocity [m/s], position [m] over ``t0 <= t <= t1``."""
+    t = np.asarray(t, float)
+    sel = np.ones(t.size, bool)
+    if t0 is not None:
+        sel &= t >= t0
+    if t1 is not None:
+        sel &= t <= t1
+    out = {"n": int(sel.sum())}
+    for name, e in (("att_deg", att), ("vel_mps", vel), ("pos_m", pos)):
+        r, m = rmse_max(np.asarray(e)[sel])
+        out[f"{name}_rmse"] = r
+        out[f"{name}_max"] = m
+    return out

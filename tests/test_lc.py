@@ -1,0 +1,149 @@
+"""Loosely coupled runs (papers 000, 003) and the integration measurement models."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from sdr_di.frames import C_e_n, llh_to_ecef
+from sdr_di.integration import (GnssNoise, LooseMeasurementModel, NoiseWindow,
+                                RangeRateMeasurementModel, load_lc_scenario, loose_measurement,
+                                predicted_observables, rmse_max)
+from sdr_di.integration.loose import make_inputs, run_loose
+from sdr_di.scenario import DEFAULT_SCENARIO, REPO_ROOT
+
+PAPER003 = REPO_ROOT / "signals" / "lc_paper003.toml"
+PAPER000 = REPO_ROOT / "signals" / "lc_paper000.toml"
+
+
+# ---------------------------------------------------------------- measurement models
+def _sats(r_rx, n, rng):
+    """n satellites at ~20000 km altitude above the receiver's horizon."""
+    up = r_rx / np.linalg.norm(r_rx)
+    out_p, out_v = [], []
+    for _ in range(n):
+        d = up + 0.8 * rng.standard_normal(3)
+        d /= np.linalg.norm(d)
+        out_p.append(r_rx + 2.2e7 * d)
+        out_v.append(rng.standard_normal(3) * 2500.0)
+    return np.array(out_p), np.array(out_v)
+
+
+@pytest.mark.parametrize("n_sat", [4, 7, 11])
+def test_range_rate_model_is_first_order_of_exact_ranges(n_sat):
+    rng = np.random.default_rng(n_sat)
+    llh_true = np.array([math.radians(40), math.radians(116), 100.0])
+    v_true = np.array([3.0, 20.0, -1.0])
+    sp, sv = _sats(llh_to_ecef(*llh_true), n_sat, rng)
+    x = np.zeros(17)
+    x[3:6] = [0.2, -0.1, 0.05]
+    x[6:9] = [3e-7, -2e-7, 4.0]
+    x[15], x[16] = 12.0, -0.7
+    llh_c, v_c = llh_true + x[6:9], v_true + x[3:6]
+    model = RangeRateMeasurementModel(llh_c, v_c, sp, sv)
+    assert model.matrix.shape == (2 * n_sat, 17) and model.n_sat == n_sat
+    # measured observables: truth ranges + true clock; the INS predicts with clock estimate
+    rho_t, rate_t, _ = predicted_observables(llh_true, v_true, sp, sv, 100.0, 5.0)
+    model.set_epoch(llh_c, v_c, sp, sv, 100.0 + x[15], 5.0 + x[16])
+    z = model.measurement(rho_t, rate_t)
+    hz = model.h(x)
+    # position/clock part exact to mm (range curvature ~ |dr|^2 / 2e7)
+    assert np.max(np.abs(z[:n_sat] - hz[:n_sat])) < 1e-3
+    # rate part: neglects the line-of-sight change from a 4 m position error (~ mm/s)
+    assert np.max(np.abs(z[n_sat:] - hz[n_sat:])) < 2e-3
+    # the rows are those of eq 10-12: zeros where the paper has zero blocks
+    H = model.matrix
+    assert np.all(H[:n_sat, 0:6] == 0) and np.all(H[:n_sat, 9:15] == 0)
+    assert np.all(H[n_sat:, 0:3] == 0) and np.all(H[n_sat:, 6:15] == 0)
+    assert np.all(H[:n_sat, 15] == 1) and np.all(H[:n_sat, 16] == 0)
+    assert np.all(H[n_sat:, 16] == 1) and np.all(H[n_sat:, 15] == 0)
+
+
+def test_loose_model_matches_differences():
+    llh_true = np.array([math.radians(34.2), math.radians(109.0), 500.0])
+    v_true = np.array([1.0, 10.0, 0.0])
+    x = np.zeros(17)
+    x[3:6] = [0.1, -0.2, 0.3]
+    x[6:9] = [1e-6, -2e-6, 7.0]
+    llh_c = llh_true + x[6:9]
+    z = loose_measurement(llh_c, v_true + x[3:6], llh_true, v_true)
+    m = LooseMeasurementModel(llh_c)
+    assert np.allclose(m.h(x), z, rtol=1e-9, atol=1e-9)
+    # position rows are metres North, East, Up
+    d = C_e_n(*llh_true[:2]) @ (llh_to_ecef(*llh_c) - llh_to_ecef(*llh_true))
+    assert np.allclose(z[3:6], [d[1], d[0], d[2]], atol=0.01)
+
+
+def test_noise_schedule():
+    nz = GnssNoise(5.0, 8.0, 0.05, (NoiseWindow(500, 700, 16),))
+    assert np.allclose(nz.true_diag(600), 16 * nz.nominal_diag())
+    assert np.allclose(nz.true_diag(499.9), nz.nominal_diag())
+    with pytest.raises(ValueError):
+        NoiseWindow(10, 5, 2)
+    rng = np.random.default_rng(0)
+    llh = np.array([0.6, 1.9, 100.0])
+    e = np.array([nz.sample(600.0, llh, np.zeros(3), rng)[1] for _ in range(4000)])
+    assert np.std(e) == pytest.approx(0.2, rel=0.05)
+    assert rmse_max(np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 0.0]])) == (math.sqrt(12.5), 5.0)
+
+
+# ---------------------------------------------------------------- closed-loop runs
+@pytest.fixture(scope="module")
+def default_inputs():
+    sc, st = load_lc_scenario(DEFAULT_SCENARIO)
+    truth, imu, model = make_inputs(sc, st)
+    return sc, st, truth, imu, model
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf", "ff-aukf"])
+def test_lc_default_trajectory_converges(default_inputs, name):
+    sc, st, truth, imu, model = default_inputs
+    st = st.replace(filter=name, init_att_err_arcmin=(10.0, 10.0, 30.0))
+    res = run_loose(truth, imu, model, st, seed=sc.seed)
+    m = res.metrics()
+    assert m["n"] == 60
+    assert m["pos_m_rmse"] < 4.0                        # GNSS 2 m / 3 m
+    assert res.metrics(30, None)["vel_mps_rmse"] < 0.15
+    att0 = np.linalg.norm(st.init_att_err_arcmin) / 60.0
+    late = res.metrics(40, None)["att_deg_rmse"]
+    assert late < 0.5 * att0                            # attitude (with yaw) converging
+    assert np.all(np.isfinite(res.att_err))
+
+
+def test_lc_free_ins_would_drift(default_inputs):
+    """Sanity: with R huge the filter ignores GNSS and the errors grow (test can fail)."""
+    sc, st, truth, imu, model = default_inputs
+    res = run_loose(truth, imu, model, st.replace(filter="ekf", r_scale=1e8), seed=sc.seed)
+    assert res.metrics(50, None)["pos_m_rmse"] > 10.0
+
+
+def test_ml_r_ckf_paper003_window():
+    """Paper 003 section 4.1: true R x16 during 500-700 s, the filter given the nominal R."""
+    sc, st = load_lc_scenario(PAPER003)
+    sc = sc.with_overrides(duration_s=700.0)
+    truth, imu, model = make_inputs(sc, st)
+    ml = run_loose(truth, imu, model, st.replace(filter="ml-r-ckf"), seed=sc.seed)
+    ck = run_loose(truth, imu, model, st.replace(filter="ckf"), seed=sc.seed)
+    sel = (ml.t >= 550) & (ml.t <= 700)                 # after one 50-epoch window
+    ratio = ml.r_diag[sel].mean(axis=0) / ml.r_true[sel].mean(axis=0)
+    assert np.all(np.abs(ratio - 1.0) < 0.25), ratio
+    pre = (ml.t >= 100) & (ml.t < 490)
+    ratio_pre = ml.r_diag[pre].mean(axis=0) / ml.r_true[pre].mean(axis=0)
+    assert np.all(np.abs(ratio_pre - 1.0) < 0.25), ratio_pre
+    assert ml.metrics(500, 700)["pos_m_rmse"] < ck.metrics(500, 700)["pos_m_rmse"]
+    assert ml.metrics(500, 700)["vel_mps_rmse"] < ck.metrics(500, 700)["vel_mps_rmse"]
+
+
+def test_ml_q_ukf_wrong_q_paper000():
+    """Paper 000 Table 1 direction: filter given 16 Q; ML-Q UKF horizontal velocity better."""
+    sc, st = load_lc_scenario(PAPER000)
+    assert st.q_scale == 16.0
+    sc = sc.with_overrides(duration_s=500.0)
+    truth, imu, model = make_inputs(sc, st)
+    out = {}
+    for name in ("ukf", "ml-q-ukf"):
+        r = run_loose(truth, imu, model, st.replace(filter=name), seed=sc.seed)
+        sel = r.t >= 100
+        out[name] = math.sqrt(np.mean(np.sum(r.vel_err[sel, :2] ** 2, axis=1)))
+    assert out["ml-q-ukf"] < out["ukf"], out
