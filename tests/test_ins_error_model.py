@@ -5,8 +5,15 @@ import pytest
 
 from sdr_di.filters import make_filter
 from sdr_di.ins import StrapdownINS
-from sdr_di.ins.error_model import (ClockModel, InsErrorModel, NavState, dcm_to_rotvec,
-                                    linear_error_matrix, process_noise, rotvec_to_dcm)
+from sdr_di.ins.error_model import (
+    ClockModel,
+    InsErrorModel,
+    NavState,
+    dcm_to_rotvec,
+    linear_error_matrix,
+    process_noise,
+    rotvec_to_dcm,
+)
 from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
 from sdr_di.sim.generate import simulate_truth
 
@@ -24,7 +31,7 @@ def _run(tr, x0, T=20.0, step=1.0, linear=False):
     ins.set_previous_increments(tr.f_b[0] + nab, tr.w_ib_b[0] + eps, tr.dt)
     model = InsErrorModel()
     x = np.array(x0, float)
-    n = int(round(step * tr.rate_hz))
+    n = round(step * tr.rate_hz)
     k, out = 0, []
     while k + n < len(tr.t) and tr.t[k + n] <= T + 1e-9:
         nav0 = NavState.from_ins(ins)

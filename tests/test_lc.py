@@ -1,15 +1,21 @@
 """Loosely coupled runs (papers 000, 003) and the integration measurement models."""
 
-import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from sdr_di.frames import C_e_n, llh_to_ecef
-from sdr_di.integration import (GnssNoise, LooseMeasurementModel, NoiseWindow,
-                                RangeRateMeasurementModel, load_lc_scenario, loose_measurement,
-                                predicted_observables, rmse_max)
+from sdr_di.integration import (
+    GnssNoise,
+    LooseMeasurementModel,
+    NoiseWindow,
+    RangeRateMeasurementModel,
+    load_lc_scenario,
+    loose_measurement,
+    predicted_observables,
+    rmse_max,
+)
 from sdr_di.integration.loose import make_inputs, run_loose
 from sdr_di.scenario import DEFAULT_SCENARIO, REPO_ROOT
 

@@ -77,8 +77,16 @@ from ..filters.models import ProcessModel, numerical_jacobian
 from ..frames import radii_of_curvature, skew
 from .gravity import normal_gravity
 
-__all__ = ["NavState", "InsErrorModel", "process_noise", "ClockModel", "linear_error_matrix",
-           "rotvec_to_dcm", "dcm_to_rotvec", "N_STATES"]
+__all__ = [
+    "N_STATES",
+    "ClockModel",
+    "InsErrorModel",
+    "NavState",
+    "dcm_to_rotvec",
+    "linear_error_matrix",
+    "process_noise",
+    "rotvec_to_dcm",
+]
 
 N_STATES = 17
 C_LIGHT = 299792458.0
@@ -107,7 +115,7 @@ class NavState:
     C_b_n: np.ndarray
 
     @classmethod
-    def from_ins(cls, ins) -> "NavState":
+    def from_ins(cls, ins) -> NavState:
         """Snapshot of a :class:`~sdr_di.ins.mechanization.StrapdownINS`."""
         return cls(np.array(ins.llh, float), np.array(ins.v_n, float), np.array(ins.C_b_n))
 
@@ -307,7 +315,7 @@ def linear_error_matrix(nav: NavState, f_b, clock: ClockModel | None = None) -> 
     """
     clock = clock or ClockModel()
     lat, h = float(nav.llh[0]), float(nav.llh[2])
-    vE, vN, vU = nav.v_n
+    vE, vN, _ = nav.v_n
     C = nav.C_b_n
     R_M, R_N = (float(r) for r in radii_of_curvature(lat))
     sl, cl = math.sin(lat), math.cos(lat)

@@ -10,12 +10,28 @@ The process model is :class:`sdr_di.ins.error_model.InsErrorModel`.
 """
 
 from .loose import LcResult, LcSettings, load_lc_scenario, run_loose, run_loose_scenario
-from .measurements import (LooseMeasurementModel, RangeRateMeasurementModel,
-                           loose_measurement, predicted_observables)
+from .measurements import (
+                           LooseMeasurementModel,
+                           RangeRateMeasurementModel,
+                           loose_measurement,
+                           predicted_observables,
+)
 from .metrics import nav_errors, rmse_max, summarize
 from .noise import GnssNoise, NoiseWindow
 
-__all__ = ["LcResult", "LcSettings", "load_lc_scenario", "run_loose", "run_loose_scenario",
-           "LooseMeasurementModel", "RangeRateMeasurementModel", "loose_measurement",
-           "predicted_observables", "nav_errors", "rmse_max", "summarize", "GnssNoise",
-           "NoiseWindow"]
+__all__ = [
+                           "GnssNoise",
+                           "LcResult",
+                           "LcSettings",
+                           "LooseMeasurementModel",
+                           "NoiseWindow",
+                           "RangeRateMeasurementModel",
+                           "load_lc_scenario",
+                           "loose_measurement",
+                           "nav_errors",
+                           "predicted_observables",
+                           "rmse_max",
+                           "run_loose",
+                           "run_loose_scenario",
+                           "summarize",
+]

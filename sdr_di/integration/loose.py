@@ -54,8 +54,14 @@ from .measurements import LooseMeasurementModel, loose_measurement
 from .metrics import nav_errors, summarize
 from .noise import GnssNoise, NoiseWindow
 
-__all__ = ["LcSettings", "LcResult", "load_lc_scenario", "run_loose", "run_loose_scenario",
-           "make_inputs"]
+__all__ = [
+    "LcResult",
+    "LcSettings",
+    "load_lc_scenario",
+    "make_inputs",
+    "run_loose",
+    "run_loose_scenario",
+]
 
 ARCMIN = math.radians(1.0 / 60.0)
 
@@ -66,7 +72,7 @@ class LcSettings:
 
     filter: str = "ekf"
     gnss_rate_hz: float = 1.0
-    noise: GnssNoise = GnssNoise()
+    noise: GnssNoise = dataclasses.field(default_factory=GnssNoise)
     q_scale: float = 1.0
     r_scale: float = 1.0
     init_att_err_arcmin: tuple = (3.0, 3.0, 10.0)
@@ -79,7 +85,7 @@ class LcSettings:
     imu_draw: str = "gaussian"
     filter_options: dict = dataclasses.field(default_factory=dict)
 
-    def replace(self, **kw) -> "LcSettings":
+    def replace(self, **kw) -> LcSettings:
         return dataclasses.replace(self, **kw)
 
 
@@ -266,7 +272,7 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     _check_inputs(truth, imu)
     s = settings
     dt_imu = float(imu.t[1] - imu.t[0])
-    n_per = int(round(1.0 / (s.gnss_rate_hz * dt_imu)))
+    n_per = round(1.0 / (s.gnss_rate_hz * dt_imu))   # whole IMU samples per GNSS epoch
     if n_per < 1:
         raise ImuDataError("GNSS rate above the IMU rate")
     dt_f = n_per * dt_imu
@@ -307,7 +313,7 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     C0 = rotvec_to_dcm(-att0) @ truth.C_b_n[0]
     ins = StrapdownINS(truth.llh[0] + dp0, truth.v_n[0] + vel0, C_b_n=C0, t=float(imu.t[0]))
     ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], dt_imu)
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x4C43]))
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 0x4C43]))
 
     rows_t, A, V, P, RD, RT, QD, NIS = [], [], [], [], [], [], [], []
     k = 0

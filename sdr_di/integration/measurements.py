@@ -31,15 +31,20 @@ import numpy as np
 from ..filters.models import LinearMeasurementModel
 from ..frames import C_e_n, llh_to_ecef, radii_of_curvature
 
-__all__ = ["RangeRateMeasurementModel", "LooseMeasurementModel", "predicted_observables",
-           "dr_e_dllh", "loose_measurement"]
+__all__ = [
+    "LooseMeasurementModel",
+    "RangeRateMeasurementModel",
+    "dr_e_dllh",
+    "loose_measurement",
+    "predicted_observables",
+]
 
 
 def dr_e_dllh(llh) -> np.ndarray:
     """``C1 = d r_e / d(lat, lon, h)`` (3, 3) at ``llh`` (rad, rad, m)."""
     lat, lon, h = (float(v) for v in llh)
     R_M, R_N = (float(r) for r in radii_of_curvature(lat))
-    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    cl = math.cos(lat)
     C_n_e = C_e_n(lat, lon).T          # columns: E, N, U unit vectors in ECEF
     return np.column_stack([C_n_e[:, 1] * (R_M + h), C_n_e[:, 0] * (R_N + h) * cl,
                             C_n_e[:, 2]])

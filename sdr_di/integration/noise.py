@@ -16,7 +16,7 @@ import numpy as np
 
 from ..frames import radii_of_curvature
 
-__all__ = ["NoiseWindow", "GnssNoise"]
+__all__ = ["GnssNoise", "NoiseWindow"]
 
 
 @dataclasses.dataclass(frozen=True)
