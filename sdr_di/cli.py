@@ -76,6 +76,60 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_run(sub) -> None:
+    p = sub.add_parser(
+        "run",
+        help="run the receiver on a recorded IF file",
+        description="Acquire, track and decode the B3I signals of an IF file and write the "
+        "navigation solution (CSV and NMEA). The file is described by its sidecar (X.json "
+        "beside X.bin) or, for a file sdr-di did not write, by --fs/--if/--format.",
+    )
+    p.add_argument("if_file", type=Path, help="IF samples (or its .json sidecar)")
+    p.add_argument("--mode", choices=("scalar",), default="scalar",
+                   help="receiver architecture (scalar tracking loops)")
+    p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
+                   help="comma-separated PRNs to search (default all 63)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output directory (default: beside the IF file, in <stem>_run/)")
+    p.add_argument("--rate", type=float, default=5.0, metavar="HZ",
+                   help="solution output rate [Hz] (default 5)")
+    p.add_argument("--fs", type=float, default=None, metavar="HZ",
+                   help="foreign file: sampling rate [Hz]")
+    p.add_argument("--if", dest="if_hz", type=float, default=None, metavar="HZ",
+                   help="foreign file: intermediate frequency [Hz] (default 0)")
+    p.add_argument("--format", dest="sample_format", default=None,
+                   help="foreign file: sample format (iq_int8/ibyte, real_int8, iq_int16, "
+                   "real_int16, iq_int4, gr_complex)")
+    p.add_argument("--inverted", action="store_true",
+                   help="foreign file: spectrum inverted")
+    p.add_argument("--start-week", type=int, default=None, help="foreign file: BDT week hint")
+    p.add_argument("--start-sow", type=float, default=None,
+                   help="foreign file: BDT seconds of week of sample 0 (hint)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_run)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .constants import parse_prn
+    from .receiver.run_scalar import open_source, run_scalar
+
+    prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
+    source = open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
+                         sample_format=args.sample_format, spectrum_inverted=args.inverted,
+                         start_week=args.start_week, start_sow=args.start_sow)
+    out = args.out or args.if_file.with_name(args.if_file.stem + "_run")
+    res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress)
+    rt = res.processed_s / max(res.wall_s, 1e-9)
+    print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
+          f"{res.n_fixes}/{res.n_epochs} epochs with a fix")
+    for row in res.channels:
+        print(f"  C{row['prn']:02d} {row['state']:8s} C/N0 {row['cn0_dbhz']} dB-Hz  "
+              f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
+    for label, path in res.files.items():
+        print(f"{label:9s} {path}")
+    return 0
+
+
 def _add_lc(sub) -> None:
     """``sdr-di lc``: closed-loop loosely coupled INS/GNSS run (:mod:`sdr_di.integration`)."""
     p = sub.add_parser(
@@ -179,6 +233,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"sdr-di {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_generate(sub)
+    _add_run(sub)
     _add_lc(sub)
     return parser
 

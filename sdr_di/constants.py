@@ -63,6 +63,20 @@ def check_prn(prn) -> int:
     return p
 
 
+def parse_prn(value) -> int:
+    """Parse a PRN given as ``21``, ``"21"`` or ``"C21"``; raise ``UnknownPrnError`` otherwise."""
+    from .errors import UnknownPrnError
+
+    text = str(value).strip().upper()
+    try:
+        prn = int(text[1:] if text.startswith("C") else text)
+    except ValueError:
+        raise UnknownPrnError(f"{value!r} is not a BDS PRN (1..63 or C01..C63)") from None
+    if not 1 <= prn <= 63:
+        raise UnknownPrnError(f"unknown BDS PRN {value!r} (valid: 1..63)")
+    return prn
+
+
 def is_geo(prn: int) -> bool:
     """Return True for a GEO PRN (D2 message, GEO orbit computation)."""
     return int(prn) in GEO_PRNS

@@ -20,6 +20,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from ..constants import parse_prn
 from ..errors import ScenarioError
 from ..timebase import datetime_to_bdt, utc_to_bdt
 
@@ -258,19 +259,13 @@ _REQUIRED = object()
 
 
 def _parse_prn(value: Any, where: str) -> int:
-    """Accept 21, "21" or "C21"; return the PRN number 1..63."""
+    """Accept 21, "21" or "C21"; return the PRN number 1..63 (errors name ``where``)."""
     from ..errors import UnknownPrnError
 
-    s = str(value).strip().upper()
-    if s.startswith("C"):
-        s = s[1:]
     try:
-        prn = int(s)
-    except ValueError:
-        raise ScenarioError(f"{where}: {value!r} is not a BDS PRN (1..63 or C01..C63)") from None
-    if not 1 <= prn <= 63:
-        raise UnknownPrnError(f"{where}: unknown BDS PRN {value!r} (valid: 1..63)")
-    return prn
+        return parse_prn(value)
+    except UnknownPrnError as exc:
+        raise UnknownPrnError(f"{where}: {exc}") from None
 
 
 def _parse_time(value: Any, scale: str, where: str) -> tuple[int, float]:

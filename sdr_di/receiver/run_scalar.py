@@ -1,0 +1,189 @@
+"""``sdr-di run --mode scalar``: IF file -> acquisition, tracking, decoding -> PVT files.
+
+Pipeline: :class:`~sdr_di.receiver.ifreader.IfSource` (sidecar or explicit options for a
+foreign file) -> :class:`~sdr_di.receiver.scalar.ScalarReceiver` (acquisition, scalar loops,
+NH/bit/frame sync, D1/D2 decoding) -> at every output epoch
+:class:`~sdr_di.receiver.pvt.PvtEngine` (observables at a common receive time, WLS position
+and velocity from the decoded ephemerides and Klobuchar set) -> streaming CSV and NMEA
+writers (nothing under the final names until the run completed).
+
+Outputs in ``out_dir`` (``STEM`` = IF file name without extension):
+
+``STEM_pvt.csv``   one row per output epoch (``docs/solution_format.md``)
+``STEM.nmea``      GGA and RMC sentences at the output rate (valid fixes)
+``STEM_channels.csv``  one row per channel: final state, C/N0, decoded ephemeris, time
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from pathlib import Path
+
+from ..errors import SdrDiError
+from ..io.atomic import atomic_open, ensure_output_dir
+from ..io.solution_files import NmeaWriter, SolutionCsvWriter
+from .ifreader import IfSource
+from .pvt import PvtEngine
+from .scalar import ScalarReceiver
+
+
+class NoSatelliteError(SdrDiError):
+    """Acquisition found no satellite in the IF file."""
+
+
+def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
+                if_hz: float | None = None, sample_format: str | None = None,
+                spectrum_inverted: bool = False, start_week: int | None = None,
+                start_sow: float | None = None) -> IfSource:
+    """Open an IF file: from its sidecar (``X.json`` beside ``X.bin``, or the JSON itself)
+    unless explicit options are given (foreign files).
+
+    Raises
+    ------
+    SampleFormatError
+        Missing sidecar and options, bad options, truncated or inconsistent file.
+    """
+    from ..errors import SampleFormatError
+
+    path = Path(path)
+    explicit = sampling_rate_hz is not None or sample_format is not None
+    if not explicit:
+        sidecar = path if path.suffix == ".json" else path.with_suffix(".json")
+        if not sidecar.exists():
+            raise SampleFormatError(
+                f"{path}: no sidecar {sidecar.name}; give --fs, --if and --format for a "
+                "foreign IF file")
+        return IfSource.from_sidecar(sidecar)
+    if sampling_rate_hz is None or sample_format is None:
+        raise SampleFormatError(f"{path}: a foreign IF file needs both --fs and --format")
+    if not path.exists():
+        raise SampleFormatError(f"IF file {path} not found")
+    return IfSource(path, sampling_rate_hz, if_hz or 0.0, sample_format,
+                    spectrum_inverted=spectrum_inverted, start_week=start_week,
+                    start_sow=start_sow)
+
+
+@dataclasses.dataclass
+class RunSummary:
+    """What a scalar run produced."""
+
+    files: dict[str, Path]
+    n_epochs: int
+    n_fixes: int
+    processed_s: float
+    wall_s: float
+    channels: list[dict]
+    profile: dict
+
+
+def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: float = 5.0,
+               stem: str | None = None, progress: bool = True,
+               receiver: ScalarReceiver | None = None) -> RunSummary:
+    """Run the scalar receiver over ``source`` and write the solution files.
+
+    Parameters
+    ----------
+    source : IfSource
+        The IF samples.
+    out_dir : path
+        Output directory (created).
+    prns : iterable of int, optional
+        PRNs to search (default all 63).
+    rate_hz : float
+        Output epoch rate [Hz] (default 5, paper 004's solution rate).
+    stem : str, optional
+        Base name of the outputs (default the IF file's stem).
+    progress : bool
+        Show a progress bar (seconds processed, real-time factor, channels in lock).
+    receiver : ScalarReceiver, optional
+        Preconfigured receiver (loop settings, acquisition options).
+
+    Raises
+    ------
+    NoSatelliteError
+        No satellite acquired.
+    OutputError
+        Outputs cannot be written (nothing is left under the final names).
+    """
+    out_dir = ensure_output_dir(out_dir)
+    stem = stem or source.path.stem
+    rx = receiver or ScalarReceiver(log=False)
+    engine = PvtEngine(source.sampling_rate_hz, {}, None)
+    files = {"pvt": out_dir / f"{stem}_pvt.csv", "nmea": out_dir / f"{stem}.nmea",
+             "channels": out_dir / f"{stem}_channels.csv"}
+    csv_w = SolutionCsvWriter(files["pvt"])
+    nmea_w = NmeaWriter(files["nmea"], rate_hz=None)
+    bar = None
+    t_wall = time.perf_counter()
+    counts = {"epochs": 0, "fixes": 0}
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=round(source.duration_s, 2), unit="s", desc="run scalar",
+                   bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
+                              "{postfix}]")
+
+    def on_epoch(sample, observations, ephemerides):
+        engine.ephemerides = ephemerides
+        engine.iono = rx.klobuchar
+        sol = engine.process(observations)
+        counts["epochs"] += 1
+        csv_w.write(sol)
+        if sol.valid:
+            counts["fixes"] += 1
+            nmea_w.write(sol)
+        if bar is not None:
+            done = sample / source.sampling_rate_hz
+            bar.update(round(done - bar.n, 3))
+            locked = sum(1 for o in observations if o.code_lock)
+            rt = done / max(time.perf_counter() - t_wall, 1e-9)
+            bar.set_postfix_str(f"x{rt:.2f} real time, {locked} in lock, "
+                                f"{len(ephemerides)} eph")
+
+    try:
+        rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=1.0 / rate_hz)
+        if not any(r.detected for r in rx.acquisition_results) and not any(
+                c.tracking for c in rx.channels.values()):
+            raise NoSatelliteError(f"{source.path}: no satellite found by acquisition "
+                                   f"(searched {len(rx.channels)} PRNs)")
+        channels = _channel_rows(rx)
+        with atomic_open(files["channels"], "w") as fh:
+            keys = list(channels[0]) if channels else ["prn"]
+            fh.write(",".join(keys) + "\n")
+            for row in channels:
+                fh.write(",".join(str(row[k]) for k in keys) + "\n")
+        csv_w.close()
+        nmea_w.close()
+    except BaseException:
+        csv_w.abort()
+        nmea_w.abort()
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - t_wall
+    return RunSummary(files, counts["epochs"], counts["fixes"], source.duration_s, wall,
+                      channels, dict(rx.profile))
+
+
+def _channel_rows(rx: ScalarReceiver) -> list[dict]:
+    rows = []
+    acq = {r.prn: r for r in rx.acquisition_results}
+    for prn, c in rx.channels.items():
+        a = acq.get(prn)
+        if (a is None or not a.detected) and not c.tracking and c.ephemeris is None:
+            continue
+        cn0 = getattr(c, "cn0_dbhz", math.nan)
+        rows.append({
+            "prn": prn,
+            "state": getattr(c.state, "name", str(c.state)),
+            "acq_doppler_hz": round(a.doppler_hz, 1) if a is not None else "",
+            "acq_cn0_dbhz": round(a.cn0_dbhz, 1) if a is not None else "",
+            "cn0_dbhz": round(float(cn0), 1) if cn0 is not None else "",
+            "ephemeris_decoded": c.ephemeris is not None,
+            "toe": c.ephemeris.toe if c.ephemeris is not None else "",
+            "subframes": len(getattr(c, "subframes", []) or []),
+        })
+    return rows

@@ -1,0 +1,122 @@
+"""``sdr-di run --mode scalar`` end to end on generated files, and its bad-input handling.
+
+The files are generated at a low sample rate (2.5-4 MHz instead of 25 MHz) to keep the suite
+fast; the full-rate figures come from ``scripts/check_scalar.py`` (closing notes).
+"""
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sdr_di.cli import main
+from sdr_di.orbits.rinex_nav import load_nav
+from sdr_di.receiver.accuracy import solution_vs_truth
+from sdr_di.receiver.run_scalar import open_source, run_scalar
+from sdr_di.receiver.scalar import ScalarReceiver
+from sdr_di.signal.fields import PARAMS
+
+DUR = "37"  # one D1 frame (subframes 1-3 at 30-48 s would need 48 s; 18 s is enough for
+            # satellites whose first subframe is caught) plus margin
+
+
+def _gen(out: Path, *args) -> Path:
+    assert main(["generate", "--no-progress", "--duration", DUR, "--out", str(out), *args]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def complex_file(tmp_path_factory):
+    return _gen(tmp_path_factory.mktemp("cplx"), "--fs", "2.5e6")
+
+
+def _prns(d: Path) -> list[int]:
+    meta = json.loads((d / "default.json").read_text())
+    return [s["prn"] for s in meta["satellites"]]
+
+
+def test_scalar_run_tracks_decodes_and_fixes(complex_file):
+    d = complex_file
+    rx = ScalarReceiver(log=False)
+    res = run_scalar(open_source(d / "default.bin"), d / "run", prns=_prns(d) + [1, 40],
+                     progress=False, receiver=rx)
+    # every simulated satellite tracked to the end, absent PRNs not
+    states = {r["prn"]: r["state"] for r in res.channels}
+    assert all(states.get(p) == "TRACK" for p in _prns(d)), states
+    assert 1 not in states and 40 not in states
+    # decoded ephemerides equal the RINEX records within the ICD LSB
+    nav = load_nav(Path(json.loads((d / "default.json").read_text())["ephemeris_file"]))
+    assert len(rx.ephemerides) >= 4
+    for prn, eph in rx.ephemerides.items():
+        ref = nav.select(prn, eph.week, eph.toe)
+        assert ref.toe == eph.toe
+        for name, p in PARAMS.items():
+            if hasattr(ref, name) and name not in ("prn", "week"):
+                lsb = p.lsb * (np.pi if p.semicircles else 1.0)
+                assert abs(getattr(eph, name) - getattr(ref, name)) <= 0.5 * lsb + 1e-15, name
+    acc = solution_vs_truth(res.files["pvt"], d / "default_truth.csv")
+    assert acc["n_fixes"] > 50
+    assert acc["pos_rmse_m"] < 3.0, acc
+    assert acc["vel_rmse_mps"] < 0.1, acc
+
+
+def test_foreign_real_int16_file_with_options(tmp_path, capsys):
+    """A real-IF int16 file at another rate, read with command-line options only.
+
+    The start time is given as a rough hint (25 s off), as a user of a recording would: it
+    only lets the receiver accept the first decoded subframe instead of waiting for two.
+    """
+    d = _gen(tmp_path, "--fs", "4e6", "--if", "1.02e6", "--format", "real_int16", "--bits", "12")
+    (d / "default.json").rename(d / "hidden.json")  # the receiver gets only the options
+    rc = main(["run", str(d / "default.bin"), "--fs", "4e6", "--if", "1.02e6", "--format",
+               "short", "--start-week", "755", "--start-sow", str(start_sow(d) - 25.0),
+               "--out", str(d / "run"), "--no-progress", "--prn",
+               ",".join(str(p) for p in _prns_from(d / "hidden.json"))])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    acc = solution_vs_truth(d / "run" / "default_pvt.csv", d / "default_truth.csv")
+    assert acc["n_fixes"] > 50 and acc["pos_rmse_m"] < 3.0 and acc["vel_rmse_mps"] < 0.1, acc
+
+
+def start_sow(d: Path) -> float:
+    return json.loads((d / "hidden.json").read_text())["start"]["sow"]
+
+
+def _prns_from(sidecar: Path) -> list[int]:
+    return [s["prn"] for s in json.loads(sidecar.read_text())["satellites"]]
+
+
+def _expect(capsys, args, pattern, out_dir: Path):
+    rc = main(["run", *args, "--out", str(out_dir), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and err[0].startswith("sdr-di: error: "), err
+    assert re.search(pattern, err[0]), err[0]
+    assert not out_dir.exists() or not any(out_dir.iterdir())
+
+
+def test_bad_inputs(tmp_path, capsys):
+    out = tmp_path / "out"
+    empty = tmp_path / "empty.bin"
+    empty.write_bytes(b"")
+    _expect(capsys, [str(empty), "--fs", "25e6", "--format", "ibyte"], "empty", out)
+    _expect(capsys, [str(tmp_path / "none.bin")], "no sidecar", out)
+    _expect(capsys, [str(empty), "--fs", "25e6", "--format", "int3"], "unknown sample format", out)
+    # truncated: the sidecar promises more samples than the file has
+    g = tmp_path / "g"
+    assert main(["generate", "--no-progress", "--duration", "0.1", "--fs", "2.5e6", "--out",
+                 str(g)]) == 0
+    data = (g / "default.bin").read_bytes()
+    (g / "default.bin").write_bytes(data[: len(data) // 2])
+    _expect(capsys, [str(g / "default.bin")], "shorter|truncated", out)
+    (g / "default.bin").write_bytes(data)
+    _expect(capsys, [str(g / "default.bin"), "--prn", "C21,C77"], "C77", out)
+
+
+def test_no_satellite_found(tmp_path, capsys):
+    g = tmp_path / "g"
+    assert main(["generate", "--no-progress", "--duration", "0.3", "--fs", "2.5e6", "--cn0",
+                 "0", "--out", str(g)]) == 0
+    _expect(capsys, [str(g / "default.bin"), "--prn", "C10,C27"], "no satellite found",
+            tmp_path / "out")
