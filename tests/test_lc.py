@@ -125,7 +125,12 @@ def test_lc_free_ins_would_drift(default_inputs):
 
 
 def test_ml_r_ckf_paper003_window():
-    """Paper 003 section 4.1: true R x16 during 500-700 s, the filter given the nominal R."""
+    """Paper 003 section 4.1: true R x16 during 500-700 s, the filter given the nominal R.
+
+    Scenario seed as shipped (not chosen from results). Over GNSS seeds 0-4 (full 1000 s) the
+    R estimates stayed within 0.80-1.18 of the truth every time, the window velocity RMSE was
+    lower than the CKF's 5/5 times but the window position RMSE only 3/5 times.
+    """
     sc, st = load_lc_scenario(PAPER003)
     sc = sc.with_overrides(duration_s=700.0)
     truth, imu, model = make_inputs(sc, st)
@@ -142,7 +147,11 @@ def test_ml_r_ckf_paper003_window():
 
 
 def test_ml_q_ukf_wrong_q_paper000():
-    """Paper 000 Table 1 direction: filter given 16 Q; ML-Q UKF horizontal velocity better."""
+    """Paper 000 Table 1 direction: filter given 16 Q; ML-Q UKF horizontal velocity better.
+
+    Only the velocity part of the claim is tested: over GNSS seeds 0-4 the horizontal position
+    RMSE of ml-q-ukf was *not* better than the UKF's (worse 4/5 times, by 0.01-0.08 m).
+    """
     sc, st = load_lc_scenario(PAPER000)
     assert st.q_scale == 16.0
     sc = sc.with_overrides(duration_s=500.0)
@@ -152,4 +161,6 @@ def test_ml_q_ukf_wrong_q_paper000():
         r = run_loose(truth, imu, model, st.replace(filter=name), seed=sc.seed)
         sel = r.t >= 100
         out[name] = math.sqrt(np.mean(np.sum(r.vel_err[sel, :2] ** 2, axis=1)))
+        axes = r.metrics(100, None)["vel_mps_rmse_axes"]
+        assert math.isclose(float(np.hypot(axes[0], axes[1])), out[name], rel_tol=1e-9)
     assert out["ml-q-ukf"] < out["ukf"], out

@@ -38,7 +38,11 @@ def rmse_max(e: np.ndarray) -> tuple[float, float]:
 
 
 def summarize(t, att, vel, pos, t0: float | None = None, t1: float | None = None) -> dict:
-    """RMSE and max of attitude [deg], velocity [m/s], position [m] over ``t0 <= t <= t1``."""
+    """RMSE and max of attitude [deg], velocity [m/s], position [m] over ``t0 <= t <= t1``.
+
+    Keys ``<q>_rmse``, ``<q>_max`` (norms) and ``<q>_rmse_axes`` (per-axis RMSE, E, N, U; the
+    form of paper 000 Table 1) for ``q`` in ``att_deg``, ``vel_mps``, ``pos_m``; ``n`` epochs.
+    """
     t = np.asarray(t, float)
     sel = np.ones(t.size, bool)
     if t0 is not None:
@@ -50,4 +54,7 @@ def summarize(t, att, vel, pos, t0: float | None = None, t1: float | None = None
         r, m = rmse_max(np.asarray(e)[sel])
         out[f"{name}_rmse"] = r
         out[f"{name}_max"] = m
+        sub = np.atleast_2d(np.asarray(e, float))[sel]
+        out[f"{name}_rmse_axes"] = (np.sqrt(np.mean(sub * sub, axis=0)) if len(sub)
+                                    else np.full(3, math.nan))
     return out
