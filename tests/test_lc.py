@@ -164,3 +164,14 @@ def test_ml_q_ukf_wrong_q_paper000():
         axes = r.metrics(100, None)["vel_mps_rmse_axes"]
         assert math.isclose(float(np.hypot(axes[0], axes[1])), out[name], rel_tol=1e-9)
     assert out["ml-q-ukf"] < out["ukf"], out
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf"])
+def test_lc_large_yaw_misalignment_converges(default_inputs, name):
+    """30 deg initial yaw error (large-misalignment model, rotation-vector feedback)."""
+    sc, st, truth, imu, model = default_inputs
+    st = st.replace(filter=name, init_att_err_arcmin=(10.0, 10.0, 1800.0))
+    res = run_loose(truth, imu, model, st, seed=sc.seed)
+    assert abs(res.att_err[0, 2]) > 5.0               # still degrees off after the 1st epoch
+    assert res.metrics(40, None)["att_deg_rmse"] < 0.1
+    assert res.metrics()["pos_m_rmse"] < 4.0
