@@ -175,3 +175,34 @@ def test_lc_large_yaw_misalignment_converges(default_inputs, name):
     assert abs(res.att_err[0, 2]) > 5.0               # still degrees off after the 1st epoch
     assert res.metrics(40, None)["att_deg_rmse"] < 0.1
     assert res.metrics()["pos_m_rmse"] < 4.0
+
+
+@pytest.mark.parametrize("name", ["ekf", "ukf", "ckf"])
+def test_tight_model_in_filters_with_changing_satellite_count(name):
+    """Eq 6-12 plugged into the filters: one update recovers position/clock errors; N_k varies."""
+    from sdr_di.filters import LinearProcessModel, make_filter
+
+    rng = np.random.default_rng(7)
+    llh_true = np.array([math.radians(40), math.radians(116), 100.0])
+    v_true = np.array([0.0, 20.0, 0.0])
+    sp, sv = _sats(llh_to_ecef(*llh_true), 7, rng)
+    x_true = np.zeros(17)
+    x_true[3:6] = [0.3, -0.2, 0.1]
+    x_true[6:9] = [5.0 / 6.37e6, -4.0 / 4.9e6, 6.0]
+    x_true[15], x_true[16] = 30.0, 1.5
+    llh_c, v_c = llh_true + x_true[6:9], v_true + x_true[3:6]
+    rho_t, rate_t, _ = predicted_observables(llh_true, v_true, sp, sv)
+    sig = np.r_[[1e-2] * 3, [10.0] * 3, 1e-4, 1e-4, 100.0, [1e-5] * 3, [1e-2] * 3, 100.0, 10.0]
+    kf = make_filter(name, LinearProcessModel(np.eye(17)), None, np.zeros(17), sig**2,
+                     np.eye(17) * 1e-12)
+    for n in (7, 5):
+        model = RangeRateMeasurementModel()
+        # receiver clock: true 0, estimate x_true[15] m / x_true[16] m/s (computed - true)
+        model.set_epoch(llh_c, v_c, sp[:n], sv[:n], x_true[15], x_true[16])
+        z = model.measurement(rho_t[:n], rate_t[:n])
+        kf.update(z, R=np.r_[[0.01] * n, [1e-4] * n], measurement_model=model)
+        assert kf.y.size == 2 * n
+    pos_err_m = (kf.x[6:8] - x_true[6:8]) * 6.37e6
+    assert np.max(np.abs(pos_err_m)) < 0.5 and abs(kf.x[8] - x_true[8]) < 0.5
+    assert abs(kf.x[15] - x_true[15]) < 0.5 and abs(kf.x[16] - x_true[16]) < 0.05
+    assert np.max(np.abs(kf.x[3:6] - x_true[3:6])) < 0.05
