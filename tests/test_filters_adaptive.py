@@ -10,6 +10,7 @@ at 10 Hz, ``N_k`` channels with random lines of sight, ``z = [drho_1..N, drho_do
 import numpy as np
 import pytest
 
+from filter_problems import cv2d
 from sdr_di.filters import (FILTER_NAMES, LinearMeasurementModel, LinearProcessModel,
                             make_filter)
 from sdr_di.filters.adaptive import forgetting_weights
@@ -181,21 +182,13 @@ def test_rae_aukf_restarts_when_N_changes():
 
 
 # --------------------------------------------------------------------------- q-scaling
-def _cv2d(dt, sa):
-    F = np.eye(4)
-    F[0, 2] = F[1, 3] = dt
-    q1 = np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]]) * sa ** 2
-    Q = np.zeros((4, 4))
-    Q[np.ix_([0, 2], [0, 2])] = q1
-    Q[np.ix_([1, 3], [1, 3])] = q1
-    return F, Q
 
 
 def _run_qscaling(name, seed, q_factor, epochs=600, change_every=None):
     """Process-noise dominated 2-D problem (1 Hz, sigma_a 1 m/s^2, 0.5 m measurements of the
     position along random directions), so the innovation trace is informative about Q."""
     rng = np.random.default_rng(seed)
-    F, Q = _cv2d(1.0, 1.0)
+    F, Q = cv2d(1.0, 1.0)
     P0 = np.diag([10.0, 10.0, 1.0, 1.0])
     x = rng.multivariate_normal(np.zeros(4), P0)
     kf = make_filter(name, LinearProcessModel(F), None, np.zeros(4), P0, q_factor * Q)

@@ -11,20 +11,13 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from filter_problems import cv2d
 from sdr_di.filters import FunctionMeasurementModel, LinearProcessModel, make_filter
 
 RUNS, STEPS, DT = 50, 100, 1.0
 SIG_R, SIG_B, SIG_A = 5.0, 0.02, 0.1          # m, rad, m/s^2
 
 
-def _cv(dt, sa):
-    F = np.eye(4)
-    F[0, 2] = F[1, 3] = dt
-    q1 = np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]]) * sa ** 2
-    Q = np.zeros((4, 4))
-    Q[np.ix_([0, 2], [0, 2])] = q1
-    Q[np.ix_([1, 3], [1, 3])] = q1
-    return F, Q
 
 
 def _h(x):
@@ -42,7 +35,7 @@ def _H(x):
 
 
 def _nees(name):
-    F, Q = _cv(DT, SIG_A)
+    F, Q = cv2d(DT, SIG_A)
     R = np.diag([SIG_R ** 2, SIG_B ** 2])
     P0 = np.diag([30.0, 30.0, 3.0, 3.0]) ** 2
     mm = FunctionMeasurementModel(_h, _H, _h_batch)

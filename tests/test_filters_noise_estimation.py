@@ -4,18 +4,11 @@ ml-r-ckf (paper 003) on synthetic problems."""
 import numpy as np
 import pytest
 
+from filter_problems import cv2d
 from sdr_di.filters import (FilterError, LinearMeasurementModel, LinearProcessModel,
                             ProcessModel, make_filter)
 
 
-def _cv2d(dt, sa):
-    F = np.eye(4)
-    F[0, 2] = F[1, 3] = dt
-    q1 = np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]]) * sa ** 2
-    Q = np.zeros((4, 4))
-    Q[np.ix_([0, 2], [0, 2])] = q1
-    Q[np.ix_([1, 3], [1, 3])] = q1
-    return F, Q
 
 
 def _run_cv2d(names, seed, *, epochs, sa, sr, n_meas, q_factor=1.0, r_factor=1.0,
@@ -23,7 +16,7 @@ def _run_cv2d(names, seed, *, epochs, sa, sr, n_meas, q_factor=1.0, r_factor=1.0
     """2-D constant velocity at 1 Hz, ``n_meas`` projections of the position (pseudorange-like)
     with noise ``sr``; filters get ``q_factor * Q`` and ``r_factor * R``."""
     rng = np.random.default_rng(seed)
-    F, Q = _cv2d(1.0, sa)
+    F, Q = cv2d(1.0, sa)
     P0 = np.diag([10.0, 10.0, 1.0, 1.0]) if P0 is None else P0
     x = rng.multivariate_normal(np.zeros(4), P0)
     x0 = x + rng.multivariate_normal(np.zeros(4), P0)

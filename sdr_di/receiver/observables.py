@@ -61,11 +61,11 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Iterable, Sequence
-from typing import Protocol
 
 import numpy as np
 
 from ..constants import C_LIGHT, LAMBDA_B3I, SECONDS_PER_WEEK
+from .tracking import ChannelObservation
 
 __all__ = [
     "NOMINAL_TRAVEL_TIME_S",
@@ -80,19 +80,8 @@ __all__ = [
 NOMINAL_TRAVEL_TIME_S = 0.075
 
 
-class ChannelObservationLike(Protocol):
-    """The attributes of :class:`sdr_di.receiver.tracking.ChannelObservation` used here."""
-
-    prn: int
-    sample_index: int
-    t_tx_week: int | None
-    t_tx_sow: float
-    doppler_hz: float
-    carrier_phase_cycles: float
-    cn0_dbhz: float
-    code_lock: bool
-    carrier_lock: bool
-    time_valid: bool
+#: What the observables are formed from (one channel at one sample).
+ChannelObservationLike = ChannelObservation
 
 
 def _normalize(week: int, sow: float) -> tuple[int, float]:
