@@ -37,18 +37,20 @@
    found (``PULL_IN``). PRNs not found by the initial acquisition are searched again (all
    together) every ``retry_acquisition_s`` when that is set (default: never).
 
-Processing cost (measured on the 2-core development machine, 10 s of the default scenario:
-7 D1 channels, 25 MHz complex 4-bit samples, ``on_epoch`` at 5 Hz): about 0.95-1.05 s of
-tracking per second of file, of which the correlator kernel takes ~0.75-0.85 s (4.2 ns per
-sample and channel with 2 threads, 8 ns with 1), the channels' Python work 0.07 s (loops,
-lock detection, sync, decoding, logging), reading and converting the samples 0.04 s; the
-initial acquisition of 7 PRNs takes ~1.5 s once (~6 s for all 63). Reaching 2x real time
-needs a kernel near 2 ns per sample and channel: a prototype with the same signature
-(carrier wipe-off of each 256-sample block into float32 buffers in a separate pass, code
-index as ``int(theta + offset)`` on a non-negative argument instead of ``floor``, the block
-split at the code wrap instead of a per-sample branch, float32 partial sums per block added
-into float64) measured 2.0 ns with 2 threads / 4.1 ns with 1. ``ScalarReceiver.profile``
-gives the breakdown of every run.
+Processing cost (measured on the 2-core development machine, which is shared, so figures
+vary from run to run; 10 s of the default scenario: 7 D1 channels, 25 MHz complex 4-bit
+samples, ``on_epoch`` at 5 Hz, ``scripts/check_scalar.py --duration 10``): 1.2-1.9x real time
+in total (10 s of file in 5.4-8.7 s, the initial acquisition of 7 PRNs included, ~1.1-1.4 s;
+~6 s for all 63), of which the correlator kernel takes 3.5-5.4 s (2.0-3.1 ns per sample and
+channel with 2 threads; ~3.2 ns with 1 in a kernel micro-benchmark), the channels' Python work
+0.4-0.6 s (loops, lock detection, sync, decoding, logging), reading and converting the samples
+0.3-0.4 s (1.2 s once). The kernel does the carrier wipe-off of each 256-sample block into float64
+buffers in a separate (vectorized) pass, then the E/P/L sums with the code index
+``int(theta + offset)`` on a non-negative argument and the block split at the code wrap
+instead of a per-sample branch. The previous kernel (per-sample wrap branch, ``floor``,
+wipe-off fused with the look-ups) measured in the same sessions 0.5-1.1x real time, 7.0-14.7 s
+of correlation (4-8 ns per sample and channel with 2 threads, ~7 ns with 1).
+``ScalarReceiver.profile`` gives the breakdown of every run.
 """
 
 from __future__ import annotations
