@@ -122,7 +122,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
     try:
         with atomic_open(paths["if"]) as fh:
             for chunk in gen.chunks():
-                fh.write(chunk.tobytes())
+                fh.write(memoryview(np.ascontiguousarray(chunk)).cast("B"))
                 if bar is not None:
                     bar.update(chunk.shape[0] / gen.fs)
     finally:
