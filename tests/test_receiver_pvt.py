@@ -27,21 +27,7 @@ from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
 from sdr_di.sim.generate import make_generator
 from sdr_di.sim.geometry import satellite_delays
 
-try:  # the real channel record once the tracking module lands
-    from sdr_di.receiver.tracking import ChannelObservation
-except ImportError:  # pragma: no cover - stand-in with the same fields
-    @dataclasses.dataclass
-    class ChannelObservation:
-        prn: int
-        sample_index: int
-        t_tx_week: int
-        t_tx_sow: float
-        doppler_hz: float
-        carrier_phase_cycles: float
-        cn0_dbhz: float
-        code_lock: bool
-        carrier_lock: bool
-        time_valid: bool
+from sdr_di.receiver.tracking import ChannelObservation
 
 
 def _chan(prn, k, week, sow, dop=0.0, phase=0.0, cn0=45.0, code_lock=True, carrier_lock=True,
