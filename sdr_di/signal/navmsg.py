@@ -738,7 +738,8 @@ def decode_stream(
 class EphemerisAssembler:
     """Collects decoded subframes of one satellite and rebuilds its broadcast record.
 
-    D1: subframes 1, 2 and 3 of the same 30-s frame form one data set. D2: pages 1-10 of
+    D1: subframes 2 and 3 of one 30-s frame plus subframe 1 of that frame or of another frame
+    whose toc equals their toe (same upload) form one data set. D2: pages 1-10 of
     subframe 1 of the same 30-s cycle (pages split parameters across page boundaries, so pages
     of different cycles are never mixed). The toe week is recovered from the broadcast WN with
     the half-week crossover rule against the SOW of the subframe that carried WN.
@@ -753,7 +754,7 @@ class EphemerisAssembler:
         self.prn = check_prn(prn)
         self.nav_type = _nav_type(self.prn)
         self._parts: dict[int, dict] = {}
-        self._done_group: int | None = None
+        self._done_group: tuple[int, ...] | None = None
         self.ephemeris: Ephemeris | None = None
         self.klobuchar: Klobuchar | None = None
 
@@ -779,14 +780,35 @@ class EphemerisAssembler:
                 return None
             key, needed = sf["Pnum"], tuple(range(1, 11))
         self._parts[key] = sf
-        if any(k not in self._parts or self._parts[k]["SOW"] // 30 != group for k in needed):
+        if any(k not in self._parts for k in needed):
             return None
-        if self._done_group == group:
+        groups = tuple(self._parts[k]["SOW"] // 30 for k in needed)
+        if self.nav_type == "D1":
+            # Subframes 2 and 3 split toe between them and must come from one frame; subframe 1
+            # (clock, health, Klobuchar) may come from another frame when its toc equals that
+            # toe (the same upload), so a receiver that missed the first subframe 1 completes
+            # the set with the next one instead of waiting for a whole new frame.
+            if groups[1] != groups[2]:
+                return None
+            if groups[0] != groups[1] and not self._same_upload():
+                return None
+        elif any(g != group for g in groups):
+            return None
+        if self._done_group == groups:
             return None
         result = self._build([self._parts[k] for k in needed])
-        self._done_group = group
+        self._done_group = groups
         self.ephemeris, self.klobuchar = result
         return result
+
+    def _same_upload(self) -> bool:
+        """D1: subframe 1's toc equals the toe of subframes 2 and 3 (raw counts)."""
+        pieces: dict[str, int] = {}
+        for k in (2, 3):
+            pieces.update(self._parts[k]["raw"])
+        toe = F.join_slices("toe", pieces)
+        toc = F.join_slices("toc", self._parts[1]["raw"])
+        return toe is not None and toc is not None and toe == toc
 
     def _build(self, parts: list[dict]) -> tuple[Ephemeris, Klobuchar]:
         pieces: dict[str, int] = {}
