@@ -4,6 +4,7 @@
 Usage::
 
     python scripts/bench.py generate [--durations 10 60] [--out DIR] [--keep]
+    python scripts/bench.py run [--durations 10 40] [--keep]
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
     python scripts/bench.py filters [options of scripts/bench_filters.py]
 
@@ -17,6 +18,7 @@ unless the cache is warm; a warm-up run of 0.2 s is made first.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import subprocess
@@ -62,6 +64,38 @@ def bench_generate(args: argparse.Namespace) -> None:
             shutil.rmtree(out, ignore_errors=True)
 
 
+def bench_run(args: argparse.Namespace) -> None:
+    """Scalar receiver real-time factor and peak memory on default-scenario files."""
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sdr-di-bench-"))
+    try:
+        print(f"machine: {os.cpu_count()} cores; scalar receiver, default scenario, "
+              "7 satellites, 25 MHz, 4-bit iq_int8, PVT at 5 Hz")
+        print(f"{'duration s':>10} {'wall s':>8} {'x real time':>12} {'peak RSS MiB':>13}")
+        for d in args.durations:
+            _run_generate(d, out)
+            meta = json.loads((out / "bench.json").read_text())
+            prns = ",".join(str(s["prn"]) for s in meta["satellites"])
+            code = (
+                "import resource, sys; from sdr_di.cli import main; "
+                f"rc = main(['run', r'{out / 'bench.bin'}', '--prn', '{prns}', '--out', "
+                f"r'{out / 'run'}', '--no-progress']); "
+                "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss); "
+                "sys.exit(rc)")
+            t0 = time.perf_counter()
+            res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+            wall = time.perf_counter() - t0
+            if res.returncode != 0:
+                raise SystemExit(f"run failed: {res.stderr.strip()}")
+            rss = int(next(l for l in res.stdout.splitlines()
+                           if l.startswith("MAXRSS")).split()[1]) * 1024
+            print(f"{d:10.1f} {wall:8.2f} {d / wall:12.2f} {rss / 2**20:13.1f}")
+            print("           " + next(l for l in res.stdout.splitlines()
+                                        if l.startswith("processed")))
+    finally:
+        if not args.keep:
+            shutil.rmtree(out, ignore_errors=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -71,6 +105,11 @@ def main(argv: list[str] | None = None) -> None:
     g.add_argument("--out", default=None, help="output directory (default: a temp dir)")
     g.add_argument("--keep", action="store_true", help="keep the generated files")
     g.set_defaults(func=bench_generate)
+    r = sub.add_parser("run", help="scalar receiver real-time factor and memory")
+    r.add_argument("--durations", type=float, nargs="+", default=[10.0, 40.0])
+    r.add_argument("--out", default=None, help="work directory (default: a temp dir)")
+    r.add_argument("--keep", action="store_true", help="keep the files")
+    r.set_defaults(func=bench_run)
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_correlate
 
