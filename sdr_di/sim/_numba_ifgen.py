@@ -64,9 +64,11 @@ def synthesize_chunk(
     chips_fx = np.int64(10230) << 32
     for h in prange(n_streams):
         g = gens[h]
-        buf = np.zeros((n_per_node, ncomp), dtype=np.float32)
+        bre = np.zeros(n_per_node, dtype=np.float32)  # in-phase sum of the satellites
+        bim = np.zeros(n_per_node, dtype=np.float32)  # quadrature (unused for real output)
         for j in range(h * per, min(n_nodes, (h + 1) * per)):
-            buf[:] = 0.0
+            bre[:] = 0.0
+            bim[:] = 0.0
             for s in range(n_sat):
                 a = amp[s, j]
                 if a == 0.0:
@@ -80,9 +82,8 @@ def synthesize_chunk(
                 for i in range(n_per_node):
                     c = codes[s, chip >> 32] * cur
                     li = ph >> shift
-                    buf[i, 0] += c * lut_cos[li]
-                    if ncomp == 2:
-                        buf[i, 1] += c * lut_sin[li]
+                    bre[i] += c * lut_cos[li]
+                    bim[i] += c * lut_sin[li]  # branch-free: cheaper than testing ncomp
                     chip += dc
                     if chip >= chips_fx:
                         chip -= chips_fx
@@ -92,7 +93,7 @@ def synthesize_chunk(
             k0 = j * n_per_node
             for i in range(n_per_node):
                 for c in range(ncomp):
-                    x = (buf[i, c] + np.float32(g.standard_normal())) * gain
+                    x = ((bre[i] if c == 0 else bim[i]) + np.float32(g.standard_normal())) * gain
                     if level == 1:
                         q = 1 if x >= 0.0 else -1
                     else:
