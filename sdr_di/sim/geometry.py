@@ -90,6 +90,7 @@ def satellite_delays(
     clock_bias_s: np.ndarray,
     iono: Klobuchar | None,
     troposphere: bool,
+    rx: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Delays:
     """Solve the light-time equation and atmosphere for one satellite.
 
@@ -109,9 +110,16 @@ def satellite_delays(
         Klobuchar coefficients; None disables the ionosphere.
     troposphere : bool
         Apply the Saastamoinen delay.
+    rx : (r_rx, llh), optional
+        Receiver ECEF position (m, 3) [m] and geodetic (lat, lon, h) (m, 3) at ``t_rx_true``,
+        when the caller already has them (one evaluation for all satellites of an epoch).
     """
     t_rx_true = np.asarray(t_rx_true, float)
-    r_rx, _ = path(t_rx_true)
+    if rx is None:
+        r_rx = path(t_rx_true)[0]
+        llh = ecef_to_llh(r_rx)
+    else:
+        r_rx, llh = rx
     tau = np.full(t_rx_true.shape, 0.075)
     for _ in range(4):
         t_tx = sow_start + t_rx_true - tau
@@ -123,7 +131,6 @@ def satellite_delays(
         los = r_rot - r_rx
         rho = np.linalg.norm(los, axis=-1)
         tau = rho / C_LIGHT
-    llh = ecef_to_llh(r_rx)
     enu = np.einsum("...ij,...j->...i", C_e_n(llh[:, 0], llh[:, 1]), los)
     el = np.arctan2(enu[:, 2], np.hypot(enu[:, 0], enu[:, 1]))
     az = np.arctan2(enu[:, 0], enu[:, 1]) % (2 * np.pi)

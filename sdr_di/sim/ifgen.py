@@ -36,6 +36,7 @@ import numpy as np
 
 from ..constants import CHIP_RATE_B3I, F_B3I, SECONDS_PER_WEEK, is_geo
 from ..errors import NoEphemerisError, ScenarioError
+from ..frames import ecef_to_llh
 from ..io.sample_formats import get_format, pack_iq_int4, quantizer_levels
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from ..scenario.schema import Scenario
@@ -190,9 +191,11 @@ class IfGenerator:
         dph = np.empty((n_sat, n))
         amp = np.empty((n_sat, n), np.float32)
         sym_lists, bases = [], np.empty(n_sat, np.int64)
+        r_rx = self.path(t)[0]
+        rx = (r_rx, ecef_to_llh(r_rx))  # once per chunk, shared by every satellite
         for k, sat in enumerate(self.sats):
             d = satellite_delays(sat.eph, self.path, t, self.sc.sow, b, self.iono,
-                                 sig.troposphere == "saastamoinen")
+                                 sig.troposphere == "saastamoinen", rx=rx)
             x = _week_seconds_between(self.sc.week, self.sc.sow, sat.nav.week, sat.nav.t0)
             u_ms = (x + s - d.d_code) * 1000.0  # code epochs since the first nav bit
             ms = np.floor(u_ms).astype(np.int64)
