@@ -80,7 +80,7 @@ from .tracking import ChannelObservation, ChannelState, TrackingConfig, Tracking
 
 __all__ = ["ScalarReceiver", "acquire_at", "acquisition_upsampling"]
 
-OnEpoch = Callable[[int, list[ChannelObservation], dict[int, Ephemeris]], None]
+OnEpoch = Callable[[int, list[ChannelObservation], dict[int, Ephemeris]], bool | None]
 
 
 def acquisition_upsampling(sampling_rate_hz: float) -> int:
@@ -389,7 +389,9 @@ class ScalarReceiver:
         prns : iterable of int, optional
             PRNs to search (default all 63).
         on_epoch : callable, optional
-            ``on_epoch(sample_index, observations, ephemerides)`` at every output epoch.
+            ``on_epoch(sample_index, observations, ephemerides)`` at every output epoch. A
+            return value of ``True`` stops the run there (the channels keep their NCO and
+            loop states at their next epoch edge: the deep receiver takes over from them).
         epoch_interval_s : float, optional
             Output epoch interval [s]. Default 0.1.
         start_sample, stop_sample : int, optional
@@ -452,6 +454,7 @@ class ScalarReceiver:
         next_out = start + round(k_out * epoch_interval_s * fs)
         t_now = start
         t_track = time.perf_counter()
+        stop_now = False
         while True:
             act = [c for c in chans if c.tracking]
             if act:
@@ -459,12 +462,17 @@ class ScalarReceiver:
             # output epochs every channel has passed
             while next_out < t_now and next_out < stop:
                 t0 = time.perf_counter()
+                stop_now = False
                 if on_epoch is not None:
                     obs = [c.observation_at(next_out) for c in act]
-                    on_epoch(next_out, obs, self._collect_ephemerides())
+                    stop_now = bool(on_epoch(next_out, obs, self._collect_ephemerides()))
                 prof["callback"] += time.perf_counter() - t0
                 k_out += 1
                 next_out = start + round(k_out * epoch_interval_s * fs)
+                if stop_now:
+                    break
+            if stop_now:
+                break
             # (re-)acquisition attempts due now
             due = [c for c in chans if not c.tracking and not c.finished
                    and c.next_reacq_sample is not None and c.next_reacq_sample <= t_now]
