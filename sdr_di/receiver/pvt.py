@@ -89,7 +89,9 @@ __all__ = [
     "PvtSolution",
     "PvtStatus",
     "SatelliteStates",
+    "atmosphere_delays",
     "compute_dops",
+    "sagnac_rotation",
     "satellite_states",
     "solve",
     "solve_position",
@@ -362,8 +364,13 @@ def _drot_z(vec: np.ndarray, theta: np.ndarray) -> np.ndarray:
                      np.zeros_like(c)], axis=-1)
 
 
-def _sagnac(r_sat: np.ndarray, r_rx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rotated satellite positions, geometric ranges and rotation angles (travel time iterated)."""
+def sagnac_rotation(r_sat: np.ndarray, r_rx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rotated satellite positions, geometric ranges and rotation angles (travel time iterated).
+
+    ``r_sat`` (n, 3) ECEF of the transmit instant, ``r_rx`` (3,) or (n, 3) [m]; returns the
+    positions in the ECEF frame of the reception instant (n, 3), the ranges (n,) [m] and the
+    Earth-rotation angles (n,) [rad]. Also used forwards by the vector loop's NCO model.
+    """
     rho = np.linalg.norm(r_sat - r_rx, axis=-1)
     for _ in range(3):
         theta = OMEGA_E * rho / C_LIGHT
@@ -374,10 +381,13 @@ def _sagnac(r_sat: np.ndarray, r_rx: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return r_rot, np.linalg.norm(r_rot - r_rx, axis=-1), theta
 
 
-def _atmosphere(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
+def atmosphere_delays(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
                 iono: Klobuchar | None, cfg: PvtConfig) -> tuple[np.ndarray, np.ndarray,
                                                                  np.ndarray, np.ndarray]:
-    """Elevation, azimuth [rad], tropospheric and B3I ionospheric delays [m]."""
+    """Elevation, azimuth [rad], tropospheric and B3I ionospheric delays [m].
+
+    One receiver position ``r_rx`` (3,) [m], satellites ``r_sat_rot`` (n, 3), BDT ``t_sow``.
+    """
     el, az = elevation_azimuth(r_rx, r_sat_rot)
     llh = ecef_to_llh(r_rx)
     el_pos = np.maximum(el, _EL_FLOOR)
@@ -519,12 +529,12 @@ def solve_position(obs: Observables, ephemerides: Mapping[int, Ephemeris] | Any,
     while True:
         if phase == 1:
             used = idx_all
-            r_rot, rho, _ = _sagnac(sat.r_e[used], r)
+            r_rot, rho, _ = sagnac_rotation(sat.r_e[used], r)
             corr = np.zeros(used.size)
             el_u = None
         else:
-            r_rot_all, _, _ = _sagnac(sat.r_e[idx_all], r)
-            el, az, tr, io = _atmosphere(r, r_rot_all, obs.sow - cb / C_LIGHT, iono, cfg)
+            r_rot_all, _, _ = sagnac_rotation(sat.r_e[idx_all], r)
+            el, az, tr, io = atmosphere_delays(r, r_rot_all, obs.sow - cb / C_LIGHT, iono, cfg)
             keep = el >= mask_rad
             if keep.sum() < 4:
                 low = [f"C{int(obs.prn[i]):02d}" for i in idx_all[~keep]]
@@ -568,8 +578,8 @@ def solve_position(obs: Observables, ephemerides: Mapping[int, Ephemeris] | Any,
             break
 
     # final residuals and geometry at the solution
-    r_rot_all, _, _ = _sagnac(sat.r_e[idx_all], r)
-    el, az, tr, io = _atmosphere(r, r_rot_all, obs.sow - cb / C_LIGHT, iono, cfg)
+    r_rot_all, _, _ = sagnac_rotation(sat.r_e[idx_all], r)
+    el, az, tr, io = atmosphere_delays(r, r_rot_all, obs.sow - cb / C_LIGHT, iono, cfg)
     keep = np.isin(idx_all, used)
     r_rot = r_rot_all[keep]
     rho = np.linalg.norm(r_rot - r, axis=-1)
@@ -646,7 +656,7 @@ def solve_velocity(obs: Observables, ephemerides: Mapping[int, Ephemeris] | Any,
     cb = solution.clock_bias_m
     t_rx = obs.sow - cb / C_LIGHT
     D = obs.pseudorange_rate_mps[idx]
-    r_rot, rho, theta = _sagnac(sat.r_e[idx], r)
+    r_rot, rho, theta = sagnac_rotation(sat.r_e[idx], r)
     v_rot = _rot_z(sat.v_e[idx], theta)
     g_rot = OMEGA_E * _drot_z(sat.r_e[idx], theta)
     e = (r_rot - r) / rho[:, None]
@@ -661,8 +671,8 @@ def solve_velocity(obs: Observables, ephemerides: Mapping[int, Ephemeris] | Any,
     for _ in range(4):
         # d(T - I)/dt by central difference of the models along the satellite and receiver motion
         h = _ATM_RATE_DT_S
-        _, _, tp, ip = _atmosphere(r + v * h, r_rot + v_rot * h, t_rx + h, iono, cfg)
-        _, _, tm, im = _atmosphere(r - v * h, r_rot - v_rot * h, t_rx - h, iono, cfg)
+        _, _, tp, ip = atmosphere_delays(r + v * h, r_rot + v_rot * h, t_rx + h, iono, cfg)
+        _, _, tm, im = atmosphere_delays(r - v * h, r_rot - v_rot * h, t_rx - h, iono, cfg)
         atm_rate = ((tp - ip) - (tm - im)) / (2.0 * h)
         num = (A - e @ v) / kfac + cd - c_ddt + atm_rate
         scale = 1.0 + cd / C_LIGHT

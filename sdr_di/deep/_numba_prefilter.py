@@ -1,0 +1,140 @@
+"""Numba kernel of the per-channel pre-filter (one channel, the epochs of one interval).
+
+Plain arrays only; the model and notation are documented in :mod:`sdr_di.deep.prefilter`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def wrap_half_pi(a: float) -> float:
+    """Reduce an angle [rad] to [-pi/2, pi/2) (the data-bit-insensitive phase ambiguity)."""
+    return a - math.pi * math.floor(a / math.pi + 0.5)
+
+
+@numba.njit(cache=True)
+def prefilter_epochs(x, P, early, prompt, late, t_epoch, spacing, beta, r_tau, r_phi,
+                     q_tau, q_phi, s_f):
+    """Run the 3-state pre-filter over consecutive epochs of one channel, in place.
+
+    Parameters
+    ----------
+    x : float64 (3,)
+        ``[dtau (chips), dphi (rad), df (Hz)]`` at the start of the first epoch; on return at
+        the start of the epoch after the last one.
+    P : float64 (3, 3)
+        Its covariance (updated in place).
+    early, prompt, late : complex128 (m,)
+        Correlator sums of the epochs.
+    t_epoch : float64 (m,)
+        Epoch durations [s].
+    spacing : float
+        Early/late offset d [chips].
+    beta : float
+        Code chips per carrier cycle, ``f_code / f_carr``.
+    r_tau, r_phi : float64 (m,)
+        Discriminator noise variances [chips^2], [rad^2] of each epoch.
+    q_tau, q_phi : float
+        Process noise per epoch [chips^2], [rad^2].
+    s_f : float
+        Frequency random-walk PSD [Hz^2/s].
+
+    Returns
+    -------
+    nis : float
+        Sum of the normalized innovations squared (2 per epoch).
+    """
+    m = prompt.shape[0]
+    nis = 0.0
+    for j in range(m):
+        T = t_epoch[j]
+        ea = abs(early[j])
+        la = abs(late[j])
+        s = ea + la
+        z_tau = (1.0 - spacing) * (ea - la) / s if s > 0.0 else 0.0
+        pr = prompt[j]
+        if pr.real != 0.0:
+            z_phi = math.atan(pr.imag / pr.real)
+        else:
+            z_phi = 0.5 * math.pi
+        # measurement rows (epoch averages of the state at its start)
+        h02 = 0.5 * beta * T
+        h12 = math.pi * T
+        y0 = z_tau - (x[0] + h02 * x[2])
+        y1 = wrap_half_pi(z_phi - (x[1] + h12 * x[2]))
+        # PH^T (3x2)
+        a0 = P[0, 0] + h02 * P[0, 2]
+        a1 = P[1, 0] + h02 * P[1, 2]
+        a2 = P[2, 0] + h02 * P[2, 2]
+        b0 = P[0, 1] + h12 * P[0, 2]
+        b1 = P[1, 1] + h12 * P[1, 2]
+        b2 = P[2, 1] + h12 * P[2, 2]
+        S00 = a0 + h02 * a2 + r_tau[j]
+        S01 = b0 + h02 * b2
+        S10 = a1 + h12 * a2
+        S11 = b1 + h12 * b2 + r_phi[j]
+        det = S00 * S11 - S01 * S10
+        i00 = S11 / det
+        i01 = -S01 / det
+        i10 = -S10 / det
+        i11 = S00 / det
+        nis += y0 * (i00 * y0 + i01 * y1) + y1 * (i10 * y0 + i11 * y1)
+        K00 = a0 * i00 + b0 * i10
+        K01 = a0 * i01 + b0 * i11
+        K10 = a1 * i00 + b1 * i10
+        K11 = a1 * i01 + b1 * i11
+        K20 = a2 * i00 + b2 * i10
+        K21 = a2 * i01 + b2 * i11
+        x[0] += K00 * y0 + K01 * y1
+        x[1] += K10 * y0 + K11 * y1
+        x[2] += K20 * y0 + K21 * y1
+        # P <- P - K (H P) with H P = [a^T; b^T]
+        for r in range(3):
+            kr0 = K00 if r == 0 else (K10 if r == 1 else K20)
+            kr1 = K01 if r == 0 else (K11 if r == 1 else K21)
+            P[r, 0] -= kr0 * a0 + kr1 * b0
+            P[r, 1] -= kr0 * a1 + kr1 * b1
+            P[r, 2] -= kr0 * a2 + kr1 * b2
+        for r in range(3):
+            for c in range(r + 1, 3):
+                v = 0.5 * (P[r, c] + P[c, r])
+                P[r, c] = v
+                P[c, r] = v
+        x[1] = wrap_half_pi(x[1])
+        # propagate to the next epoch start: F = [[1, 0, beta T], [0, 1, 2 pi T], [0, 0, 1]]
+        f02 = beta * T
+        f12 = 2.0 * math.pi * T
+        x[0] += f02 * x[2]
+        x[1] += f12 * x[2]
+        # P <- F P F^T + Q
+        p00, p01, p02 = P[0, 0], P[0, 1], P[0, 2]
+        p11, p12, p22 = P[1, 1], P[1, 2], P[2, 2]
+        n00 = p00 + 2.0 * f02 * p02 + f02 * f02 * p22
+        n01 = p01 + f12 * p02 + f02 * p12 + f02 * f12 * p22
+        n02 = p02 + f02 * p22
+        n11 = p11 + 2.0 * f12 * p12 + f12 * f12 * p22
+        n12 = p12 + f12 * p22
+        P[0, 0] = n00 + q_tau
+        P[0, 1] = n01
+        P[1, 0] = n01
+        P[0, 2] = n02
+        P[2, 0] = n02
+        P[1, 1] = n11 + q_phi
+        P[1, 2] = n12
+        P[2, 1] = n12
+        P[2, 2] = p22 + s_f * T
+    return nis
+
+
+def _warm() -> None:  # pragma: no cover - compile on import of the bank when cached
+    x = np.zeros(3)
+    P = np.eye(3)
+    z = np.ones(1, np.complex128)
+    t = np.full(1, 1e-3)
+    r = np.ones(1)
+    prefilter_epochs(x, P, z, z, z, t, 0.5, 0.008, r, r, 0.0, 0.0, 1.0)

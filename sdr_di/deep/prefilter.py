@@ -1,0 +1,155 @@
+"""Per-channel pre-filters of the federated deep integration (paper 004 Fig. 1, refs [6], [13]).
+
+Each tracked channel has a small Kalman filter fed by the early/prompt/late sums of every
+1 ms code epoch (NH code wiped off on D1 satellites). Its state is the tracking error of the
+INS-commanded NCOs, *signal minus replica*::
+
+    x = [dtau (chips), dphi (rad), df (Hz)]     at the start of an epoch
+
+Measurements of epoch ``j`` (duration ``T``), linear in the state at its start (epoch
+averages)::
+
+    z_tau = (1 - d) (|E| - |L|) / (|E| + |L|)  = dtau + (beta T / 2) df + v_tau
+    z_phi = atan(Q_P / I_P)                    = dphi + (pi T) df     + v_phi   (mod pi)
+
+``d`` the early/late offset [chips], ``beta = f_code / f_carr`` [chips per cycle]. The
+two-quadrant arctangent and the innovation reduced modulo pi make the filter insensitive to
+data-bit (and NH) sign changes, so it needs no bit synchronization: bit transitions never
+break it. Discriminator noise variances from the channel's C/N0 (linear, Hz) and ``T``::
+
+    r_tau = d / (2 C/N0 T) (1 + 1 / (C/N0 T))          (normalized early-minus-late envelope)
+    r_phi = 1 / (2 C/N0 T) (1 + 1 / (2 C/N0 T))         (arctangent, with squaring loss)
+
+Dynamics from one epoch start to the next: ``dtau += beta T df`` (carrier-aided code),
+``dphi += 2 pi T df``, ``df`` a random walk of PSD ``s_f`` [Hz^2/s] (the INS velocity-error
+drift and the clock frequency noise the NCO commands cannot predict), plus small
+``q_tau``, ``q_phi`` per epoch.
+
+Interaction with the vector loop (:mod:`sdr_di.deep.vector_loop`):
+
+* **outputs** at the integration-filter rate: ``dtau``, ``df`` and their variances, turned
+  into the measurements of paper 004 eq 8-9, ``drho = (c / f_code) dtau`` and
+  ``drho_dot = (c / f_carr) df`` (``df`` in Hz is ``delta_omega / 2 pi``), with ``R_k`` from
+  the covariances (eq 34);
+* **corrections**: after the integration filter's feedback the NCO commands of the next
+  interval move by the correction's projection on the channel, ``(f_code / c) (H x)_rho``
+  chips and ``(f_carr / c) (H x)_rho_dot`` Hz; :meth:`PreFilterBank.shift` removes them from
+  the state so it stays the error relative to the new NCOs;
+* **decorrelation**: the code and frequency variances are reset to their prior
+  (``sigma_tau0``, ``sigma_f0``) at the start of every interval, so successive outputs are
+  (nearly) independent measurements of the integration filter, as a federated filter's local
+  filters must be (the carried carrier phase keeps the channel phase-tracked).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..constants import CHIP_RATE_B3I, F_B3I
+from ._numba_prefilter import prefilter_epochs
+
+__all__ = ["PreFilterBank", "discriminator_variances"]
+
+
+def discriminator_variances(cn0_hz: float, t_epoch: np.ndarray, spacing: float
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """``(r_tau [chips^2], r_phi [rad^2])`` per epoch (module notes) at ``cn0_hz`` (linear)."""
+    snr = np.maximum(float(cn0_hz), 1.0) * np.asarray(t_epoch, float)
+    r_tau = spacing / (2.0 * snr) * (1.0 + 1.0 / snr)
+    r_phi = 1.0 / (2.0 * snr) * (1.0 + 1.0 / (2.0 * snr))
+    return r_tau, r_phi
+
+
+class PreFilterBank:
+    """Pre-filters of ``n`` channels (module notes).
+
+    Parameters
+    ----------
+    n : int
+        Channels.
+    spacing : float
+        Early/late offset d [chips].
+    carrier_hz : float
+        Carrier frequency [Hz] (for ``beta``).
+    s_f : float
+        Frequency random-walk PSD [Hz^2/s]. Default 4 (0.2 Hz, i.e. 5 cm/s, of unpredicted
+        drift in 10 ms).
+    sigma_tau0, sigma_f0 : float
+        Prior standard deviations of the code [chips] and frequency [Hz] errors at every
+        interval start (decorrelation). Defaults 0.2 chip, 5 Hz.
+    q_tau, q_phi : float
+        Process noise per epoch [chips^2], [rad^2].
+
+    Attributes
+    ----------
+    x : ndarray (n, 3)
+        States ``[dtau, dphi, df]``.
+    P : ndarray (n, 3, 3)
+        Covariances.
+    nis : ndarray (n,)
+        Normalized innovation squared of the last interval, per epoch and measurement.
+    """
+
+    def __init__(self, n: int, spacing: float = 0.5, carrier_hz: float = F_B3I, *,
+                 s_f: float = 4.0, sigma_tau0: float = 0.2, sigma_f0: float = 5.0,
+                 q_tau: float = 1e-8, q_phi: float = 1e-4):
+        self.n = int(n)
+        self.spacing = float(spacing)
+        self.beta = CHIP_RATE_B3I / float(carrier_hz)
+        self.s_f = float(s_f)
+        self.sigma_tau0 = float(sigma_tau0)
+        self.sigma_f0 = float(sigma_f0)
+        self.q_tau = float(q_tau)
+        self.q_phi = float(q_phi)
+        self.x = np.zeros((self.n, 3))
+        self.P = np.zeros((self.n, 3, 3))
+        self.nis = np.full(self.n, math.nan)
+        for i in range(self.n):
+            self.reset(i)
+
+    def reset(self, i: int, dtau: float = 0.0, dphi: float = 0.0, df: float = 0.0,
+              sigma_tau: float | None = None, sigma_phi: float = 1.0,
+              sigma_f: float | None = None) -> None:
+        """Set channel ``i``'s state and a diagonal covariance (defaults: the priors)."""
+        st = self.sigma_tau0 if sigma_tau is None else float(sigma_tau)
+        sf = self.sigma_f0 if sigma_f is None else float(sigma_f)
+        self.x[i] = (dtau, dphi, df)
+        self.P[i] = np.diag([st * st, float(sigma_phi) ** 2, sf * sf])
+
+    def shift(self, i: int, d_tau_chips: float, d_f_hz: float) -> None:
+        """The channel's NCOs moved by ``d_tau`` chips and ``d_f`` Hz: keep the state the
+        error relative to them."""
+        self.x[i, 0] -= d_tau_chips
+        self.x[i, 2] -= d_f_hz
+
+    def decorrelate(self, i: int) -> None:
+        """Reset the code and frequency variances (and their cross terms) to the priors."""
+        P = self.P[i]
+        p11 = P[1, 1]
+        P[:] = 0.0
+        P[0, 0] = self.sigma_tau0 ** 2
+        P[1, 1] = p11
+        P[2, 2] = self.sigma_f0 ** 2
+
+    def process(self, i: int, early, prompt, late, t_epoch, cn0_hz: float) -> None:
+        """Run channel ``i`` over its epochs of the interval (NH already wiped off)."""
+        t = np.ascontiguousarray(t_epoch, dtype=np.float64)
+        if t.size == 0:
+            return
+        r_tau, r_phi = discriminator_variances(cn0_hz, t, self.spacing)
+        xi = self.x[i].copy()
+        Pi = self.P[i].copy()
+        nis = prefilter_epochs(xi, Pi, np.ascontiguousarray(early, np.complex128),
+                               np.ascontiguousarray(prompt, np.complex128),
+                               np.ascontiguousarray(late, np.complex128), t, self.spacing,
+                               self.beta, r_tau, r_phi, self.q_tau, self.q_phi, self.s_f)
+        self.x[i] = xi
+        self.P[i] = Pi
+        self.nis[i] = nis / (2.0 * t.size)
+
+    def outputs(self, i: int) -> tuple[float, float, float, float]:
+        """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])`` of channel ``i``."""
+        return (float(self.x[i, 0]), float(self.x[i, 2]), float(self.P[i, 0, 0]),
+                float(self.P[i, 2, 2]))

@@ -1,0 +1,704 @@
+"""Deep (INS-aided vector tracking) receiver: scalar start-up, hand-over, federated loop.
+
+Paper 004 Fig. 1, federated architecture. Data flow of :meth:`DeepReceiver.run`::
+
+    scalar start-up (ScalarReceiver: acquisition, loops, NH/bit/frame sync, decoding, WLS PVT)
+        --hand-over-->  for every interval [k0, k1) of T = 1 / filter_rate_hz:
+    INS (200 Hz IMU) propagated over the interval  -> predicted P, Pc at k0 and k1
+    (corrected INS position, clock states, orbits at transmit time, atmosphere: nco.py)
+    -> code/carrier NCO commands of every handed-over channel -> correlators (numba, every
+    1 ms code epoch of every channel in one kernel call) -> NH wipe-off -> pre-filters
+    (prefilter.py) -> z = [c/f_code dtau_i, c/f_carr df_i] of the channels in the measurement
+    vector (eq 7-9), R from the pre-filter covariances (eq 34) -> integration filter (any
+    name of the filter family, 17 states, eq 1-12) predict + update -> closed-loop feedback to
+    the INS (attitude, velocity, position, IMU biases) and the clock, error state reset ->
+    the pre-filters shifted by the correction's projection on each channel (their NCOs move
+    by it in the next interval).
+
+Decisions
+---------
+* **Filter rate** default 50 Hz (T = 20 ms): one D1 data bit, four 200 Hz IMU samples, the
+  rate at which the NCO commands are refreshed from the corrected INS. Faster costs filter
+  time without new information (the pre-filters already average the 1 ms epochs); slower
+  lets the INS error (MEMS: 4 mg) grow between NCO corrections: at 10 Hz an uncorrected
+  0.04 m/s^2 gives 2 mm of code and 0.017 Hz of carrier error, still small, so 10-50 Hz all
+  work; ``--filter-rate`` sets it.
+* **Hand-over** (from scalar tracking) once a valid WLS fix with velocity exists and every
+  channel in ``TRACK`` has its transmit time and an ephemeris (decoded, or from the
+  assistance navigation file, as paper 004 feeds its ephemerides to the receiver); after
+  ``handover_wait_s`` without that, at least 4 such channels suffice. The clock bias/drift
+  come from the fix; each channel's pre-filter starts from the scalar loop's code phase and
+  Doppler relative to the INS prediction.
+* **INS initial alignment**: ``align="truth"``: from the first record of the reference (the
+  scenario's initial state, paper 004 Table 3) at the IMU start, then coasting on the IMU
+  until the hand-over, where position and velocity are replaced by the WLS fix;
+  ``align="gnss"``: at the hand-over from the fix, pitch and heading from the velocity
+  vector, roll 0 (the vehicle must move).
+* **Time**: IMU sample ``i`` (BDT epoch in its header) is IF sample
+  ``round((t_i + sow_imu0 - sow_if0) fs)``: the IMU is taken as time-stamped in the receiver
+  clock's scale (exact for generated files, whose receiver clock defaults to BDT).
+* **Channel management**: a channel leaves the measurement vector (``N_k`` changes) while
+  its C/N0 (known-noise estimator over the last ``cn0_window`` intervals) is below
+  ``cn0_min_dbhz`` or its pre-filter innovations are inconsistent (NIS above
+  ``nis_max``); its NCOs stay driven by the INS and its pre-filter is restarted every
+  interval, so it rejoins as soon as the signal is back, without an acquisition search.
+* **Process noise** from the IMU spec (random walks; bias random walk reaching the spec in
+  ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`ClockModel`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+
+import numpy as np
+
+from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
+from ..errors import ImuDataError, NoEphemerisError, SdrDiError, UnknownPrnError
+from ..filters import make_filter
+from ..frames import C_e_n, ecef_to_llh, euler_to_C_b_n, llh_to_ecef
+from ..ins.error_model import InsErrorModel, NavState, process_noise
+from ..ins.mechanization import StrapdownINS
+from ..integration.measurements import RangeRateMeasurementModel
+from ..integration.metrics import nav_errors, summarize
+from ..receiver.correlator import CODE_PAD, correlate_table, padded_replicas
+from ..receiver.ifreader import IfSource
+from ..receiver.lock import cn0_known_noise
+from ..receiver.observables import ReceiverTime
+from ..receiver.pvt import PvtEngine
+from ..receiver.scalar import ScalarReceiver
+from ..receiver.tracking import ChannelState
+from ..signal.codes import NH20, b3i_code
+from .nco import nco_commands, predict_ranges
+from .prefilter import PreFilterBank
+
+__all__ = ["DeepConfig", "DeepReceiver", "DeepResult", "HandoverError"]
+
+_DEG_H = math.radians(1.0) / 3600.0
+_MG = 9.80665e-3
+_CN0_MIN_PROMPTS = 40  # 1 ms prompts before the loop's own C/N0 replaces the scalar one
+
+
+class HandoverError(SdrDiError):
+    """The scalar start-up never reached a state the vector loop can take over."""
+
+
+@dataclasses.dataclass
+class DeepConfig:
+    """Settings of the deep receiver (module notes give the reasons for the defaults).
+
+    Attributes
+    ----------
+    filter : str
+        Integration filter (registry name, :data:`sdr_di.filters.FILTER_NAMES`).
+    filter_rate_hz : float
+        Integration-filter and NCO-command rate [Hz]; must divide the IMU rate.
+    output_rate_hz : float
+        Solution rows [Hz] (paper 004: 5 Hz).
+    align : str
+        ``"truth"`` or ``"gnss"`` (module notes).
+    handover_wait_s : float
+        Seconds after the first fix to wait for every tracked channel before handing over
+        with at least 4.
+    cn0_min_dbhz, cn0_window, nis_max
+        Channel management (module notes).
+    gyro_random_walk_deg_sqrth, accel_random_walk_mps_sqrth, gyro_bias_deg_h, accel_bias_mg
+        IMU spec for ``Q`` and ``P0`` (paper 004 Table 4).
+    bias_time_s : float
+        Time for the bias random walk to reach the spec [s].
+    prefilter : dict
+        Keyword arguments of :class:`~sdr_di.deep.prefilter.PreFilterBank`.
+    filter_options : dict
+        Options of :func:`~sdr_di.filters.make_filter` (e.g. ``window`` of ``ff-aukf``).
+    p0_att_deg : tuple
+        Initial attitude sigmas (E, N, U) [deg] for ``align="truth"`` (``"gnss"`` uses
+        (1, 1, 2) deg).
+    chunk_ms : int
+        Samples read per refill [ms].
+    """
+
+    filter: str = "ff-aukf"
+    filter_rate_hz: float = 50.0
+    output_rate_hz: float = 5.0
+    align: str = "truth"
+    handover_wait_s: float = 6.0
+    cn0_min_dbhz: float = 25.0
+    cn0_window: int = 10
+    nis_max: float = 4.0
+    gyro_random_walk_deg_sqrth: float = 0.04
+    accel_random_walk_mps_sqrth: float = 0.05
+    gyro_bias_deg_h: float = 8.0
+    accel_bias_mg: float = 4.0
+    bias_time_s: float = 3600.0
+    prefilter: dict = dataclasses.field(default_factory=dict)
+    filter_options: dict = dataclasses.field(default_factory=dict)
+    p0_att_deg: tuple = (0.05, 0.05, 0.1)
+    chunk_ms: int = 200
+
+    def __post_init__(self) -> None:
+        if self.align not in ("truth", "gnss"):
+            raise ValueError(f"align must be 'truth' or 'gnss', got {self.align!r}")
+        for name in ("filter_rate_hz", "output_rate_hz"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be > 0, got {v!r}")
+
+
+@dataclasses.dataclass
+class DeepResult:
+    """Output of a deep run (solution rows at the output rate, after feedback).
+
+    Attributes
+    ----------
+    t : (n,) seconds since the IF file start (receiver clock)
+    week, sow : BDT of each row (receiver time minus clock bias)
+    llh : (n, 3) rad, rad, m;  v_n : (n, 3) ENU m/s;  att : (n, 3) pitch, roll, yaw [rad]
+    clock_bias_m, clock_drift_mps : (n,)
+    n_used : (n,) channels in the measurement vector
+    att_err, vel_err, pos_err : (n, 3) errors vs the reference [deg, m/s, m ENU] (NaN
+        without a reference)
+    prns : handed-over PRNs;  used : (n, n_ch) bool, channel in the measurement vector
+    cn0_dbhz : (n, n_ch)
+    handover_s : time of the hand-over [s since file start]
+    filter_name : str;  adaptation_s : float (time in the adaptive rule, if any)
+    profile : dict (seconds per stage: scalar, read, nco, correlate, prefilter, filter, ins)
+    """
+
+    t: np.ndarray
+    week: int
+    sow: np.ndarray
+    llh: np.ndarray
+    v_n: np.ndarray
+    att: np.ndarray
+    clock_bias_m: np.ndarray
+    clock_drift_mps: np.ndarray
+    n_used: np.ndarray
+    att_err: np.ndarray
+    vel_err: np.ndarray
+    pos_err: np.ndarray
+    prns: tuple
+    used: np.ndarray
+    cn0_dbhz: np.ndarray
+    handover_s: float
+    filter_name: str
+    adaptation_s: float
+    profile: dict
+
+    def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
+        """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
+        return summarize(self.t, self.att_err, self.vel_err, self.pos_err, t0, t1)
+
+
+class _Assisted:
+    """Ephemeris source: decoded records first, then the assistance navigation file."""
+
+    def __init__(self, decoded: dict, nav) -> None:
+        self.decoded = decoded
+        self.nav = nav
+
+    def select(self, prn: int, week: int, sow: float):
+        e = self.decoded.get(prn)
+        if e is not None and e.healthy and e.finite():
+            return e
+        if self.nav is None:
+            raise NoEphemerisError(f"no ephemeris for C{prn:02d}")
+        return self.nav.select(prn, week, sow)
+
+    def has(self, prn: int, week: int, sow: float) -> bool:
+        try:
+            self.select(prn, week, sow)
+        except (NoEphemerisError, UnknownPrnError):
+            return False
+        return True
+
+
+@dataclasses.dataclass
+class _Chan:
+    """Vector-loop state of one handed-over channel."""
+
+    prn: int
+    idx: int
+    is_d1: bool
+    eph: object
+    next_start: int          # first sample of the next code epoch
+    epoch: int               # its number (ms since S0)
+    phase: float             # carrier NCO phase at next_start [cycles]
+    prompts: np.ndarray      # recent 1 ms prompts (C/N0)
+    n_prompts: int = 0
+    cn0_dbhz: float = math.nan
+    used: bool = True
+
+
+def _imu_offset_s(source: IfSource, imu) -> float:
+    """IF-relative time of IMU ``t = 0`` [s]; checks the time tags."""
+    if source.start_week is None or source.start_sow is None:
+        if imu.week is not None:
+            raise ImuDataError("IMU file has a BDT time tag but the IF file has none: give "
+                               "--start-week/--start-sow for the IF file")
+        return 0.0
+    if imu.week is None or imu.sow is None:
+        raise ImuDataError("IMU file has no BDT time tag (bdt_week_t0/bdt_sow_t0): cannot "
+                           "align it with the IF file")
+    return (imu.week - source.start_week) * 604800.0 + (imu.sow - source.start_sow)
+
+
+class DeepReceiver:
+    """INS-aided vector-tracking receiver (module notes).
+
+    Parameters
+    ----------
+    config : DeepConfig, optional
+    scalar : ScalarReceiver, optional
+        Start-up receiver (default ``ScalarReceiver(log=False)``).
+    """
+
+    def __init__(self, config: DeepConfig | None = None, scalar: ScalarReceiver | None = None):
+        self.config = config or DeepConfig()
+        self.scalar = scalar or ScalarReceiver(log=False)
+        self.profile: dict = {}
+
+    # ------------------------------------------------------------------------------------
+    def run(self, source: IfSource, imu, *, prns=None, nav=None, truth=None,
+            progress: Callable[[float, int, int], None] | None = None,
+            duration_s: float | None = None) -> DeepResult:
+        """Run the deep receiver over ``source`` with the IMU record ``imu``.
+
+        Parameters
+        ----------
+        source : IfSource
+            IF samples (with a start time tag for generated files).
+        imu : ImuData
+            IMU record with its BDT epoch; must cover the IF file.
+        prns : iterable of int, optional
+            PRNs to search (default all 63).
+        nav : NavData, optional
+            Assistance navigation data (ephemerides and ionosphere before they are decoded).
+        truth : Truth, optional
+            Reference: needed for ``align="truth"``; gives the error columns when on the
+            IMU time grid.
+        progress : callable, optional
+            ``progress(seconds_processed, n_channels, n_used)`` about once per second.
+        duration_s : float, optional
+            Stop after this many seconds of the file.
+
+        Raises
+        ------
+        ImuDataError
+            IMU time tags missing or inconsistent, IMU span not covering the IF file.
+        FilterError
+            Unknown filter name or option, non-positive-definite ``P0``.
+        HandoverError
+            No satellite found or no hand-over state reached.
+        """
+        cfg = self.config
+        t_all = time.perf_counter()
+        fs = source.sampling_rate_hz
+        stop = source.n_samples if duration_s is None else min(
+            source.n_samples, int(round(duration_s * fs)))
+        # ---- IMU / IF time consistency
+        off = _imu_offset_s(source, imu)
+        if_end = stop / fs
+        dt_imu = 1.0 / imu.rate_hz
+        if imu.t[0] + off > dt_imu + 1e-6 or imu.t[-1] + off < if_end - dt_imu - 1e-6:
+            raise ImuDataError(
+                f"IMU record spans {imu.t[0] + off:.3f}..{imu.t[-1] + off:.3f} s of the IF "
+                f"file, which needs 0..{if_end:.3f} s (IMU/IF start times inconsistent or IMU "
+                "file too short)")
+        n_per = imu.rate_hz / cfg.filter_rate_hz
+        if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
+            raise ValueError(f"filter rate {cfg.filter_rate_hz} Hz must divide the IMU rate "
+                             f"{imu.rate_hz} Hz")
+        n_per = int(round(n_per))
+        if cfg.align == "truth" and truth is None:
+            raise ImuDataError("align='truth' needs the reference (truth) file; use "
+                               "align='gnss' without one")
+        # filter name check before the (long) start-up
+        make_filter(cfg.filter, InsErrorModel(), RangeRateMeasurementModel(), np.zeros(17),
+                    np.eye(17), np.eye(17), None, dt=1.0 / cfg.filter_rate_hz,
+                    **cfg.filter_options)
+
+        # ---- scalar start-up until hand-over
+        rx = self.scalar
+        rt = None
+        if source.start_week is not None and source.start_sow is not None:
+            rt = ReceiverTime.from_sample_zero(fs, source.start_week, source.start_sow)
+        engine = PvtEngine(fs, {}, None, rx_time=rt)
+        eph_src = _Assisted({}, nav)
+        nav_iono = None
+        if nav is not None:
+            from ..sim.generate import broadcast_iono
+
+            nav_iono = broadcast_iono(nav)[0]
+        hand: dict = {}
+
+        def on_epoch(sample, obs, ephs):
+            eph_src.decoded = ephs
+            engine.ephemerides = eph_src
+            engine.iono = rx.klobuchar if rx.klobuchar is not None else nav_iono
+            sol = engine.process(obs)
+            if not sol.valid or not sol.velocity_valid:
+                return False
+            hand.setdefault("first_fix", sample)
+            trk = [o for o in obs if o.state == ChannelState.TRACK.name]
+            ok = [o for o in trk if o.time_valid and o.code_lock
+                  and eph_src.has(o.prn, sol.week, sol.sow)]
+            waited = (sample - hand["first_fix"]) / fs >= cfg.handover_wait_s
+            if len(ok) >= 4 and (len(ok) == len(trk) or waited):
+                hand.update(sample=sample, sol=sol, prns=[o.prn for o in ok])
+                return True
+            return False
+
+        t0 = time.perf_counter()
+        rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=0.1, stop_sample=stop)
+        t_scalar = time.perf_counter() - t0
+        if "sample" not in hand:
+            found = [c.prn for c in rx.channels.values() if c.n_acquisitions > 0]
+            raise HandoverError(
+                f"{source.path}: no hand-over to the vector loop: " +
+                ("no satellite found" if not found else
+                 f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
+                 "ephemeris and a valid fix"))
+        return self._vector_loop(source, imu, off, n_per, stop, rx, engine, eph_src,
+                                 nav_iono, hand, truth, progress, t_scalar, t_all)
+
+    # ------------------------------------------------------------------------------------
+    def _vector_loop(self, source, imu, off, n_per, stop, rx, engine, eph_src, nav_iono,
+                     hand, truth, progress, t_scalar, t_all) -> DeepResult:
+        cfg = self.config
+        fs = source.sampling_rate_hz
+        n1 = round(fs * 1e-3)
+        sol = hand["sol"]
+        k_h = int(hand["sample"])
+        rt = engine.builder.rx_time
+        week = int(rt.week0)
+        # receiver time of sample k: sow0 + (k - k0) / fs; reference S0 = whole second before
+        S0 = math.floor(rt.sow0) - 1.0
+        base_rel = rt.sow0 - S0
+
+        def t_rel(k):
+            return base_rel + (k - rt.k0) / fs
+
+        iono = rx.klobuchar if rx.klobuchar is not None else nav_iono
+
+        # ---- channels
+        chans: list[_Chan] = []
+        for i, prn in enumerate(hand["prns"]):
+            c = rx.channels[prn]
+            s = int(c.next_start)
+            o = c.observation_at(s)
+            eph = eph_src.select(prn, sol.week, sol.sow)
+            e = int(round((o.t_tx_sow - S0) * 1000.0))
+            chans.append(_Chan(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s, epoch=e,
+                               phase=float(c.phi), prompts=np.zeros(cfg.cn0_window * 20,
+                                                                    np.complex128),
+                               cn0_dbhz=float(c.cn0_dbhz)))
+        n_ch = len(chans)
+        ephs = [c.eph for c in chans]
+        pre = PreFilterBank(n_ch, self.scalar.config.spacing_chips, source.carrier_hz,
+                            **cfg.prefilter)
+        spacing = pre.spacing
+        code_rows = {c.prn: padded_replicas(np.asarray(b3i_code(c.prn)))[0] for c in chans}
+        tables: OrderedDict = OrderedDict()
+
+        # ---- IMU grid and INS alignment
+        dt_imu = 1.0 / imu.rate_hz
+        t_if = imu.t + off                     # IF-relative time of each IMU sample
+        i_h = int(np.searchsorted(t_if, max(k_h, max(c.next_start for c in chans)) / fs))
+        i_h = max(i_h, 1)
+        T = n_per * dt_imu
+        r_fix = sol.r_e + sol.v_e * (t_if[i_h] - k_h / fs)
+        llh_fix = ecef_to_llh(r_fix)
+        if cfg.align == "truth":
+            ins = StrapdownINS(truth.llh[0], truth.v_n[0], C_b_n=truth.C_b_n[0],
+                               t=float(imu.t[0]))
+            ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], dt_imu)
+            for i in range(1, i_h + 1):
+                ins.step(imu.f_b[i], imu.w_ib_b[i], float(imu.t[i] - imu.t[i - 1]))
+            ins.llh = np.array(llh_fix, float)
+            ins.v_n = np.array(sol.v_n, float)
+            att_sig = np.radians(np.asarray(cfg.p0_att_deg, float))
+        else:
+            v = np.asarray(sol.v_n, float)
+            sp = math.hypot(v[0], v[1])
+            if sp < 2.0:
+                raise HandoverError(f"align='gnss' needs a moving receiver at the hand-over "
+                                    f"(horizontal speed {sp:.2f} m/s < 2 m/s)")
+            att0 = np.array([math.atan2(v[2], sp), 0.0, math.atan2(v[0], v[1])])
+            ins = StrapdownINS(llh_fix, v, C_b_n=euler_to_C_b_n(*att0), t=float(imu.t[i_h]))
+            ins.set_previous_increments(imu.f_b[i_h], imu.w_ib_b[i_h], dt_imu)
+            att_sig = np.radians([1.0, 1.0, 2.0])
+        clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
+        clk_d = float(sol.clock_drift_mps)
+
+        # ---- integration filter
+        gyro_rw = cfg.gyro_random_walk_deg_sqrth * math.radians(1.0) / 60.0
+        accel_rw = cfg.accel_random_walk_mps_sqrth / 60.0
+        gb = cfg.gyro_bias_deg_h * _DEG_H
+        ab = cfg.accel_bias_mg * _MG
+        Q0 = process_noise(T, gyro_random_walk_si=gyro_rw, accel_random_walk_si=accel_rw,
+                           gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=cfg.bias_time_s)
+        lat0, h0 = float(llh_fix[0]), float(llh_fix[2])
+        from ..frames import radii_of_curvature
+
+        R_M, R_N = (float(r) for r in radii_of_curvature(lat0))
+        cov = np.asarray(sol.cov, float)
+        s_pos = math.sqrt(max(np.trace(cov[:3, :3]) / 3.0, 0.25)) if np.all(
+            np.isfinite(cov[:3, :3])) else 2.0
+        s_pos = max(s_pos, 1.0)
+        p0 = np.r_[att_sig ** 2, [0.1 ** 2] * 3,
+                   (s_pos / (R_M + h0)) ** 2, (s_pos / ((R_N + h0) * math.cos(lat0))) ** 2,
+                   (1.5 * s_pos) ** 2, [gb ** 2] * 3, [ab ** 2] * 3, (1.5 * s_pos) ** 2,
+                   0.1 ** 2]
+        process = InsErrorModel()
+        meas = RangeRateMeasurementModel()
+        meas_all = RangeRateMeasurementModel()
+        kf = make_filter(cfg.filter, process, meas, np.zeros(17), np.diag(p0), Q0, None, dt=T,
+                         **cfg.filter_options)
+
+        # ---- pre-filters from the scalar loops
+        k_grid0 = int(round(t_if[i_h] * fs))
+        r0 = llh_to_ecef(*ins.llh)
+        for c in chans:
+            sc = rx.channels[c.prn]
+            s = c.next_start
+            pr = predict_ranges([c.eph], week, [S0 + t_rel(s)], [r0], [clk_b], iono)
+            chips_deep = CHIP_RATE_B3I * (t_rel(s) - pr.P[0, 0] / C_LIGHT)
+            dtau = c.epoch * CODE_LENGTH_B3I + float(sc.theta) - chips_deep
+            pre.reset(c.idx, dtau=dtau, df=0.0, sigma_tau=0.1, sigma_phi=0.3, sigma_f=3.0)
+            c._f_scalar = float(sc.fd)  # noqa: SLF001 - initial frequency error (set below)
+
+        # ---- main loop
+        prof = {"scalar": t_scalar, "read": 0.0, "nco": 0.0, "correlate": 0.0,
+                "prefilter": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
+        out_every = max(1, int(round(cfg.filter_rate_hz / cfg.output_rate_hz)))
+        rows = {k: [] for k in ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve",
+                                "pe", "used", "cn0")}
+        truth_on_grid = (truth is not None and len(truth.t) == len(imu.t)
+                         and np.allclose(truth.t, imu.t, atol=1e-6))
+        x_buf = np.empty(0, dtype=source.dtype)
+        buf0 = buf1 = 0
+        npow = 1.0
+        chunk = max(4 * n1, int(round(cfg.chunk_ms * 1e-3 * fs)))
+        tau_prev = None
+        i0 = i_h
+        k0 = k_grid0
+        j = 0
+        first = True
+        next_progress = 0.0
+        adapt0 = _adaptation_s(kf)
+        while True:
+            i1 = i0 + n_per
+            if i1 >= len(imu.t):
+                break
+            k1 = int(round(t_if[i1] * fs))
+            if k1 + 2 * n1 + 16 > stop:
+                break
+            # -- INS over the interval
+            ta = time.perf_counter()
+            nav0 = NavState.from_ins(ins)
+            fs_ = imu.f_b[i0 + 1:i1 + 1]
+            ws_ = imu.w_ib_b[i0 + 1:i1 + 1]
+            f_mean = fs_.mean(axis=0) - ins.accel_bias
+            w_mean = ws_.mean(axis=0) - ins.gyro_bias
+            for m in range(n_per):
+                ins.step(fs_[m], ws_[m], float(imu.t[i0 + m + 1] - imu.t[i0 + m]))
+            nav1 = NavState.from_ins(ins)
+            b0, b1 = clk_b, clk_b + clk_d * T
+            tb = time.perf_counter()
+            prof["ins"] += tb - ta
+            # -- NCO commands
+            r_a = llh_to_ecef(*nav0.llh)
+            r_b = llh_to_ecef(*nav1.llh)
+            pred = predict_ranges(ephs, week, [S0 + t_rel(k0), S0 + t_rel(k1)], [r_a, r_b],
+                                  [b0, b1], iono, tau0=tau_prev, passes=2 if first else 1)
+            tau_prev = pred.tau
+            cmd = nco_commands(pred, k0, k1, fs, t_rel(k0), t_rel(k1), source.carrier_hz)
+            dchip = cmd.code_rate_cps / fs
+            if first:
+                for c in chans:
+                    # initial frequency error: scalar loop Doppler minus the INS prediction
+                    pre.x[c.idx, 2] = c._f_scalar - float(cmd.doppler_hz[c.idx])  # noqa: SLF001
+                first = False
+            starts, nsamp, theta, phi, dphi, prn_rows, reps, nh = [], [], [], [], [], [], [], []
+            for c in chans:
+                i = c.idx
+                c0 = float(cmd.chips0[i])
+                dc = float(dchip[i])
+                dp = (source.if_hz + float(cmd.doppler_hz[i])) / fs
+                s = c.next_start
+                e = c.epoch
+                ph = c.phase
+                cnt = 0
+                while s < k1:
+                    ch = c0 + (s - k0) * dc - e * CODE_LENGTH_B3I     # chips into epoch e
+                    n = max(1, math.ceil((CODE_LENGTH_B3I - ch) / dc))
+                    starts.append(s)
+                    nsamp.append(n)
+                    theta.append(ch)
+                    phi.append(ph)
+                    dphi.append(dp)
+                    nh.append(NH20[e % 20] if c.is_d1 else 1)
+                    ph += n * dp
+                    ph -= math.floor(ph)
+                    s += n
+                    e += 1
+                    cnt += 1
+                c.next_start, c.epoch, c.phase = s, e, ph
+                reps.append(cnt)
+                prn_rows.append(c.prn)
+            tc = time.perf_counter()
+            prof["nco"] += tc - tb
+            # -- samples
+            need0, need1 = min(starts), max(a + b for a, b in zip(starts, nsamp))
+            if need1 > stop:
+                break
+            if need0 < buf0 or need1 > buf1:
+                n_read = min(max(chunk, need1 - need0), stop - need0)
+                x_buf = source.read(need0, n_read)
+                buf0, buf1 = need0, need0 + n_read
+                npow = float(np.vdot(x_buf, x_buf).real) / max(1, x_buf.size)
+            td = time.perf_counter()
+            prof["read"] += td - tc
+            # -- correlation (every epoch of every channel in one kernel call)
+            key = tuple(reps)
+            tab = tables.get(key)
+            if tab is None:
+                tab = np.ascontiguousarray(np.repeat(
+                    np.stack([code_rows[p] for p in prn_rows]), reps, axis=0))
+                tables[key] = tab
+                if len(tables) > 64:
+                    tables.popitem(last=False)
+            else:
+                tables.move_to_end(key)
+            st = np.asarray(starts, np.int64) - buf0
+            ns = np.asarray(nsamp, np.int64)
+            res = correlate_table(x_buf, tab, CODE_LENGTH_B3I, np.asarray(theta),
+                                  np.repeat(cmd.code_rate_cps, reps), np.asarray(phi),
+                                  np.asarray(dphi) * fs, ns, fs, spacing, st, pad=CODE_PAD)
+            sgn = np.asarray(nh, float)
+            E = res.early * sgn
+            P = res.prompt * sgn
+            L = res.late * sgn
+            te = time.perf_counter()
+            prof["correlate"] += te - td
+            # -- pre-filters and channel management
+            z_rho, z_rate, r_rho, r_rate, use = [], [], [], [], []
+            a = 0
+            for c, cnt in zip(chans, reps):
+                i = c.idx
+                sl = slice(a, a + cnt)
+                a += cnt
+                if cnt:
+                    pp = P[sl]
+                    m = min(cnt, c.prompts.size)
+                    c.prompts = np.roll(c.prompts, -m)
+                    c.prompts[-m:] = pp[-m:]
+                    c.n_prompts = min(c.n_prompts + m, c.prompts.size)
+                    nbar = float(ns[sl].mean())
+                    if c.n_prompts >= _CN0_MIN_PROMPTS:
+                        c.cn0_dbhz = cn0_known_noise(c.prompts[-c.n_prompts:], nbar * npow,
+                                                     nbar / fs)
+                    cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
+                    pre.process(i, E[sl], pp, L[sl], ns[sl] / fs, cn0_lin)
+                good = (math.isfinite(c.cn0_dbhz) and c.cn0_dbhz >= cfg.cn0_min_dbhz
+                        and cnt > 0 and pre.nis[i] <= cfg.nis_max)
+                c.used = good
+                use.append(good)
+                if good:
+                    dtau, df, vt, vf = pre.outputs(i)
+                    z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
+                    z_rate.append(LAMBDA_B3I * df)
+                    r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * vt)
+                    r_rate.append(LAMBDA_B3I ** 2 * vf)
+            tf = time.perf_counter()
+            prof["prefilter"] += tf - te
+            # -- integration filter
+            process.set_interval(nav0, nav1, f_mean, w_mean)
+            kf.predict(T)
+            use = np.asarray(use, bool)
+            n_used = int(use.sum())
+            if n_used:
+                meas.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[use, 1], pred.v_sat[use, 1],
+                               b1, clk_d)
+                kf.update(np.r_[z_rho, z_rate], np.diag(np.r_[r_rho, r_rate]))
+            x = kf.x.copy()
+            tg = time.perf_counter()
+            prof["filter"] += tg - tf
+            # -- feedback: INS, clock, pre-filters
+            ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
+            clk_b = b1 - x[15]
+            clk_d = clk_d - x[16]
+            meas_all.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[:, 1], pred.v_sat[:, 1])
+            Hx = meas_all.matrix @ x
+            for c in chans:
+                i = c.idx
+                pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
+                if c.used:
+                    pre.decorrelate(i)
+                else:
+                    pre.reset(i, sigma_phi=1.0)
+            kf.x = np.zeros(17)
+            th = time.perf_counter()
+            prof["ins"] += th - tg
+            # -- output
+            j += 1
+            if j % out_every == 0:
+                rows["t"].append(k1 / fs)
+                rows["sow"].append(S0 + t_rel(k1) - clk_b / C_LIGHT)
+                rows["llh"].append(ins.llh.copy())
+                rows["v"].append(ins.v_n.copy())
+                rows["att"].append(ins.att.copy())
+                rows["b"].append(clk_b)
+                rows["d"].append(clk_d)
+                rows["n"].append(n_used)
+                rows["used"].append(use.copy())
+                rows["cn0"].append([c.cn0_dbhz for c in chans])
+                if truth_on_grid:
+                    ae, ve, pe = nav_errors(ins.llh, ins.v_n, ins.C_b_n, truth.llh[i1],
+                                            truth.v_n[i1], truth.C_b_n[i1])
+                else:
+                    ae = ve = pe = np.full(3, math.nan)
+                rows["ae"].append(ae)
+                rows["ve"].append(ve)
+                rows["pe"].append(pe)
+                if progress is not None and k1 / fs >= next_progress:
+                    progress(k1 / fs, n_ch, n_used)
+                    next_progress = k1 / fs + 1.0
+            prof["output"] += time.perf_counter() - th
+            i0, k0 = i1, k1
+        prof["total"] = time.perf_counter() - t_all
+        prof["processed_s"] = k0 / fs
+        prof["deep_s"] = (k0 - k_grid0) / fs
+        loop = sum(prof[k] for k in ("read", "nco", "correlate", "prefilter", "filter", "ins",
+                                     "output"))
+        prof["loop"] = loop
+        prof["realtime_factor"] = prof["processed_s"] / prof["total"] if prof["total"] else 0.0
+        self.profile = prof
+
+        def arr(key, width=None):
+            a = np.asarray(rows[key], float)
+            return a.reshape(-1, width) if width else a
+
+        return DeepResult(
+            t=arr("t"), week=week, sow=arr("sow"), llh=arr("llh", 3), v_n=arr("v", 3),
+            att=arr("att", 3), clock_bias_m=arr("b"), clock_drift_mps=arr("d"),
+            n_used=np.asarray(rows["n"], int), att_err=arr("ae", 3), vel_err=arr("ve", 3),
+            pos_err=arr("pe", 3), prns=tuple(c.prn for c in chans),
+            used=np.asarray(rows["used"], bool).reshape(-1, n_ch),
+            cn0_dbhz=arr("cn0", n_ch), handover_s=k_grid0 / fs, filter_name=kf.name,
+            adaptation_s=_adaptation_s(kf) - adapt0, profile=prof)
+
+
+def _adaptation_s(kf) -> float:
+    """Seconds spent so far in the filter's adaptive rule (0 without one)."""
+    rule = getattr(kf, "rule", None)
+    if rule is None:
+        return 0.0
+    for name in ("adaptation_time_s", "adaptation_s", "elapsed_s", "time_s"):
+        v = getattr(rule, name, None)
+        if isinstance(v, (int, float)):
+            return float(v)
+    return 0.0
