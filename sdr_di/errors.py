@@ -74,3 +74,12 @@ class CovarianceError(FilterError):
             f"(smallest eigenvalue {min_eigenvalue:.3e}); Cholesky factorization failed. "
             "Check Q/R/P scaling, or construct the filter with psd_fallback='clip' to clip "
             "eigenvalues instead of failing")
+
+
+class ExperimentError(SdrDiError):
+    """Unknown experiment name, unknown parameter or a parameter value of the wrong kind."""
+
+
+class CampaignError(SdrDiError):
+    """Bad campaign configuration (``runs < 1``, bad worker count, unreachable scheduler) or a
+    campaign in which no run completed."""

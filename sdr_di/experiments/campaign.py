@@ -1,0 +1,252 @@
+"""Monte Carlo campaigns: an experiment repeated with independent seeds, in parallel on Dask.
+
+One code path for both kinds of cluster: without a scheduler address a
+:class:`distributed.LocalCluster` of worker *processes* (one thread each) is started on the
+local cores for the campaign and closed after it; with ``scheduler="tcp://host:port"`` the
+campaign connects a :class:`distributed.Client` to that scheduler. Either way runs are
+submitted as tasks of :func:`~.execute.execute_run` and collected with
+:func:`distributed.as_completed`.
+
+Decisions
+---------
+* Seed of run ``i`` = first word of ``numpy.random.SeedSequence(base_seed, spawn_key=(i,))``
+  (the ``i``-th child of the base seed: independent streams, stable when ``runs`` changes),
+  unless explicit ``seeds`` are given.
+* At most as many runs are in flight as the cluster has worker threads; the next run is
+  submitted when one completes. A task that is only *queued* on a worker therefore never
+  shares the fate of a worker that dies under another run.
+* The local cluster's scheduler is started with ``allowed_failures = 0``: a run whose worker
+  dies fails at once with :class:`distributed.KilledWorker` (reported as that run's failure)
+  instead of being retried on the next worker (and possibly killing it too). An external
+  scheduler keeps its own setting (``distributed.scheduler.allowed-failures``, default 3: a
+  run that kills its worker is tried 4 times); the campaign records the value it found.
+* Each record is written to ``runs/<i>.json`` (and the run's files to ``runs/<i>/``) as soon
+  as it arrives, so a crashed or interrupted campaign keeps what it had. Aggregates use the
+  successful runs in index order, so identical seeds give identical aggregates.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import logging
+import os
+import shutil
+import time
+import uuid
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CampaignError
+from ..io.atomic import ensure_output_dir
+from .aggregate import aggregate
+from .execute import execute_run, failed_record, write_json, write_run_record
+from .outputs import write_campaign_outputs
+from .registry import Experiment, get_experiment, parse_params
+
+__all__ = ["CampaignResult", "run_campaign", "run_seed"]
+
+log = logging.getLogger(__name__)
+
+
+def run_seed(base_seed: int, index: int) -> int:
+    """Seed of run ``index`` of a campaign with ``base_seed`` (deterministic, independent)."""
+    ss = np.random.SeedSequence(int(base_seed), spawn_key=(int(index),))
+    return int(ss.generate_state(1, np.uint32)[0])
+
+
+@dataclasses.dataclass
+class CampaignResult:
+    """Outcome of :func:`run_campaign`.
+
+    Attributes
+    ----------
+    experiment : str
+    params : dict
+    records : list of dict
+        One per run in index order (``status``, ``seed``, ``figures`` or ``error``...).
+    stats : dict
+        :func:`~.aggregate.aggregate` of the successful runs.
+    out_dir : Path
+    scheduler : str
+        Address of the scheduler used.
+    elapsed_s : float
+    """
+
+    experiment: str
+    params: dict
+    records: list
+    stats: dict
+    out_dir: Path
+    scheduler: str
+    elapsed_s: float
+
+    @property
+    def failed(self) -> list[dict]:
+        """Records of the runs that failed."""
+        return [r for r in self.records if r["status"] != "ok"]
+
+    @property
+    def n_ok(self) -> int:
+        """Number of successful runs."""
+        return sum(r["status"] == "ok" for r in self.records)
+
+
+def _positive_int(value, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise CampaignError(f"{what} must be an integer >= 1, got {value!r}")
+    return int(value)
+
+
+@contextlib.contextmanager
+def _client(scheduler: str | None, workers: int | None, allowed_failures: int):
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout="10s", set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            raise CampaignError(f"cannot connect to Dask scheduler {scheduler}: {exc}") from None
+        with client:
+            yield client
+        return
+    n = workers or os.cpu_count() or 1
+    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                      dashboard_address=":0", silence_logs=logging.ERROR,
+                      scheduler_kwargs={"allowed_failures": allowed_failures}) as cluster, \
+            Client(cluster, set_as_default=False) as client:
+        yield client
+
+
+def _threads(client) -> int:
+    try:
+        return max(1, sum(client.nthreads().values()))
+    except Exception:  # noqa: BLE001 - scheduler briefly unreachable: keep one run in flight
+        return 1
+
+
+def run_campaign(experiment: str | Experiment, params: Mapping | None = None, runs: int = 4,
+                 *, base_seed: int = 0, seeds: Sequence[int] | None = None,
+                 scheduler: str | None = None, workers: int | None = None,
+                 out_dir: str | Path, allowed_failures: int = 0, overwrite: bool = False,
+                 on_record: Callable[[dict], None] | None = None) -> CampaignResult:
+    """Run ``experiment`` ``runs`` times with independent seeds on Dask and aggregate.
+
+    Parameters
+    ----------
+    experiment : str or Experiment
+        Registered name (``"noise-mismatch"``) or an :class:`~.registry.Experiment`.
+    params : mapping, optional
+        Typed parameter values overriding the experiment's defaults.
+    runs : int
+        Number of runs (>= 1).
+    base_seed : int
+        Seed of the campaign; run ``i`` uses :func:`run_seed` ``(base_seed, i)``.
+    seeds : sequence of int, optional
+        Explicit seeds instead (length ``runs``).
+    scheduler : str, optional
+        Dask scheduler address (``tcp://host:8786``); default: a local cluster.
+    workers : int, optional
+        Worker processes of the local cluster (default: the number of cores).
+    out_dir : path
+        Output folder (module docstring of :mod:`sdr_di.experiments` for its layout).
+    allowed_failures : int
+        Worker deaths a run may survive on the local cluster (default 0).
+    overwrite : bool
+        Replace the run records of an earlier campaign in ``out_dir``.
+    on_record : callable, optional
+        Called with each record as it arrives (progress display).
+
+    Returns
+    -------
+    CampaignResult
+
+    Raises
+    ------
+    ExperimentError
+        Unknown experiment or bad parameter.
+    CampaignError
+        ``runs``/``workers``/``seeds`` invalid, output folder holds another campaign,
+        scheduler unreachable.
+    """
+    t_start = time.perf_counter()
+    exp = get_experiment(experiment)
+    runs = _positive_int(runs, "runs")
+    if workers is not None:
+        workers = _positive_int(workers, "workers")
+    if scheduler is not None and workers is not None:
+        raise CampaignError("--workers applies to the local cluster only; with --scheduler "
+                            "the cluster's workers are used")
+    if seeds is None:
+        seeds = [run_seed(base_seed, i) for i in range(runs)]
+    else:
+        seeds = [int(s) for s in seeds]
+        if len(seeds) != runs:
+            raise CampaignError(f"{len(seeds)} seeds given for {runs} runs")
+    params = parse_params(exp, overrides=dict(params or {}))
+    out = ensure_output_dir(out_dir)
+    runs_dir = out / "runs"
+    if runs_dir.exists():
+        if not overwrite:
+            raise CampaignError(f"output folder {out} already holds campaign runs; choose "
+                                "another --out or pass --force to replace them")
+        shutil.rmtree(runs_dir)
+    ensure_output_dir(runs_dir)
+    config = {"experiment": exp.name, "description": exp.description, "params": params,
+              "runs": runs, "base_seed": int(base_seed), "seeds": seeds}
+    write_json(out / "campaign.json", {**config, "status": "running"})
+
+    records: dict[int, dict] = {}
+    token = uuid.uuid4().hex[:8]
+    with _client(scheduler, workers, allowed_failures) as client:
+        from distributed import KilledWorker, as_completed
+
+        address = client.scheduler.address
+        try:
+            found_failures = client.run_on_scheduler(
+                lambda dask_scheduler: dask_scheduler.allowed_failures)
+        except Exception:  # noqa: BLE001 - informational only
+            found_failures = None
+        pending = list(enumerate(seeds))
+        where: dict[str, tuple[int, int]] = {}
+        ac = as_completed(loop=client.loop)
+
+        def submit_next() -> None:
+            i, s = pending.pop(0)
+            fut = client.submit(execute_run, exp, params, s, i, pure=False,
+                                key=f"{exp.name}-{token}-run-{i}")
+            where[fut.key] = (i, s)
+            ac.add(fut)
+
+        for _ in range(min(_threads(client), len(pending))):
+            submit_next()
+        for fut in ac:
+            i, s = where.pop(fut.key)
+            try:
+                rec = fut.result()
+            except KilledWorker as exc:
+                rec = failed_record(i, s, f"worker died while running this run ({exc})")
+            except Exception as exc:  # noqa: BLE001 - lost task: that run's failure
+                rec = failed_record(i, s, f"{type(exc).__name__}: {exc}")
+            finally:
+                fut.release()
+            write_run_record(runs_dir, rec)
+            rec.pop("files", None)
+            records[i] = rec
+            if on_record is not None:
+                on_record(rec)
+            while pending and len(where) < _threads(client):
+                submit_next()
+            if pending and not where:
+                submit_next()
+
+    ordered = [records[i] for i in range(runs)]
+    stats = aggregate(r["figures"] for r in ordered if r["status"] == "ok")
+    result = CampaignResult(experiment=exp.name, params=params, records=ordered, stats=stats,
+                            out_dir=out, scheduler=address,
+                            elapsed_s=time.perf_counter() - t_start)
+    write_campaign_outputs(exp, result, config={**config, "scheduler": address,
+                                                "scheduler_allowed_failures": found_failures})
+    return result

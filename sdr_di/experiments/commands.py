@@ -1,0 +1,142 @@
+"""CLI handlers: ``sdr-di campaign``, ``sdr-di robustness``, ``sdr-di report``.
+
+:func:`add_parsers` adds the three sub-commands to the ``sdr-di`` sub-parser set; each sets
+``func`` to its handler, which returns the exit status (0: all runs completed; 1: some runs
+failed, their errors printed) and raises :class:`~sdr_di.errors.SdrDiError` subclasses for
+bad input (printed by the CLI on one line, exit status 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..errors import CampaignError
+
+__all__ = ["add_parsers", "cmd_campaign", "cmd_report", "cmd_robustness"]
+
+
+def _default_out(kind: str, experiment: str) -> Path:
+    from ..scenario import REPO_ROOT
+
+    return REPO_ROOT / "signals" / "out" / f"{kind}_{experiment}"
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("experiment", help="experiment name (noise-mismatch, ...)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output folder (default: signals/out/<command>_<experiment>)")
+    p.add_argument("--seed", type=int, default=0, metavar="S",
+                   help="seed (campaign: base seed of the runs' seeds; default 0)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="run length [s] (the experiment's duration_s parameter)")
+    p.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="set an experiment parameter (repeatable), e.g. case=r, "
+                   "filters=ekf,ff-aukf")
+    p.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="Dask scheduler address (tcp://host:8786); default: local processes")
+    p.add_argument("--no-report", action="store_true", help="do not write report.html")
+
+
+def add_parsers(subparsers) -> None:
+    """Add ``campaign``, ``robustness`` and ``report`` to an argparse sub-parser set."""
+    p = subparsers.add_parser(
+        "campaign", help="repeat an experiment with independent seeds on Dask and aggregate",
+        description="Run an experiment RUNS times with independent seeds in parallel (a local "
+        "Dask cluster of worker processes, or the cluster of --scheduler), write each run as "
+        "it completes (runs/<i>.json), then mean/std/min/max of every figure, the "
+        "experiment's tables and plots and report.html.")
+    _common(p)
+    p.add_argument("--runs", type=int, required=True, metavar="N", help="number of runs")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="local worker processes (default: number of cores)")
+    p.add_argument("--force", action="store_true",
+                   help="replace the runs of an earlier campaign in --out")
+    p.set_defaults(func=cmd_campaign)
+
+    p = subparsers.add_parser(
+        "robustness", help="one run of an experiment, with its table, plots and report",
+        description="Run an experiment once (seed --seed) and write its figures, tables, "
+        "time series, plots and report.html.")
+    _common(p)
+    p.set_defaults(func=cmd_robustness)
+
+    p = subparsers.add_parser(
+        "report", help="render report.html for a campaign or robustness output folder",
+        description="Write DIR/report.html: one self-contained page with every table "
+        "(inline) and plot (embedded PNG) of the folder.")
+    p.add_argument("dir", type=Path, help="output folder of sdr-di campaign / robustness")
+    p.set_defaults(func=cmd_report)
+
+
+def _params(args: argparse.Namespace):
+    from .registry import get_experiment, parse_params
+
+    exp = get_experiment(args.experiment)
+    overrides = {}
+    if args.duration is not None:
+        if not args.duration > 0:
+            raise CampaignError(f"--duration must be > 0, got {args.duration:g}")
+        overrides["duration_s"] = float(args.duration)
+    return exp, parse_params(exp, args.param, overrides)
+
+
+def cmd_campaign(args: argparse.Namespace) -> int:
+    """Handler of ``sdr-di campaign``."""
+    from .campaign import run_campaign
+    from .report import render_report
+
+    exp, params = _params(args)
+    if args.seed < 0:
+        raise CampaignError(f"--seed must be >= 0, got {args.seed}")
+    out = args.out or _default_out("campaign", exp.name)
+
+    def show(rec: dict) -> None:
+        state = "ok" if rec["status"] == "ok" else f"FAILED: {rec.get('error')}"
+        print(f"  run {rec['index']:4d} seed {rec['seed']:10d}  {state}", flush=True)
+
+    res = run_campaign(exp, params, args.runs, base_seed=args.seed, scheduler=args.scheduler,
+                       workers=args.workers, out_dir=out, overwrite=args.force,
+                       on_record=show)
+    print(f"{res.n_ok}/{len(res.records)} runs completed in {res.elapsed_s:.1f} s on "
+          f"{res.scheduler}")
+    for r in res.failed:
+        print(f"  failed: run {r['index']} (seed {r['seed']}): {r.get('error')}",
+              file=sys.stderr)
+    if res.n_ok == 0:
+        raise CampaignError(f"campaign {exp.name}: all {len(res.records)} runs failed "
+                            f"(first: {res.records[0].get('error')}); records in {out}/runs")
+    print(f"aggregate {out / 'aggregate.md'}")
+    if not args.no_report:
+        print(f"report    {render_report(out)}")
+    return 1 if res.failed else 0
+
+
+def cmd_robustness(args: argparse.Namespace) -> int:
+    """Handler of ``sdr-di robustness``."""
+    from .report import render_report
+    from .single_run import run_experiment
+
+    exp, params = _params(args)
+    out = args.out or _default_out("robustness", exp.name)
+    res = run_experiment(exp, params, args.seed, out_dir=out, scheduler=args.scheduler)
+    if not res.ok:
+        print(f"{exp.name}: run failed: {res.record.get('error')}", file=sys.stderr)
+    else:
+        figs = res.record["figures"]
+        width = max(len(k) for k in figs) if figs else 0
+        for k, v in figs.items():
+            print(f"{k:{width}s} {v:.6g}" if isinstance(v, float) else f"{k:{width}s} {v}")
+    print(f"output    {out}")
+    if not args.no_report:
+        print(f"report    {render_report(out)}")
+    return 0 if res.ok else 1
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Handler of ``sdr-di report``."""
+    from .report import render_report
+
+    print(render_report(args.dir))
+    return 0

@@ -1,0 +1,216 @@
+"""``noise-mismatch``: every filter given the wrong Q or the wrong R (papers 000 and 003).
+
+One run simulates the scenario's truth and IMU once (seeded) and runs the closed-loop loosely
+coupled filter (:func:`sdr_di.integration.loose.run_loose`) once per filter on the same inputs
+and the same GNSS noise draw, so the filters differ only in how they cope with the mismatch:
+
+* ``case = "q"`` (paper 000): scenario ``signals/lc_paper000.toml``; the filters are given
+  ``q_scale`` x the true process noise (the scenario says 16).
+* ``case = "r"`` (paper 003): scenario ``signals/lc_paper003.toml``; the true GNSS noise
+  variance is multiplied by the window factor during the window (the scenario says 16 x during
+  500-700 s) while the filters keep ``r_scale`` x the nominal R (1).
+
+Figures (per filter ``f``): ``f.att_deg_rmse``, ``f.att_deg_max``, ``f.vel_mps_rmse``,
+``f.vel_mps_max``, ``f.pos_m_rmse``, ``f.pos_m_max`` over the run and, when the run has noise
+windows, the same with ``f.win_`` over the epochs inside them; ``n_epochs``; a filter that
+fails (e.g. loses positive definiteness) gets NaN figures and ``f.error``. Files: one error
+CSV per filter (``errors_<f>.csv``) and ``error_norms.png`` (norms over time per filter).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ExperimentError, SdrDiError
+from ..filters import FILTER_NAMES
+from ..integration.loose import load_lc_scenario, make_inputs, run_loose
+from ..integration.noise import NoiseWindow
+from ..scenario import REPO_ROOT
+from . import plotting
+
+__all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run", "tables"]
+
+NAME = "noise-mismatch"
+DESCRIPTION = ("wrong Q (paper 000, q_scale) or wrong R (paper 003, noise window / r_scale) "
+               "given to every filter in loosely coupled runs; RMSE/max per filter")
+
+SCENARIOS = {"q": REPO_ROOT / "signals" / "lc_paper000.toml",
+             "r": REPO_ROOT / "signals" / "lc_paper003.toml"}
+
+#: ``None`` = the scenario's value; ``r_window``: ``"scenario"``, ``"none"`` or ``"t0,t1,f"``.
+default_params: dict = {
+    "case": "q",
+    "scenario": None,
+    "filters": "all",
+    "duration_s": None,
+    "q_scale": None,
+    "r_scale": None,
+    "r_window": "scenario",
+    "plots": True,
+}
+
+QUANTITIES = (("att_deg", "attitude [deg]"), ("vel_mps", "velocity [m/s]"),
+              ("pos_m", "position [m]"))
+STATS = ("rmse", "max")
+
+
+def _filters(text: str) -> list[str]:
+    if text.strip().lower() == "all":
+        return list(FILTER_NAMES)
+    names = [n.strip().lower() for n in str(text).split(",") if n.strip()]
+    bad = [n for n in names if n not in FILTER_NAMES]
+    if bad or not names:
+        raise ExperimentError(f"noise-mismatch: filters={text!r}: unknown filter(s) "
+                              f"{', '.join(bad) or '(none given)'}; valid: all or "
+                              f"{', '.join(FILTER_NAMES)}")
+    return names
+
+
+def _window(text: str) -> tuple[NoiseWindow, ...] | None:
+    t = str(text).strip().lower()
+    if t == "scenario":
+        return None
+    if t == "none":
+        return ()
+    try:
+        t0, t1, f = (float(v) for v in t.split(","))
+        return (NoiseWindow(t0, t1, f),)
+    except ValueError as exc:
+        raise ExperimentError(f"noise-mismatch: r_window={text!r}: expected 'scenario', "
+                              f"'none' or 't0,t1,factor' with t0 < t1, factor > 0 ({exc})") \
+            from None
+
+
+def check_params(params: dict) -> None:
+    """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
+    if params["case"] not in SCENARIOS:
+        raise ExperimentError(f"noise-mismatch: case={params['case']!r}: expected 'q' "
+                              "(wrong Q, paper 000) or 'r' (wrong R, paper 003)")
+    _filters(params["filters"])
+    _window(params["r_window"])
+    for key in ("duration_s", "q_scale", "r_scale"):
+        v = params[key]
+        if v is not None and (isinstance(v, (str, bool)) or not math.isfinite(v) or v <= 0):
+            raise ExperimentError(f"noise-mismatch: {key}={v!r}: expected a number > 0")
+    if params["scenario"] is not None and not Path(str(params["scenario"])).is_file():
+        raise ExperimentError(f"noise-mismatch: scenario {params['scenario']}: no such file")
+
+
+def run(params: dict, seed: int, out_dir: Path) -> dict:
+    """One run: every filter on the same seeded inputs (module docstring).
+
+    Parameters
+    ----------
+    params : dict
+        :data:`default_params` updated by the caller.
+    seed : int
+        Seed of the IMU noise and the GNSS noise (replaces the scenario's seed).
+    out_dir : Path
+        Existing directory for ``errors_<filter>.csv`` and ``error_norms.png``.
+
+    Returns
+    -------
+    dict
+        Flat figures (module docstring).
+    """
+    check_params(params)
+    path = Path(str(params["scenario"])) if params["scenario"] else SCENARIOS[params["case"]]
+    sc, st = load_lc_scenario(path)
+    sc = sc.with_overrides(seed=int(seed), duration_s=params["duration_s"])
+    kw = {k: float(params[k]) for k in ("q_scale", "r_scale") if params[k] is not None}
+    windows = _window(params["r_window"])
+    if windows is not None:
+        kw["noise"] = dataclasses.replace(st.noise, windows=windows)
+    st = st.replace(**kw)
+    truth, imu, model = make_inputs(sc, st)
+    spans = [(w.t0, w.t1) for w in st.noise.windows]
+    fig: dict = {"case": params["case"], "q_scale": st.q_scale, "r_scale": st.r_scale,
+                 "duration_s": float(sc.duration_s)}
+    series: dict = {}
+    for name in _filters(params["filters"]):
+        try:
+            res = run_loose(truth, imu, model, st.replace(filter=name), seed=int(seed))
+        except SdrDiError as exc:
+            for q, _ in QUANTITIES:
+                for s in STATS:
+                    fig[f"{name}.{q}_{s}"] = math.nan
+                    if spans:
+                        fig[f"{name}.win_{q}_{s}"] = math.nan
+            fig[f"{name}.error"] = f"{type(exc).__name__}: {exc}"
+            continue
+        m = res.metrics()
+        fig["n_epochs"] = int(m["n"])
+        for q, _ in QUANTITIES:
+            for s in STATS:
+                fig[f"{name}.{q}_{s}"] = float(m[f"{q}_{s}"])
+        if spans:
+            inside = np.zeros(res.t.size, bool)
+            for t0, t1 in spans:
+                inside |= (res.t >= t0) & (res.t <= t1)
+            from ..integration.metrics import summarize
+
+            mw = summarize(res.t[inside], res.att_err[inside], res.vel_err[inside],
+                           res.pos_err[inside])
+            for q, _ in QUANTITIES:
+                for s in STATS:
+                    fig[f"{name}.win_{q}_{s}"] = float(mw[f"{q}_{s}"])
+        res.write_csv(Path(out_dir) / f"errors_{name}.csv")
+        series[name] = res
+    if params["plots"] and series:
+        note = plotting.matplotlib_missing()
+        if note is None:
+            panels = [(label, {n: np.linalg.norm(getattr(r, f"{q[:3]}_err"), axis=1)
+                               for n, r in series.items()}) for q, label in QUANTITIES]
+            plotting.time_series(Path(out_dir) / "error_norms.png",
+                                 {n: r.t for n, r in series.items()}, panels,
+                                 title=f"noise-mismatch case {params['case']}: error norms "
+                                 f"(seed {seed})", spans=spans)
+        else:
+            fig["plots_note"] = note
+    return fig
+
+
+def _filter_names(stats: dict) -> list[str]:
+    seen = []
+    for key in stats:
+        name, dot, _ = key.partition(".")
+        if dot and name not in seen:
+            seen.append(name)
+    return seen
+
+
+def tables(stats: dict) -> dict[str, list[dict]]:
+    """Table ``filters``: one row per filter, mean (and std over runs) of every figure."""
+    rows = []
+    for name in _filter_names(stats):
+        row: dict = {"filter": name}
+        for key, st in stats.items():
+            if key.startswith(name + ".") and isinstance(st, dict):
+                fig = key[len(name) + 1:]
+                row[fig] = st["mean"]
+                if st["n"] > 1:
+                    row[fig + "_std"] = st["std"]
+        rows.append(row)
+    return {"filters": rows}
+
+
+def plots(results: list[dict], out_dir: Path) -> list[Path]:
+    """``rmse_by_filter.png``: mean RMSE per filter over the runs, std as error bars."""
+    if not results or plotting.matplotlib_missing():
+        return []
+    names = _filter_names(results[0]["figures"])
+    panels = []
+    for q, label in QUANTITIES:
+        vals = np.array([[r["figures"].get(f"{n}.{q}_rmse", math.nan) for n in names]
+                         for r in results], float)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            panels.append((f"RMSE {label}", np.nanmean(vals, axis=0),
+                           np.nanstd(vals, axis=0) if len(results) > 1 else None))
+    return [plotting.bar_chart(Path(out_dir) / "rmse_by_filter.png", names, panels,
+                               title=f"noise-mismatch: RMSE per filter ({len(results)} runs)")]

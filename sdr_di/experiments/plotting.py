@@ -1,0 +1,95 @@
+"""PNG plots of experiment results with matplotlib's object API (no pyplot, no display).
+
+matplotlib is a dependency of sdr-di (reports are a feature, not an extra), but a broken or
+missing installation must not lose a run's figures: :func:`matplotlib_missing` says why plots
+cannot be drawn, and the callers record that note instead of a plot.
+"""
+
+from __future__ import annotations
+
+import importlib
+import io
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..io.atomic import atomic_open
+
+__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "time_series"]
+
+PLOTS_SKIPPED = "plots skipped: matplotlib is not installed (pip install matplotlib)"
+
+
+def matplotlib_missing() -> str | None:
+    """``None`` when matplotlib can draw PNGs, else a one-line note saying why not."""
+    try:
+        for mod in ("matplotlib.figure", "matplotlib.backends.backend_agg"):
+            importlib.import_module(mod)
+    except ImportError:
+        return PLOTS_SKIPPED
+    return None
+
+
+def _save(fig, path: Path) -> Path:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    with atomic_open(path, "wb") as fh:
+        fh.write(buf.getvalue())
+    return path
+
+
+def time_series(path: Path, t_by_label: dict[str, np.ndarray],
+                panels: Sequence[tuple[str, dict[str, np.ndarray]]], title: str = "",
+                spans: Sequence[tuple[float, float]] = ()) -> Path:
+    """One panel per quantity, one line per label (e.g. error norm per filter) against time.
+
+    Parameters
+    ----------
+    path : Path
+        PNG to write (atomically).
+    t_by_label : dict
+        Time [s] of each label's series.
+    panels : sequence of (ylabel, {label: values})
+    title : str
+    spans : sequence of (t0, t1)
+        Time windows to shade (e.g. noise windows).
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9, 2.6 * len(panels)), layout="constrained")
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (ylabel, series) in zip(axes, panels):
+        for label, y in series.items():
+            ax.plot(t_by_label[label], y, lw=1.0, label=label)
+        for t0, t1 in spans:
+            ax.axvspan(t0, t1, color="0.85", zorder=0)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    axes[0].legend(fontsize="x-small", ncol=5, loc="upper right")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)
+
+
+def bar_chart(path: Path, labels: Sequence[str],
+              panels: Sequence[tuple[str, Sequence[float], Sequence[float] | None]],
+              title: str = "") -> Path:
+    """Grouped panels of bars (one bar per label) with optional error bars (e.g. std)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9, 2.4 * len(panels)), layout="constrained")
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    x = np.arange(len(labels))
+    for ax, (ylabel, values, err) in zip(axes, panels):
+        ax.bar(x, values, yerr=err, capsize=3, color="tab:blue", alpha=0.8)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, axis="y", alpha=0.3)
+    axes[-1].set_xticks(x, labels, rotation=30, ha="right")
+    if title:
+        fig.suptitle(title)
+    return _save(fig, path)

@@ -1,0 +1,138 @@
+"""``render_report(dir)``: one self-contained HTML page for a campaign or single-run folder.
+
+The page holds the configuration, the failed runs, every table listed in ``campaign.json``
+or ``result.json`` (inline HTML, read from the CSV files) and every PNG of the folder plus
+those of the first few runs (embedded as base64 ``data:`` URIs): it can be mailed or archived
+alone.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+from ..errors import ExperimentError
+from ..io.atomic import atomic_open
+from .execute import read_json
+from .tables import format_cell, read_csv_table
+
+__all__ = ["render_report"]
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
+table{border-collapse:collapse;margin:0.5em 0 1.5em;font-size:0.85em}
+th,td{border:1px solid #ccc;padding:2px 6px;text-align:right}
+th{background:#eee} td:first-child,th:first-child{text-align:left}
+.scroll{overflow-x:auto} img{max-width:100%;border:1px solid #ddd;margin:0.5em 0}
+.failed{color:#a00} code{background:#f4f4f4;padding:0 3px}
+"""
+
+
+def _cell(text: str) -> str:
+    try:
+        return format_cell(float(text)) if text not in ("", "True", "False") else text
+    except ValueError:
+        return text
+
+
+def _table_html(path: Path) -> str:
+    head, rows = read_csv_table(path)
+    out = ['<div class="scroll"><table><tr>']
+    out += [f"<th>{html.escape(h)}</th>" for h in head]
+    out.append("</tr>")
+    for row in rows:
+        out.append("<tr>" + "".join(f"<td>{html.escape(_cell(c))}</td>" for c in row) + "</tr>")
+    out.append("</table></div>")
+    return "".join(out)
+
+
+def _img_html(path: Path, caption: str) -> str:
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return (f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+
+
+def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
+    """Write ``folder/report.html`` for a campaign or single-run folder.
+
+    Parameters
+    ----------
+    folder : path
+        Output folder of ``sdr-di campaign`` (``campaign.json``) or ``sdr-di robustness``
+        (``result.json``).
+    max_run_plots : int
+        Per-run PNGs are included for this many runs of a campaign (the first ones).
+
+    Returns
+    -------
+    Path
+        The HTML file.
+
+    Raises
+    ------
+    ExperimentError
+        Not a folder written by a campaign or a run.
+    """
+    folder = Path(folder)
+    if (folder / "campaign.json").is_file():
+        meta = read_json(folder / "campaign.json")
+        kind = "campaign"
+    elif (folder / "result.json").is_file():
+        meta = read_json(folder / "result.json")
+        kind = "run"
+    else:
+        raise ExperimentError(f"report {folder}: not an experiment output folder (no "
+                              "campaign.json or result.json)")
+    name = meta.get("experiment", "?")
+    parts = [(f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>sdr-di {kind} "
+             f"{html.escape(name)}</title><style>{_CSS}</style></head><body>")]
+    if kind == "campaign":
+        status = meta.get("status")
+        parts.append(f"<h1>Campaign: {html.escape(name)}</h1>")
+        parts.append(f"<p>{html.escape(meta.get('description', ''))}</p>")
+        if status != "done":
+            parts.append(f"<p class='failed'>Campaign status: {html.escape(str(status))} "
+                         "(incomplete: tables come from the run records so far)</p>")
+        parts.append(f"<p>{meta.get('n_ok', '?')} of {meta.get('runs')} runs completed, "
+                     f"{meta.get('n_failed', '?')} failed; base seed {meta.get('base_seed')}; "
+                     f"scheduler <code>{html.escape(str(meta.get('scheduler')))}</code>.</p>")
+    else:
+        parts.append(f"<h1>Run: {html.escape(name)}</h1>")
+        parts.append(f"<p>{html.escape(meta.get('description', ''))}</p>")
+        parts.append(f"<p>seed {meta.get('seed')}, status {html.escape(meta.get('status'))}"
+                     "</p>")
+        if meta.get("status") != "ok":
+            parts.append(f"<p class='failed'>{html.escape(str(meta.get('error')))}</p>")
+    params = json.dumps(meta.get("params", {}), indent=1)
+    parts.append(f"<h2>Parameters</h2><pre>{html.escape(params)}</pre>")
+    for note in meta.get("notes", []):
+        parts.append(f"<p><em>{html.escape(note)}</em></p>")
+    failed = meta.get("failed") or []
+    if failed:
+        parts.append("<h2>Failed runs</h2><ul class='failed'>")
+        parts += [f"<li>run {f['index']} (seed {f['seed']}): {html.escape(str(f['error']))}"
+                  "</li>" for f in failed]
+        parts.append("</ul>")
+    parts.append("<h2>Tables</h2>")
+    for t in meta.get("tables", []):
+        path = folder / f"{t}.csv"
+        if path.is_file():
+            parts.append(f"<h3>{html.escape(t)}</h3>{_table_html(path)}")
+    parts.append("<h2>Plots</h2>")
+    pngs = sorted(folder.glob("*.png"))
+    if kind == "campaign":
+        runs = sorted((p for p in (folder / "runs").glob("*") if p.is_dir()),
+                      key=lambda p: int(p.name) if p.name.isdigit() else 1 << 30)
+        for run_dir in runs[:max_run_plots]:
+            pngs += sorted(run_dir.rglob("*.png"))
+    if not pngs:
+        parts.append("<p><em>no plots in this folder</em></p>")
+    for p in pngs:
+        parts.append(_img_html(p, p.relative_to(folder).as_posix()))
+    parts.append("</body></html>\n")
+    out = folder / "report.html"
+    with atomic_open(out, "w") as fh:
+        fh.write("\n".join(parts))
+    return out
