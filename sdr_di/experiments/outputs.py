@@ -19,9 +19,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from . import plotting
 from .aggregate import single_stats
 from .execute import write_json
-from .plotting import matplotlib_missing
 from .registry import Experiment
 from .tables import stats_rows, write_table
 
@@ -36,7 +36,7 @@ def _experiment_outputs(exp: Experiment, stats: dict, ok_records: list[dict],
             write_table(out, name, rows)
             tables.append(name)
     if exp.plots is not None and ok_records:
-        note = matplotlib_missing()
+        note = plotting.matplotlib_missing()
         if note:
             notes.append(note)
         else:
