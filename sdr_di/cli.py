@@ -13,6 +13,10 @@ from pathlib import Path
 from .errors import SdrDiError
 
 
+class UsageError(SdrDiError):
+    """Command-line options that do not fit together (one-line message, exit 2)."""
+
+
 def _prn_list(text: str) -> list[str]:
     return [p for p in text.replace(" ", "").split(",") if p]
 
@@ -85,8 +89,10 @@ def _add_run(sub) -> None:
         "beside X.bin) or, for a file sdr-di did not write, by --fs/--if/--format.",
     )
     p.add_argument("if_file", type=Path, help="IF samples (or its .json sidecar)")
-    p.add_argument("--mode", choices=("scalar",), default="scalar",
-                   help="receiver architecture (scalar tracking loops)")
+    p.add_argument("--mode", choices=("scalar", "deep"), default="scalar",
+                   help="receiver architecture: scalar tracking loops, or deep (INS-aided "
+                   "vector tracking: scalar start-up, then every NCO commanded from the "
+                   "INS corrected by the integration filter)")
     p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
                    help="comma-separated PRNs to search (default all 63)")
     p.add_argument("--out", type=Path, default=None,
@@ -105,6 +111,27 @@ def _add_run(sub) -> None:
     p.add_argument("--start-week", type=int, default=None, help="foreign file: BDT week hint")
     p.add_argument("--start-sow", type=float, default=None,
                    help="foreign file: BDT seconds of week of sample 0 (hint)")
+    g = p.add_argument_group("deep mode")
+    g.add_argument("--filter", default=None,
+                   help="integration filter (default ff-aukf; any of ekf, ukf, ckf, ff-aukf, "
+                   "rae-aukf, ml-q-ukf, sage-husa-ukf, q-scaling-ekf, q-scaling-ukf, ml-r-ckf)")
+    g.add_argument("--imu", type=Path, default=None,
+                   help="IMU file (default: the sidecar's imu_file)")
+    g.add_argument("--truth", type=Path, default=None,
+                   help="reference file for --align truth and the error columns (default: "
+                   "the sidecar's truth_file)")
+    g.add_argument("--ephemeris", type=Path, default=None,
+                   help="RINEX navigation file used as assistance data (default: the "
+                   "sidecar's ephemeris_file)")
+    g.add_argument("--no-assist", action="store_true",
+                   help="use decoded ephemerides and ionosphere only")
+    g.add_argument("--filter-rate", type=float, default=None, metavar="HZ",
+                   help="integration filter / NCO command rate [Hz] (default 50)")
+    g.add_argument("--align", choices=("truth", "gnss"), default=None,
+                   help="INS initial alignment: from the reference at the IMU start "
+                   "(default) or from the GNSS fix at the hand-over")
+    g.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="process only the first S seconds")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
 
@@ -113,11 +140,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .constants import parse_prn
     from .receiver.run_scalar import open_source, run_scalar
 
+    deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
+                                                       "filter_rate", "align", "duration")
+                 if getattr(args, n) is not None] + (["--no-assist"] if args.no_assist else [])
+    if args.mode != "deep" and deep_opts:
+        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep")
     prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
     source = open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
                          sample_format=args.sample_format, spectrum_inverted=args.inverted,
                          start_week=args.start_week, start_sow=args.start_sow)
     out = args.out or args.if_file.with_name(args.if_file.stem + "_run")
+    if args.mode == "deep":
+        return _run_deep(args, source, out, prns)
     res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress)
     rt = res.processed_s / max(res.wall_s, 1e-9)
     print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
@@ -125,6 +159,53 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for row in res.channels:
         print(f"  C{row['prn']:02d} {row['state']:8s} C/N0 {row['cn0_dbhz']} dB-Hz  "
               f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
+    for label, path in res.files.items():
+        print(f"{label:9s} {path}")
+    return 0
+
+
+def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
+    from .deep.run_deep import run_deep
+    from .deep.vector_loop import DeepConfig
+    from .errors import FilterError
+    from .filters import FILTER_NAMES
+
+    name = (args.filter or "ff-aukf").strip().lower()
+    if name not in FILTER_NAMES:
+        raise FilterError(f"unknown filter {name!r}; valid names: {', '.join(FILTER_NAMES)}")
+    kw = {"filter": name, "output_rate_hz": args.rate}
+    if args.filter_rate is not None:
+        kw["filter_rate_hz"] = args.filter_rate
+    if args.align is not None:
+        kw["align"] = args.align
+    try:
+        cfg = DeepConfig(**kw)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if args.duration is not None and not args.duration > 0:
+        raise UsageError(f"--duration must be > 0, got {args.duration:g}")
+    try:
+        res = run_deep(source, out, config=cfg, imu_path=args.imu, truth_path=args.truth,
+                       nav_path=args.ephemeris, assist=not args.no_assist, prns=prns,
+                       progress=not args.no_progress, duration_s=args.duration)
+    except ValueError as exc:  # e.g. a filter rate that does not divide the IMU rate
+        raise UsageError(str(exc)) from None
+    r = res.result
+    prof = r.profile
+    print(f"processed {prof['processed_s']:.1f} s in {res.wall_s:.1f} s "
+          f"(x{prof['processed_s'] / max(res.wall_s, 1e-9):.2f} real time); hand-over to the "
+          f"vector loop at {r.handover_s:.2f} s with "
+          f"{', '.join(f'C{p:02d}' for p in r.prns)}")
+    loop = max(prof["loop"], 1e-9)
+    print("vector loop time: " + ", ".join(
+        f"{k} {100 * prof[k] / loop:.0f}%" for k in ("correlate", "prefilter", "filter", "ins",
+                                                    "nco", "read")))
+    m = res.metrics
+    if m["n"] and m["pos_m_rmse"] == m["pos_m_rmse"]:
+        print(f"errors vs reference ({m['n']} epochs after the hand-over): attitude RMSE "
+              f"{m['att_deg_rmse']:.4f} deg (max {m['att_deg_max']:.4f}), velocity "
+              f"{m['vel_mps_rmse']:.4f} m/s (max {m['vel_mps_max']:.4f}), position "
+              f"{m['pos_m_rmse']:.3f} m (max {m['pos_m_max']:.3f})")
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     return 0

@@ -43,7 +43,7 @@ from ..orbits.broadcast import sat_pos_vel_clock
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from ..receiver.pvt import PvtConfig, atmosphere_delays, sagnac_rotation
 
-__all__ = ["RangePrediction", "predict_ranges", "NcoCommand", "nco_commands"]
+__all__ = ["NcoCommand", "RangePrediction", "nco_commands", "predict_ranges"]
 
 _TAU0_S = 0.075
 
@@ -117,7 +117,7 @@ def predict_ranges(ephemerides: Sequence[Ephemeris], week: int, sow_nom, r_rx, c
         for i, eph in enumerate(ephemerides):
             rs, vs, dts, _ = sat_pos_vel_clock(eph, t_r - tau[i], week=week)
             r_sat[i], v_sat[i], dt_sv[i] = rs, vs, dts
-        rot, rho, theta = sagnac_rotation(r_sat.reshape(-1, 3), np.repeat(r[None], n_s, 0)
+        rot, rho, _ = sagnac_rotation(r_sat.reshape(-1, 3), np.repeat(r[None], n_s, 0)
                                           .reshape(-1, 3))
         tau = rho.reshape(n_s, n_t) / C_LIGHT
     r_rot = rot.reshape(n_s, n_t, 3)

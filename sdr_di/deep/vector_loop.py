@@ -59,7 +59,7 @@ import numpy as np
 from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
 from ..errors import ImuDataError, NoEphemerisError, SdrDiError, UnknownPrnError
 from ..filters import make_filter
-from ..frames import C_e_n, ecef_to_llh, euler_to_C_b_n, llh_to_ecef
+from ..frames import ecef_to_llh, euler_to_C_b_n, llh_to_ecef
 from ..ins.error_model import InsErrorModel, NavState, process_noise
 from ..ins.mechanization import StrapdownINS
 from ..integration.measurements import RangeRateMeasurementModel
@@ -230,6 +230,7 @@ class _Chan:
     n_prompts: int = 0
     cn0_dbhz: float = math.nan
     used: bool = True
+    f_scalar: float = 0.0    # scalar loop Doppler at the hand-over [Hz]
 
 
 def _imu_offset_s(source: IfSource, imu) -> float:
@@ -297,7 +298,7 @@ class DeepReceiver:
         t_all = time.perf_counter()
         fs = source.sampling_rate_hz
         stop = source.n_samples if duration_s is None else min(
-            source.n_samples, int(round(duration_s * fs)))
+            source.n_samples, round(duration_s * fs))
         # ---- IMU / IF time consistency
         off = _imu_offset_s(source, imu)
         if_end = stop / fs
@@ -311,7 +312,7 @@ class DeepReceiver:
         if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
             raise ValueError(f"filter rate {cfg.filter_rate_hz} Hz must divide the IMU rate "
                              f"{imu.rate_hz} Hz")
-        n_per = int(round(n_per))
+        n_per = round(n_per)
         if cfg.align == "truth" and truth is None:
             raise ImuDataError("align='truth' needs the reference (truth) file; use "
                                "align='gnss' without one")
@@ -390,7 +391,7 @@ class DeepReceiver:
             s = int(c.next_start)
             o = c.observation_at(s)
             eph = eph_src.select(prn, sol.week, sol.sow)
-            e = int(round((o.t_tx_sow - S0) * 1000.0))
+            e = round((o.t_tx_sow - S0) * 1000.0)
             chans.append(_Chan(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s, epoch=e,
                                phase=float(c.phi), prompts=np.zeros(cfg.cn0_window * 20,
                                                                     np.complex128),
@@ -459,7 +460,7 @@ class DeepReceiver:
                          **cfg.filter_options)
 
         # ---- pre-filters from the scalar loops
-        k_grid0 = int(round(t_if[i_h] * fs))
+        k_grid0 = round(t_if[i_h] * fs)
         r0 = llh_to_ecef(*ins.llh)
         for c in chans:
             sc = rx.channels[c.prn]
@@ -468,12 +469,12 @@ class DeepReceiver:
             chips_deep = CHIP_RATE_B3I * (t_rel(s) - pr.P[0, 0] / C_LIGHT)
             dtau = c.epoch * CODE_LENGTH_B3I + float(sc.theta) - chips_deep
             pre.reset(c.idx, dtau=dtau, df=0.0, sigma_tau=0.1, sigma_phi=0.3, sigma_f=3.0)
-            c._f_scalar = float(sc.fd)  # noqa: SLF001 - initial frequency error (set below)
+            c.f_scalar = float(sc.fd)
 
         # ---- main loop
         prof = {"scalar": t_scalar, "read": 0.0, "nco": 0.0, "correlate": 0.0,
                 "prefilter": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
-        out_every = max(1, int(round(cfg.filter_rate_hz / cfg.output_rate_hz)))
+        out_every = max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz))
         rows = {k: [] for k in ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve",
                                 "pe", "used", "cn0")}
         truth_on_grid = (truth is not None and len(truth.t) == len(imu.t)
@@ -481,7 +482,7 @@ class DeepReceiver:
         x_buf = np.empty(0, dtype=source.dtype)
         buf0 = buf1 = 0
         npow = 1.0
-        chunk = max(4 * n1, int(round(cfg.chunk_ms * 1e-3 * fs)))
+        chunk = max(4 * n1, round(cfg.chunk_ms * 1e-3 * fs))
         tau_prev = None
         i0 = i_h
         k0 = k_grid0
@@ -493,7 +494,7 @@ class DeepReceiver:
             i1 = i0 + n_per
             if i1 >= len(imu.t):
                 break
-            k1 = int(round(t_if[i1] * fs))
+            k1 = round(t_if[i1] * fs)
             if k1 + 2 * n1 + 16 > stop:
                 break
             # -- INS over the interval
@@ -520,7 +521,7 @@ class DeepReceiver:
             if first:
                 for c in chans:
                     # initial frequency error: scalar loop Doppler minus the INS prediction
-                    pre.x[c.idx, 2] = c._f_scalar - float(cmd.doppler_hz[c.idx])  # noqa: SLF001
+                    pre.x[c.idx, 2] = c.f_scalar - float(cmd.doppler_hz[c.idx])
                 first = False
             starts, nsamp, theta, phi, dphi, prn_rows, reps, nh = [], [], [], [], [], [], [], []
             for c in chans:

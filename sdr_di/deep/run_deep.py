@@ -1,0 +1,174 @@
+"""``sdr-di run --mode deep``: IF file + IMU file -> deep receiver -> solution files.
+
+Companion files default to the ones the IF file's sidecar names (``imu_file``,
+``truth_file``, ``ephemeris_file``, relative to the sidecar): the IMU record (required), the
+reference trajectory (for ``align="truth"`` and the error columns) and the RINEX navigation
+file used as assistance data (ephemerides and ionosphere before they are decoded; the
+decoded records take precedence; ``assist=False`` uses decoded messages only).
+
+Outputs in ``out_dir`` (``STEM`` = IF file name without extension), written under temporary
+names and renamed when complete:
+
+``STEM_deep.csv``          one row per output epoch (``docs/solution_format.md``, deep mode)
+``STEM_deep_summary.json`` filter, hand-over time, channels, error metrics vs the reference,
+                           time shares of the loop stages
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ImuDataError, SampleFormatError
+from ..io.atomic import atomic_open, ensure_output_dir
+from ..receiver.ifreader import IfSource
+from .vector_loop import DeepConfig, DeepReceiver, DeepResult
+
+__all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
+
+DEEP_COLUMNS = (
+    "t_s", "bdt_week", "bdt_sow", "lat_deg", "lon_deg", "h_m", "v_e", "v_n", "v_u",
+    "pitch_deg", "roll_deg", "yaw_deg", "clock_bias_m", "clock_drift_mps", "n_used",
+    "att_err_e_deg", "att_err_n_deg", "att_err_u_deg", "vel_err_e", "vel_err_n", "vel_err_u",
+    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m",
+)
+
+
+@dataclasses.dataclass
+class DeepRunSummary:
+    """What a deep run produced."""
+
+    files: dict
+    result: DeepResult
+    metrics: dict
+    wall_s: float
+
+
+def companion_files(source: IfSource) -> dict:
+    """``{"imu", "truth", "ephemeris"}`` paths named by the IF file's sidecar (None if absent)."""
+    out = {"imu": None, "truth": None, "ephemeris": None}
+    sidecar = source.path.with_suffix(".json")
+    if not sidecar.exists():
+        return out
+    try:
+        meta = json.loads(sidecar.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise SampleFormatError(f"sidecar {sidecar}: unreadable ({exc})") from None
+    for key, name in (("imu", "imu_file"), ("truth", "truth_file"),
+                      ("ephemeris", "ephemeris_file")):
+        v = meta.get(name)
+        if v:
+            p = Path(v)
+            out[key] = p if p.is_absolute() else sidecar.parent / p
+    return out
+
+
+def write_deep_csv(path: Path, res: DeepResult) -> Path:
+    """Write the solution rows (atomic)."""
+    data = np.column_stack([
+        res.t, np.full(res.t.size, res.week), res.sow, np.degrees(res.llh[:, :2]),
+        res.llh[:, 2], res.v_n, np.degrees(res.att), res.clock_bias_m, res.clock_drift_mps,
+        res.n_used, res.att_err, res.vel_err, res.pos_err]) if res.t.size else np.zeros(
+        (0, len(DEEP_COLUMNS)))
+    with atomic_open(path, "w") as fh:
+        fh.write(f"# sdr-di deep solution, filter {res.filter_name}, hand-over at "
+                 f"{res.handover_s:.3f} s, channels {' '.join(f'C{p:02d}' for p in res.prns)}\n")
+        fh.write(",".join(DEEP_COLUMNS) + "\n")
+        np.savetxt(fh, data, delimiter=",", fmt="%.12g")
+    return path
+
+
+def _finite(v):
+    if isinstance(v, np.ndarray):
+        return [_finite(x) for x in v.tolist()]
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None = None,
+             imu_path: str | Path | None = None, truth_path: str | Path | None = None,
+             nav_path: str | Path | None = None, assist: bool = True, prns=None,
+             stem: str | None = None, progress: bool = True,
+             duration_s: float | None = None) -> DeepRunSummary:
+    """Run the deep receiver over ``source`` and write the solution files (module notes).
+
+    Raises
+    ------
+    ImuDataError
+        No IMU file, bad IMU/truth file, time span or time tags inconsistent with the IF.
+    FilterError
+        Unknown filter name or option.
+    HandoverError
+        No satellite found / no hand-over from scalar tracking.
+    OutputError
+        Outputs cannot be written.
+    """
+    from ..io.imu_files import read_imu, read_truth
+    from ..orbits.rinex_nav import load_nav
+
+    cfg = config or DeepConfig()
+    comp = companion_files(source)
+    imu_path = Path(imu_path) if imu_path is not None else comp["imu"]
+    if imu_path is None:
+        raise ImuDataError(f"{source.path}: deep mode needs an IMU file (--imu); the sidecar "
+                           "names none")
+    truth_path = Path(truth_path) if truth_path is not None else comp["truth"]
+    if cfg.align == "truth" and truth_path is None:
+        raise ImuDataError("align 'truth' needs a reference file (--truth); use --align gnss "
+                           "without one")
+    imu = read_imu(imu_path)
+    truth = read_truth(truth_path)[0] if truth_path is not None else None
+    nav = None
+    if assist:
+        nav_path = Path(nav_path) if nav_path is not None else comp["ephemeris"]
+        if nav_path is not None:
+            nav = load_nav(nav_path)
+    out_dir = ensure_output_dir(out_dir)
+    stem = stem or source.path.stem
+    files = {"solution": out_dir / f"{stem}_deep.csv",
+             "summary": out_dir / f"{stem}_deep_summary.json"}
+    bar = None
+    t_wall = time.perf_counter()
+    cb = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=round(source.duration_s, 2), unit="s", desc=f"run deep {cfg.filter}",
+                   bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
+                              "{postfix}]")
+
+        def cb(done, n_ch, n_used):
+            bar.update(round(done - bar.n, 3))
+            rt = done / max(time.perf_counter() - t_wall, 1e-9)
+            bar.set_postfix_str(f"x{rt:.2f} real time, {n_used}/{n_ch} in the vector")
+
+    try:
+        rx = DeepReceiver(cfg)
+        res = rx.run(source, imu, prns=prns, nav=nav, truth=truth, progress=cb,
+                     duration_s=duration_s)
+    finally:
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - t_wall
+    metrics = res.metrics()
+    write_deep_csv(files["solution"], res)
+    summary = {
+        "filter": res.filter_name, "handover_s": res.handover_s,
+        "prns": list(res.prns), "rows": int(res.t.size),
+        "channels_always_used": bool(res.used.all()) if res.used.size else False,
+        "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],
+        "metrics": {k: _finite(v) for k, v in metrics.items()},
+        "adaptation_s": res.adaptation_s,
+        "profile": {k: _finite(v) for k, v in res.profile.items()},
+        "wall_s": wall,
+    }
+    with atomic_open(files["summary"], "w") as fh:
+        json.dump(summary, fh, indent=2)
+        fh.write("\n")
+    return DeepRunSummary(files=files, result=res, metrics=metrics, wall_s=wall)
