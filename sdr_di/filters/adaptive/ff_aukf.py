@@ -53,6 +53,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import FilterError
+from . import _numba_ff
 from .base import AdaptiveRule
 
 __all__ = ["ForgettingFactorAUKF", "forgetting_weights"]
@@ -82,6 +83,9 @@ class ForgettingFactorAUKF(AdaptiveRule):
         Bounds of the R scale factors (default (1e-3, 1e6)).
     q_floor : float or array_like, optional
         See :class:`~sdr_di.filters.adaptive.base.AdaptiveRule`.
+    jit : bool
+        Run each hook as one compiled kernel (:mod:`._numba_ff`, default) or as plain numpy
+        expressions (the reference the kernels are tested against; same results to rounding).
 
     Attributes
     ----------
@@ -96,8 +100,10 @@ class ForgettingFactorAUKF(AdaptiveRule):
 
     def __init__(self, window: int = 20, d: float = 0.95, n_blocks: int = 2,
                  adapt_q: bool = True, adapt_r: bool = True,
-                 s_bounds: tuple[float, float] = (1e-3, 1e6), q_floor=None) -> None:
+                 s_bounds: tuple[float, float] = (1e-3, 1e6), q_floor=None,
+                 jit: bool = True) -> None:
         super().__init__(q_floor)
+        self.jit = bool(jit)
         if int(window) < 1:
             raise FilterError(f"ff-aukf: window must be >= 1, got {window}")
         if not 0.0 < d < 1.0:
@@ -122,11 +128,58 @@ class ForgettingFactorAUKF(AdaptiveRule):
         self._buf = np.zeros((self.window, n + self.n_blocks))
         self._ptr = -1
         self._count = 0
-        self._per_m: dict[int, tuple] = {}
+        self._wnorm = self._wtab
         self._diag_r = True
+        self._per_m: dict[int, tuple] = {}
+        if self.jit:
+            _numba_ff.warm_up()                        # compile outside the timed hooks
 
+    def before_update(self, filt, mp, z, R_prior):
+        m = z.size
+        if m % self.n_blocks:
+            raise FilterError(f"{filt.name}: measurement vector of length {m} cannot be "
+                              f"split into {self.n_blocks} equal blocks (pseudorange / rate)")
+        self.s_applied = self.s
+        if self.jit and not R_prior.flags.c_contiguous:
+            R_prior = np.ascontiguousarray(R_prior)    # the kernels are compiled for C order
+        if not self.adapt_r:
+            return z, R_prior
+        if self.jit:
+            # R^+ = S_k R^- (eq 35-36); notes whether R^- is diagonal (eq 34)
+            R_used, self._diag_r = _numba_ff.scale_r(R_prior, self.s, self.n_blocks)
+            return z, R_used
+        e2 = self.s.take(self._blocks(m)[0])           # diagonal of S_k (eq 35)
+        self._diag_r = np.count_nonzero(R_prior) <= m
+        if self._diag_r:                               # paper eq 34: diagonal R^-
+            return z, R_prior * e2                     # = S_k R^- (eq 36)
+        e = np.sqrt(e2)                                # sqrt(S) R^- sqrt(S) for a full R^-
+        return z, R_prior * np.outer(e, e)
+
+    def after_update(self, filt, z, R_prior) -> None:
+        p = self._ptr + 1
+        if p == self.window:
+            p = 0
+        self._ptr = p
+        if self._count < self.window:                  # eq 30 normalization while filling
+            self._count += 1
+            self._wnorm = self._wtab / self._wcum[self._count - 1]
+        if self.jit:
+            Q, s = _numba_ff.ff_after_update(
+                filt.K, filt.y, filt.residual, filt.R_used, filt.S_inv, R_prior.diagonal(),
+                self._diag_r or not self.adapt_r, self._buf, p, self._wnorm[p],
+                self.n_blocks, self.q_floor, self.adapt_q, self.adapt_r, self.s_applied,
+                self.s_bounds[0], self.s_bounds[1])
+            if self.adapt_q:
+                filt.Q = Q
+            self.s = s
+        else:
+            self._after_update_numpy(filt, R_prior, p)
+        self.n_adaptations += 1
+
+    # -- plain numpy version (jit=False) -------------------------------------------------
     def _blocks(self, m: int) -> tuple:
-        """Per measurement size: block of each element, block-mean matrix, work arrays."""
+        """Per measurement size ``m``: block index of each element, block-mean matrix, work
+        arrays (built once per size and cached)."""
         got = self._per_m.get(m)
         if got is None:
             nb = self.n_blocks
@@ -137,61 +190,38 @@ class ForgettingFactorAUKF(AdaptiveRule):
             got = self._per_m[m] = (idx, B, np.empty((3, m)), np.empty((3, nb)))
         return got
 
-    def before_update(self, filt, mp, z, R_prior):
-        m = z.size
-        if m % self.n_blocks:
-            raise FilterError(f"{filt.name}: measurement vector of length {m} cannot be "
-                              f"split into {self.n_blocks} equal blocks (pseudorange / rate)")
-        self.s_applied = self.s
-        if not self.adapt_r:
-            return z, R_prior
-        e2 = self.s[self._blocks(m)[0]]                # diagonal of S_k (eq 35)
-        self._diag_r = np.count_nonzero(R_prior) <= m
-        if self._diag_r:                               # paper eq 34: diagonal R^-
-            return z, R_prior * e2                     # = S_k R^- (eq 36)
-        e = np.sqrt(e2)                                # sqrt(S) R^- sqrt(S) for a full R^-
-        return z, R_prior * np.outer(e, e)
-
-    def after_update(self, filt, z, R_prior) -> None:
+    def _after_update_numpy(self, filt, R_prior, p: int) -> None:
         n = self._n
         v = filt.y
         _, B, wk, sums = self._blocks(v.size)
-        p = self._ptr + 1
-        if p == self.window:
-            p = 0
-        self._ptr = p
         row = self._buf[p]
         K = filt.K
         np.dot(K * K, v * v, out=row[:n])              # diag(K diag(v o v) K^T), eq 27-29
         r = filt.residual
         np.multiply(r, r, out=wk[0])                   # residual powers (eq 39 summands)
         if self.adapt_r:
-            rho = R_prior.diagonal()
-            wk[1] = rho                                # -> tr(R^-_b), eq 38 denominators
-            if self._diag_r:                           # diag(R S^-1 R) / s_b^2 for R = S_k R^-
-                np.multiply(rho, rho, out=wk[2])
+            Ru = filt.R_used
+            ru = Ru.diagonal()
+            wk[1] = R_prior.diagonal()                 # -> tr(R^-_b), eq 38 denominators
+            if self._diag_r:                           # diag(R S^-1 R), R = S_k R^- diagonal
+                np.multiply(ru, ru, out=wk[2])
                 wk[2] *= filt.S_inv.diagonal()
             else:
-                Ru = filt.R_used
                 np.sum((Ru @ filt.S_inv) * Ru, axis=1, out=wk[2])
+            np.subtract(ru, wk[2], out=wk[2])          # diag(H P+ H^T) = diag(R - R S^-1 R)
         np.dot(wk, B, out=sums)                        # per-channel block means, (3, n_blocks)
         row[n:] = sums[0]                              # (v_j^+)^T v_j^+ / N_j per block
-        if self._count < self.window:
-            self._count += 1
-            self._wnorm = self._wtab / self._wcum[self._count - 1]
         avg = self._wnorm[p] @ self._buf               # eq 30 and eq 39 (normalized sums)
         if self.adapt_q:
-            filt.Q = np.diag(np.maximum(avg[:n], self.q_floor))
+            Q = np.zeros((n, n))
+            np.maximum(avg[:n], self.q_floor, out=Q.ravel()[::n + 1])
+            filt.Q = Q
         if self.adapt_r:
-            # Per block, divided by N_k:  s_b,k+1 = [tr(H P+ H^T)_b + tr(C)_b] / tr(R^-_b)
-            # (eq 37-38) with tr(H P+ H^T)_b = tr(R_b) - tr(R S^-1 R)_b, tr(R_b) = s_b tr(R^-_b)
-            # and tr(C)_b / N_k = the smoothed per-channel power (eq 39); n_blocks scalars.
-            _, tr, u = sums.tolist()
+            # per block, divided by N_k (eq 37-39):
+            #   s_b,k+1 = [tr(H P+ H^T)_b / N_k + tr(C)_b / N_k] / [tr(R^-_b) / N_k]
+            s = sums[2] + avg[n:]
+            s /= sums[1]
             lo, hi = self.s_bounds
-            diag_r = self._diag_r
-            s_new = []
-            for s_b, tr_b, u_b, c_b in zip(self.s_applied.tolist(), tr, u, avg[n:].tolist()):
-                hph = s_b * tr_b - (s_b * s_b * u_b if diag_r else u_b)
-                s_new.append(min(max((hph + c_b) / tr_b, lo), hi))
-            self.s = np.array(s_new)
-        self.n_adaptations += 1
+            np.maximum(s, lo, out=s)
+            np.minimum(s, hi, out=s)
+            self.s = s
