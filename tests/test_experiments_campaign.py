@@ -139,3 +139,19 @@ def test_refuses_to_mix_with_an_earlier_campaign(tmp_path):
     (tmp_path / "runs").mkdir()
     with pytest.raises(CampaignError, match="already holds campaign runs"):
         run_campaign(KILL, runs=1, out_dir=tmp_path)
+
+
+def test_interrupted_campaign_keeps_its_records_and_reports_them(tmp_path):
+    def stop(rec: dict) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(KILL, runs=3, seeds=[1, 2, 3], workers=1, out_dir=tmp_path,
+                     on_record=stop)
+    summary = json.loads((tmp_path / "campaign.json").read_text())
+    assert summary["status"] == "interrupted" and summary["n_records"] == 1
+    assert json.loads((tmp_path / "runs" / "0.json").read_text())["figures"]["x"] == 1.0
+    assert not (tmp_path / "runs" / "2.json").exists()
+    page = render_report(tmp_path).read_text()
+    assert "interrupted" in page and "Aggregate of the runs so far" in page
+    assert "<td>twice</td><td>1</td><td>2</td>" in page

@@ -127,6 +127,47 @@ def _threads(client) -> int:
         return 1
 
 
+def _collect(client, exp: Experiment, params: dict, seeds: list[int], runs_dir: Path,
+             records: dict[int, dict], on_record) -> None:
+    """Submit the runs (at most one per worker thread in flight), write each record as it
+    arrives and store it in ``records`` (index -> record without file bytes)."""
+    from distributed import KilledWorker, as_completed
+
+    token = uuid.uuid4().hex[:8]
+    pending = list(enumerate(seeds))
+    where: dict[str, tuple[int, int]] = {}
+    ac = as_completed(loop=client.loop)
+
+    def submit_next() -> None:
+        i, s = pending.pop(0)
+        fut = client.submit(execute_run, exp, params, s, i, pure=False,
+                            key=f"{exp.name}-{token}-run-{i}")
+        where[fut.key] = (i, s)
+        ac.add(fut)
+
+    for _ in range(min(_threads(client), len(pending))):
+        submit_next()
+    for fut in ac:
+        i, s = where.pop(fut.key)
+        try:
+            rec = fut.result()
+        except KilledWorker as exc:
+            rec = failed_record(i, s, f"worker died while running this run ({exc})")
+        except Exception as exc:  # noqa: BLE001 - lost task: that run's failure
+            rec = failed_record(i, s, f"{type(exc).__name__}: {exc}")
+        finally:
+            fut.release()
+        write_run_record(runs_dir, rec)
+        rec.pop("files", None)
+        records[i] = rec
+        if on_record is not None:
+            on_record(rec)
+        while pending and len(where) < _threads(client):
+            submit_next()
+        if pending and not where:
+            submit_next()
+
+
 def run_campaign(experiment: str | Experiment, params: Mapping | None = None, runs: int = 4,
                  *, base_seed: int = 0, seeds: Sequence[int] | None = None,
                  scheduler: str | None = None, workers: int | None = None,
@@ -199,48 +240,22 @@ def run_campaign(experiment: str | Experiment, params: Mapping | None = None, ru
     write_json(out / "campaign.json", {**config, "status": "running"})
 
     records: dict[int, dict] = {}
-    token = uuid.uuid4().hex[:8]
-    with _client(scheduler, workers, allowed_failures) as client:
-        from distributed import KilledWorker, as_completed
-
-        address = client.scheduler.address
-        try:
-            found_failures = client.run_on_scheduler(
-                lambda dask_scheduler: dask_scheduler.allowed_failures)
-        except Exception:  # noqa: BLE001 - informational only
-            found_failures = None
-        pending = list(enumerate(seeds))
-        where: dict[str, tuple[int, int]] = {}
-        ac = as_completed(loop=client.loop)
-
-        def submit_next() -> None:
-            i, s = pending.pop(0)
-            fut = client.submit(execute_run, exp, params, s, i, pure=False,
-                                key=f"{exp.name}-{token}-run-{i}")
-            where[fut.key] = (i, s)
-            ac.add(fut)
-
-        for _ in range(min(_threads(client), len(pending))):
-            submit_next()
-        for fut in ac:
-            i, s = where.pop(fut.key)
+    try:
+        with _client(scheduler, workers, allowed_failures) as client:
+            address = client.scheduler.address
             try:
-                rec = fut.result()
-            except KilledWorker as exc:
-                rec = failed_record(i, s, f"worker died while running this run ({exc})")
-            except Exception as exc:  # noqa: BLE001 - lost task: that run's failure
-                rec = failed_record(i, s, f"{type(exc).__name__}: {exc}")
-            finally:
-                fut.release()
-            write_run_record(runs_dir, rec)
-            rec.pop("files", None)
-            records[i] = rec
-            if on_record is not None:
-                on_record(rec)
-            while pending and len(where) < _threads(client):
-                submit_next()
-            if pending and not where:
-                submit_next()
+                found_failures = client.run_on_scheduler(
+                    lambda dask_scheduler: dask_scheduler.allowed_failures)
+            except Exception:  # noqa: BLE001 - informational only
+                found_failures = None
+            _collect(client, exp, params, seeds, runs_dir, records, on_record)
+    except BaseException as exc:
+        # keep what arrived: the run records are on disk; say the campaign did not finish
+        status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "crashed"
+        write_json(out / "campaign.json", {**config, "status": status,
+                                           "error": f"{type(exc).__name__}: {exc}",
+                                           "n_records": len(records)})
+        raise
 
     ordered = [records[i] for i in range(runs)]
     stats = aggregate(r["figures"] for r in ordered if r["status"] == "ok")

@@ -15,8 +15,9 @@ from pathlib import Path
 
 from ..errors import ExperimentError
 from ..io.atomic import atomic_open
-from .execute import read_json
-from .tables import format_cell, read_csv_table
+from .aggregate import aggregate
+from .execute import read_json, restore_floats
+from .tables import format_cell, read_csv_table, stats_rows
 
 __all__ = ["render_report"]
 
@@ -46,6 +47,32 @@ def _table_html(path: Path) -> str:
         out.append("<tr>" + "".join(f"<td>{html.escape(_cell(c))}</td>" for c in row) + "</tr>")
     out.append("</table></div>")
     return "".join(out)
+
+
+def _rows_html(head: list[str], rows: list[dict]) -> str:
+    out = ['<div class="scroll"><table><tr>']
+    out += [f"<th>{html.escape(h)}</th>" for h in head]
+    out.append("</tr>")
+    for row in rows:
+        out.append("<tr>" + "".join(f"<td>{html.escape(format_cell(row.get(h)))}</td>"
+                                    for h in head) + "</tr>")
+    out.append("</table></div>")
+    return "".join(out)
+
+
+def _partial_campaign(folder: Path) -> dict:
+    """Counts, failures and aggregate from ``runs/<i>.json`` of an unfinished campaign."""
+    recs = []
+    for p in (folder / "runs").glob("*.json"):
+        try:
+            recs.append(read_json(p))
+        except (OSError, ValueError):
+            continue
+    recs.sort(key=lambda r: r.get("index", 0))
+    ok = [r for r in recs if r.get("status") == "ok"]
+    return {"n_ok": len(ok), "n_failed": len(recs) - len(ok),
+            "failed": [r for r in recs if r.get("status") != "ok"],
+            "stats": aggregate(restore_floats(r.get("figures", {})) for r in ok)}
 
 
 def _img_html(path: Path, caption: str) -> str:
@@ -94,7 +121,13 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
         parts.append(f"<p>{html.escape(meta.get('description', ''))}</p>")
         if status != "done":
             parts.append(f"<p class='failed'>Campaign status: {html.escape(str(status))} "
-                         "(incomplete: tables come from the run records so far)</p>")
+                         f"{html.escape(str(meta.get('error', '')))} (incomplete: the "
+                         "aggregate below comes from the run records so far)</p>")
+            partial = _partial_campaign(folder)
+            meta.update(partial)
+            parts.append("<h2>Aggregate of the runs so far</h2>" + _rows_html(
+                ["figure", "n", "mean", "std", "min", "max", "value"],
+                stats_rows(partial["stats"])))
         parts.append(f"<p>{meta.get('n_ok', '?')} of {meta.get('runs')} runs completed, "
                      f"{meta.get('n_failed', '?')} failed; base seed {meta.get('base_seed')}; "
                      f"scheduler <code>{html.escape(str(meta.get('scheduler')))}</code>.</p>")
