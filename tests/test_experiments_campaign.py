@@ -1,6 +1,6 @@
 """Campaigns on Dask: local default vs an explicit scheduler, killed workers, partial records.
 
-Each test starts at most one small cluster (2 worker processes) and runs short (8 s)
+Each test starts at most one small cluster (2 worker processes) and runs short (6 s)
 noise-mismatch runs on three filters, to stay light on a shared 2-core machine.
 """
 
@@ -20,7 +20,7 @@ from sdr_di.experiments import Experiment, render_report, run_campaign, run_seed
 # the test-only experiments below travel to the workers by value (no import of this file)
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
 
-SHORT = {"duration_s": 8.0, "filters": "ekf,ukf,ff-aukf", "plots": False}
+SHORT = {"duration_s": 6.0, "filters": "ekf,ukf,sage-husa-ukf", "plots": False}
 
 
 def _kill_run(params: dict, seed: int, out_dir) -> dict:
@@ -79,11 +79,11 @@ def test_campaign_outputs_and_report(local_campaign):
         assert rec["status"] == "ok" and rec["index"] == i
         assert (out / "runs" / str(i) / "errors_ekf.csv").is_file()
     md = (out / "filters.md").read_text()
-    assert "| filter |" in md and "| ff-aukf |" in md and "pos_m_rmse_std" in md
+    assert "| filter |" in md and "| sage-husa-ukf |" in md and "pos_m_rmse_std" in md
     assert "rmse_by_filter.png" in json.loads((out / "campaign.json").read_text())["plots"]
     page = render_report(out).read_text()
     assert page.count("<table>") >= 3
-    assert "data:image/png;base64," in page and "ff-aukf" in page
+    assert "data:image/png;base64," in page and "sage-husa-ukf" in page
 
 
 def test_killed_worker_loses_only_that_run(tmp_path):

@@ -227,35 +227,38 @@ def run_campaign(experiment: str | Experiment, params: Mapping | None = None, ru
         if len(seeds) != runs:
             raise CampaignError(f"{len(seeds)} seeds given for {runs} runs")
     params = parse_params(exp, overrides=dict(params or {}))
-    out = ensure_output_dir(out_dir)
+    out = Path(out_dir)
     runs_dir = out / "runs"
-    if runs_dir.exists():
-        if not overwrite:
-            raise CampaignError(f"output folder {out} already holds campaign runs; choose "
-                                "another --out or pass --force to replace them")
-        shutil.rmtree(runs_dir)
-    ensure_output_dir(runs_dir)
+    if runs_dir.exists() and not overwrite:
+        raise CampaignError(f"output folder {out} already holds campaign runs; choose "
+                            "another --out or pass --force to replace them")
     config = {"experiment": exp.name, "description": exp.description, "params": params,
               "runs": runs, "base_seed": int(base_seed), "seeds": seeds}
-    write_json(out / "campaign.json", {**config, "status": "running"})
-
     records: dict[int, dict] = {}
-    try:
-        with _client(scheduler, workers, allowed_failures) as client:
-            address = client.scheduler.address
-            try:
-                found_failures = client.run_on_scheduler(
-                    lambda dask_scheduler: dask_scheduler.allowed_failures)
-            except Exception:  # noqa: BLE001 - informational only
-                found_failures = None
+    # connect (or start the local cluster) before touching the output folder
+    with _client(scheduler, workers, allowed_failures) as client:
+        address = client.scheduler.address
+        try:
+            found_failures = client.run_on_scheduler(
+                lambda dask_scheduler: dask_scheduler.allowed_failures)
+        except Exception:  # noqa: BLE001 - informational only
+            found_failures = None
+        ensure_output_dir(out)
+        if runs_dir.exists():
+            shutil.rmtree(runs_dir)
+        ensure_output_dir(runs_dir)
+        write_json(out / "campaign.json", {**config, "status": "running",
+                                           "scheduler": address})
+        try:
             _collect(client, exp, params, seeds, runs_dir, records, on_record)
-    except BaseException as exc:
-        # keep what arrived: the run records are on disk; say the campaign did not finish
-        status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "crashed"
-        write_json(out / "campaign.json", {**config, "status": status,
-                                           "error": f"{type(exc).__name__}: {exc}",
-                                           "n_records": len(records)})
-        raise
+        except BaseException as exc:
+            # keep what arrived: the run records are on disk; say the campaign did not finish
+            status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "crashed"
+            write_json(out / "campaign.json", {**config, "status": status,
+                                               "scheduler": address,
+                                               "error": f"{type(exc).__name__}: {exc}",
+                                               "n_records": len(records)})
+            raise
 
     ordered = [records[i] for i in range(runs)]
     stats = aggregate(r["figures"] for r in ordered if r["status"] == "ok")
