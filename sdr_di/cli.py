@@ -316,6 +316,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_generate(sub)
     _add_run(sub)
     _add_lc(sub)
+    from .experiments.commands import add_parsers as add_experiment_parsers
+
+    add_experiment_parsers(sub)
     return parser
 
 

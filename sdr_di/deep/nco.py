@@ -162,14 +162,16 @@ class NcoCommand:
     _fs: float = 1.0
 
 
-def nco_commands(pred: RangePrediction, k0: int, k1: int, fs: float, t_nom_rel0: float,
+def nco_commands(P0, Pc0, P1, Pc1, k0: int, k1: int, fs: float, t_nom_rel0: float,
                  t_nom_rel1: float, carrier_hz: float = F_B3I) -> NcoCommand:
-    """NCO commands over ``[k0, k1)`` from predictions at the two ends (module notes).
+    """NCO commands over ``[k0, k1)`` from the predictions at its two ends (module notes).
 
     Parameters
     ----------
-    pred : RangePrediction
-        Predictions at the receive instants of samples ``k0`` and ``k1`` (``n_t = 2``).
+    P0, Pc0 : array_like (n_sat,)
+        Predicted code pseudorange and carrier phase-range at sample ``k0`` [m].
+    P1, Pc1 : array_like (n_sat,)
+        The same at sample ``k1`` [m].
     k0, k1 : int
         Interval [samples], ``k1 > k0``.
     fs : float
@@ -182,14 +184,12 @@ def nco_commands(pred: RangePrediction, k0: int, k1: int, fs: float, t_nom_rel0:
     """
     if not k1 > k0:
         raise ValueError(f"empty NCO interval [{k0}, {k1})")
-    ts0 = t_nom_rel0 - pred.P[:, 0] / C_LIGHT
-    ts1 = t_nom_rel1 - pred.P[:, 1] / C_LIGHT
-    c0 = CHIP_RATE_B3I * ts0
-    c1 = CHIP_RATE_B3I * ts1
+    c0 = CHIP_RATE_B3I * (t_nom_rel0 - np.asarray(P0, float) / C_LIGHT)
+    c1 = CHIP_RATE_B3I * (t_nom_rel1 - np.asarray(P1, float) / C_LIGHT)
     n = float(k1 - k0)
     rate = (c1 - c0) * fs / n
     T = n / fs
-    dop = -(carrier_hz / C_LIGHT) * (pred.Pc[:, 1] - pred.Pc[:, 0]) / T
+    dop = -(carrier_hz / C_LIGHT) * (np.asarray(Pc1, float) - np.asarray(Pc0, float)) / T
     return NcoCommand(chips0=c0, code_rate_cps=rate, doppler_hz=dop, k0=int(k0), k1=int(k1),
                       _fs=float(fs))
 

@@ -462,6 +462,8 @@ class DeepReceiver:
         # ---- pre-filters from the scalar loops
         k_grid0 = round(t_if[i_h] * fs)
         r0 = llh_to_ecef(*ins.llh)
+        pred0 = predict_ranges(ephs, week, [S0 + t_rel(k_grid0)], [r0], [clk_b], iono)
+        P_k0, Pc_k0 = pred0.P[:, 0].copy(), pred0.Pc[:, 0].copy()
         for c in chans:
             sc = rx.channels[c.prn]
             s = c.next_start
@@ -483,7 +485,7 @@ class DeepReceiver:
         buf0 = buf1 = 0
         npow = 1.0
         chunk = max(4 * n1, round(cfg.chunk_ms * 1e-3 * fs))
-        tau_prev = None
+        tau_prev = pred0.tau
         i0 = i_h
         k0 = k_grid0
         j = 0
@@ -507,53 +509,39 @@ class DeepReceiver:
             for m in range(n_per):
                 ins.step(fs_[m], ws_[m], float(imu.t[i0 + m + 1] - imu.t[i0 + m]))
             nav1 = NavState.from_ins(ins)
-            b0, b1 = clk_b, clk_b + clk_d * T
+            b1 = clk_b + clk_d * T
             tb = time.perf_counter()
             prof["ins"] += tb - ta
-            # -- NCO commands
-            r_a = llh_to_ecef(*nav0.llh)
+            # -- NCO commands: predictions at k1 from the propagated INS; at k0 the previous
+            # interval's, moved by the feedback (pred_new = pred_old - H x)
             r_b = llh_to_ecef(*nav1.llh)
-            pred = predict_ranges(ephs, week, [S0 + t_rel(k0), S0 + t_rel(k1)], [r_a, r_b],
-                                  [b0, b1], iono, tau0=tau_prev, passes=2 if first else 1)
+            pred = predict_ranges(ephs, week, [S0 + t_rel(k1)], [r_b], [b1], iono,
+                                  tau0=tau_prev, passes=1)
             tau_prev = pred.tau
-            cmd = nco_commands(pred, k0, k1, fs, t_rel(k0), t_rel(k1), source.carrier_hz)
+            P1, Pc1 = pred.P[:, 0], pred.Pc[:, 0]
+            cmd = nco_commands(P_k0, Pc_k0, P1, Pc1, k0, k1, fs, t_rel(k0), t_rel(k1),
+                               source.carrier_hz)
             dchip = cmd.code_rate_cps / fs
             if first:
                 for c in chans:
                     # initial frequency error: scalar loop Doppler minus the INS prediction
                     pre.x[c.idx, 2] = c.f_scalar - float(cmd.doppler_hz[c.idx])
                 first = False
-            starts, nsamp, theta, phi, dphi, prn_rows, reps, nh = [], [], [], [], [], [], [], []
-            for c in chans:
-                i = c.idx
-                c0 = float(cmd.chips0[i])
-                dc = float(dchip[i])
-                dp = (source.if_hz + float(cmd.doppler_hz[i])) / fs
-                s = c.next_start
-                e = c.epoch
-                ph = c.phase
-                cnt = 0
-                while s < k1:
-                    ch = c0 + (s - k0) * dc - e * CODE_LENGTH_B3I     # chips into epoch e
-                    n = max(1, math.ceil((CODE_LENGTH_B3I - ch) / dc))
-                    starts.append(s)
-                    nsamp.append(n)
-                    theta.append(ch)
-                    phi.append(ph)
-                    dphi.append(dp)
-                    nh.append(NH20[e % 20] if c.is_d1 else 1)
-                    ph += n * dp
-                    ph -= math.floor(ph)
-                    s += n
-                    e += 1
-                    cnt += 1
-                c.next_start, c.epoch, c.phase = s, e, ph
-                reps.append(cnt)
-                prn_rows.append(c.prn)
+            parts = [_epoch_rows(c, float(cmd.chips0[c.idx]), float(dchip[c.idx]),
+                                 (source.if_hz + float(cmd.doppler_hz[c.idx])) / fs, k0, k1)
+                     for c in chans]
+            reps = [len(p[0]) for p in parts]
+            prn_rows = [c.prn for c in chans]
+            starts = np.concatenate([p[0] for p in parts])
+            nsamp = np.concatenate([p[1] for p in parts])
+            theta = np.concatenate([p[2] for p in parts])
+            phi = np.concatenate([p[3] for p in parts])
+            dphi = np.concatenate([p[4] for p in parts])
+            nh = np.concatenate([p[5] for p in parts])
             tc = time.perf_counter()
             prof["nco"] += tc - tb
             # -- samples
-            need0, need1 = min(starts), max(a + b for a, b in zip(starts, nsamp))
+            need0, need1 = int(starts.min()), int((starts + nsamp).max())
             if need1 > stop:
                 break
             if need0 < buf0 or need1 > buf1:
@@ -574,12 +562,12 @@ class DeepReceiver:
                     tables.popitem(last=False)
             else:
                 tables.move_to_end(key)
-            st = np.asarray(starts, np.int64) - buf0
-            ns = np.asarray(nsamp, np.int64)
-            res = correlate_table(x_buf, tab, CODE_LENGTH_B3I, np.asarray(theta),
-                                  np.repeat(cmd.code_rate_cps, reps), np.asarray(phi),
-                                  np.asarray(dphi) * fs, ns, fs, spacing, st, pad=CODE_PAD)
-            sgn = np.asarray(nh, float)
+            st = starts - buf0
+            ns = nsamp
+            res = correlate_table(x_buf, tab, CODE_LENGTH_B3I, theta,
+                                  np.repeat(cmd.code_rate_cps, reps), phi, dphi * fs, ns, fs,
+                                  spacing, st, pad=CODE_PAD)
+            sgn = nh
             E = res.early * sgn
             P = res.prompt * sgn
             L = res.late * sgn
@@ -622,7 +610,7 @@ class DeepReceiver:
             use = np.asarray(use, bool)
             n_used = int(use.sum())
             if n_used:
-                meas.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[use, 1], pred.v_sat[use, 1],
+                meas.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[use, 0], pred.v_sat[use, 0],
                                b1, clk_d)
                 kf.update(np.r_[z_rho, z_rate], np.diag(np.r_[r_rho, r_rate]))
             x = kf.x.copy()
@@ -632,8 +620,10 @@ class DeepReceiver:
             ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
             clk_b = b1 - x[15]
             clk_d = clk_d - x[16]
-            meas_all.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[:, 1], pred.v_sat[:, 1])
+            meas_all.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[:, 0], pred.v_sat[:, 0])
             Hx = meas_all.matrix @ x
+            P_k0 = P1 - Hx[:n_ch]
+            Pc_k0 = Pc1 - Hx[:n_ch]
             for c in chans:
                 i = c.idx
                 pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
@@ -691,6 +681,38 @@ class DeepReceiver:
             used=np.asarray(rows["used"], bool).reshape(-1, n_ch),
             cn0_dbhz=arr("cn0", n_ch), handover_s=k_grid0 / fs, filter_name=kf.name,
             adaptation_s=_adaptation_s(kf) - adapt0, profile=prof)
+
+
+def _epoch_rows(c: _Chan, c0: float, dc: float, dp: float, k0: int, k1: int):
+    """Correlator rows of channel ``c``: its code epochs that start in ``[next_start, k1)``.
+
+    The code NCO's chip count is ``c0 + (k - k0) dc`` over the interval; epoch ``e`` ends at
+    the first sample where it reaches ``(e + 1) L``. The carrier phase stays continuous
+    (``dp`` cycles per sample). Advances the channel's ``next_start``, ``epoch``, ``phase``.
+
+    Returns ``(starts, n, theta, phi, dphi, nh_sign)`` arrays (one row per epoch).
+    """
+    L = CODE_LENGTH_B3I
+    s0, e0 = c.next_start, c.epoch
+    if s0 >= k1:
+        z = np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), z, z, z, z
+    # epoch ends: ceil(k0 + ((e + 1) L - c0) / dc) until one reaches k1
+    m_max = int((k1 - s0) * dc / L) + 3
+    ends = np.ceil(k0 + ((e0 + 1 + np.arange(m_max)) * L - c0) / dc).astype(np.int64)
+    starts = np.concatenate(([s0], ends[:-1]))
+    ends = np.maximum(ends, starts + 1)
+    keep = starts < k1
+    starts, ends = starts[keep], ends[keep]
+    m = starts.size
+    ep = e0 + np.arange(m)
+    theta = c0 + (starts - k0) * dc - ep * L
+    phi = c.phase + (starts - s0) * dp
+    phi -= np.floor(phi)
+    end_phase = c.phase + (int(ends[-1]) - s0) * dp
+    c.next_start, c.epoch, c.phase = int(ends[-1]), e0 + m, end_phase - math.floor(end_phase)
+    nh = NH20[ep % 20].astype(float) if c.is_d1 else np.ones(m)
+    return starts, ends - starts, theta, phi, np.full(m, dp), nh
 
 
 def _adaptation_s(kf) -> float:
