@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 
 from sdr_di.errors import UnknownPrnError
-from sdr_di.receiver.correlator import Correlator, correlate
+from sdr_di.receiver._numba_correlate_bits import correlate_epl_bits, mean_power
+from sdr_di.receiver.correlator import (
+    CARRIER_BLOCK,
+    CODE_PAD,
+    Correlator,
+    bit_windows,
+    correlate,
+    padded_replicas,
+)
 from sdr_di.signal.codes import b3i_code
 
 L = 10230
@@ -142,3 +150,42 @@ def test_b3i_codes_through_the_bank():
     x = c6[np.floor(100.5 + k * 10.23e6 / fs).astype(int) % L].astype(np.complex64)
     r = bank.correlate(x, [6, 7], 100.5, 10.23e6, 0.0, 0.0, n)
     assert abs(r.prompt[0] - n) < 1e-3 * n and abs(r.prompt[1]) < 0.05 * n
+
+
+@pytest.mark.parametrize(("fs", "complex_input", "dtype", "spacing"), [
+    (25e6, True, np.int8, 0.5),  # the default scenario's file
+    (20e6, False, np.int16, 0.3),  # real IF
+    (5e6, True, np.float32, 1.0),  # > 1 chip per sample: runs shorter than a block
+    (25e6, False, np.int8, 0.0),
+])
+def test_receiver_kernel_on_stored_samples_matches_numpy_reference(fs, complex_input, dtype,
+                                                                     spacing):
+    """The receiver's bit-window kernel on stored (integer) samples equals the reference."""
+    rng = np.random.default_rng(int(fs) % 1000 + int(10 * spacing))
+    n_ch, n_block = 5, 60_000
+    n_comp = 2 if complex_input else 1
+    xs = rng.integers(-100, 100, n_block * n_comp).astype(dtype)
+    x = xs.astype(np.float32)
+    if complex_input:
+        x = x.view(np.complex64)
+    codes = rng.choice(np.array([-1, 1], np.int8), size=(n_ch, L))
+    theta0 = rng.uniform(0, L, n_ch)
+    rate = 10.23e6 * (1.0 + rng.uniform(-5e-5, 5e-5, n_ch))
+    phi0 = rng.uniform(0, 1, n_ch)
+    fc = rng.uniform(-6e3, 6e3, n_ch) + (0.0 if complex_input else 5e6)
+    n = rng.integers(20_000, 50_000, n_ch)
+    start = np.array([rng.integers(0, n_block - m + 1) for m in n])
+    dphi = fc / fs
+    arg = np.outer(dphi, np.arange(CARRIER_BLOCK))
+    arg = 2 * np.pi * (arg - np.floor(arg))
+    ref = reference_epl(x, codes, theta0, rate, phi0, fc, n, fs, spacing, start)
+    scale = np.sqrt(n.max())
+    for n_sub in (1, 3):
+        out = np.empty((n_ch, 3, 2))
+        correlate_epl_bits(xs, n_comp, bit_windows(padded_replicas(codes)), CODE_PAD, L,
+                           start.astype(np.int64), n.astype(np.int64), theta0, rate / fs,
+                           phi0, dphi, np.cos(arg), -np.sin(arg), spacing, n_sub, out)
+        got = out[..., 0] + 1j * out[..., 1]
+        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * scale)
+    assert mean_power(xs, n_comp) == pytest.approx(np.mean(np.abs(x.astype(complex)) ** 2),
+                                                    rel=1e-12)

@@ -89,6 +89,18 @@ def test_round_trip_every_format(tmp_path, fmt):
     np.testing.assert_array_equal(src2.read(100, 50), exp[100:150])
     with pytest.raises(ValueError, match="outside"):
         src.read(n - 10, 11)
+    # stored values for the receiver's kernel: the same numbers, integer types kept
+    st, n_comp = src.read_stored(4321, 777)
+    assert n_comp == (2 if src.is_complex else 1) and st.size == 777 * n_comp
+    assert st.dtype == {"iq_int8": np.int8, "real_int8": np.int8, "iq_int4": np.int8,
+                        "iq_int16": np.int16, "real_int16": np.int16,
+                        "gr_complex": np.float32}[fmt]
+    want = exp[4321:4321 + 777]
+    if src.is_complex:
+        want = np.stack([want.real, want.imag], axis=1).ravel()
+    np.testing.assert_array_equal(st.astype(np.float32), want)
+    with pytest.raises(ValueError, match="outside"):
+        src.read_stored(n - 10, 11)
 
 
 def test_aliases_and_generator_layout(tmp_path):
@@ -178,6 +190,10 @@ def test_spectrum_inversion_complex_and_real(tmp_path):
         assert (c > 25) == big, (f, c)
     # odd start: the (-1)^k pattern follows the file index, not the block
     np.testing.assert_array_equal(src.read(3, 100), src.read(0, 103)[3:])
+    # stored values for the kernel: the corrected samples
+    st, n_comp = src.read_stored(3, 100)
+    assert n_comp == 1
+    np.testing.assert_array_equal(st, src.read(3, 100))
 
 
 def test_error_cases(tmp_path: Path):

@@ -37,8 +37,8 @@ from ..constants import CODE_LENGTH_B3I
 from ..errors import UnknownPrnError
 from ._numba_correlate import correlate_epl
 
-__all__ = ["CorrelationResult", "Correlator", "correlate", "correlate_table", "padded_replicas",
-           "check_prn", "CODE_PAD"]
+__all__ = ["CODE_PAD", "CorrelationResult", "Correlator", "bit_windows", "check_prn",
+           "correlate", "correlate_table", "padded_replicas"]
 
 #: Chips of periodic padding on each side of the replica table (spacing must be < CODE_PAD - 1).
 CODE_PAD = 8
@@ -94,6 +94,31 @@ def padded_replicas(codes: np.ndarray, pad: int = CODE_PAD) -> np.ndarray:
     length = codes.shape[1]
     idx = np.arange(-pad, length + pad) % length
     return np.ascontiguousarray(codes[:, idx], dtype=np.float32)
+
+
+def bit_windows(table: np.ndarray) -> np.ndarray:
+    """Bit windows of padded replica tables, for the receiver's bit-packed kernel.
+
+    Parameters
+    ----------
+    table : numpy.ndarray
+        (n_ch, W) or (W,) padded replicas from :func:`padded_replicas` (+/-1), ``W = L + 2 M``.
+
+    Returns
+    -------
+    numpy.ndarray
+        uint64 (n_ch, W + 64): bit ``b`` of entry ``j`` is 1 where table entry ``j + b`` is
+        negative (entries past ``W - 1`` count as positive: no valid phase needs them, see
+        :mod:`~sdr_di.receiver._numba_correlate_bits`).
+    """
+    tab = np.atleast_2d(np.asarray(table))
+    n_ch, width = tab.shape
+    neg = np.zeros((n_ch, width + 128), dtype=np.uint64)
+    neg[:, :width] = tab < 0
+    out = np.zeros((n_ch, width + 64), dtype=np.uint64)
+    for b in range(64):
+        out |= neg[:, b:b + width + 64] << np.uint64(b)
+    return out
 
 
 def _as_channel_array(v, n_ch: int, dtype, name: str) -> np.ndarray:

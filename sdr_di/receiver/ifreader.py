@@ -94,6 +94,8 @@ class IfFileWarning(UserWarning):
 # 256-entry table built with the registry's unpack: packed iq_int4 byte -> complex64.
 _I4, _Q4 = unpack_iq_int4(np.arange(256, dtype=np.uint8))
 _IQ_INT4_LUT = (_I4.astype(np.float32) + 1j * _Q4.astype(np.float32)).astype(np.complex64)
+# the same as int8 (I, Q) pairs, for read_stored
+_IQ_INT4_PAIRS = np.ascontiguousarray(np.stack([_I4, _Q4], axis=1).astype(np.int8))
 
 _CHECK_WINDOW_BYTES = 65536
 _CHECK_MIN_PAIRS = 4096
@@ -329,6 +331,66 @@ class IfSource:
             else:
                 out[(1 - start_sample % 2)::2] *= -1.0
         return out
+
+    def read_stored(self, start_sample: int, n: int) -> tuple[np.ndarray, int]:
+        """Read ``n`` samples as stored integers, without conversion to float.
+
+        For the receiver's correlator kernel, which converts the values itself. Values are
+        those :meth:`read` returns (same scale), in the smallest exact type.
+
+        Parameters
+        ----------
+        start_sample, n : int
+            As in :meth:`read`.
+
+        Returns
+        -------
+        values : numpy.ndarray
+            1-D, ``n * n_comp`` values: ``int8`` (``iq_int8``, ``real_int8``, ``iq_int4``
+            unpacked), ``int16`` (``iq_int16``, ``real_int16``) or ``float32``
+            (``gr_complex``, and every format when the spectrum is inverted: then the
+            :meth:`read` values, corrected); I and Q interleaved for I/Q formats. A fresh
+            array.
+        n_comp : int
+            2 for I/Q formats, 1 for real ones.
+
+        Raises
+        ------
+        ValueError
+            Range outside the file.
+        """
+        n_comp = 2 if self.format.is_complex else 1
+        if self.spectrum_inverted:
+            return self.read(start_sample, n).view(np.float32), n_comp
+        start_sample = int(start_sample)
+        n = int(n)
+        if start_sample < 0 or n < 0 or start_sample + n > self._n:
+            raise ValueError(f"IF file {self.path}: samples [{start_sample}, {start_sample + n})"
+                             f" outside [0, {self._n})")
+        fmt = self.format
+        if n == 0:
+            dt = np.float32 if fmt.name == "gr_complex" else \
+                np.int8 if fmt.name == "iq_int4" else fmt.dtype
+            return np.empty(0, dt), n_comp
+        bps = fmt.bytes_per_sample
+        raw = np.memmap(self.path, dtype=np.uint8, mode="r", offset=start_sample * bps,
+                        shape=(n * bps,))
+        try:
+            if fmt.name == "iq_int4":
+                out = _IQ_INT4_PAIRS[raw].reshape(-1)
+            elif fmt.name == "gr_complex":
+                out = raw.view(np.dtype("<f4")).astype(np.float32)
+            else:
+                out = raw.view(fmt.dtype).astype(fmt.dtype.newbyteorder("="))
+        finally:
+            mm = getattr(raw, "_mmap", None)
+            del raw
+            if mm is not None:
+                try:
+                    mm.close()
+                except BufferError:  # pragma: no cover - a view still alive
+                    pass
+        return out, n_comp
 
     def chunks(self, n_per_chunk: int, start: int = 0,
                stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:

@@ -65,12 +65,13 @@ import numpy as np
 
 from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I
 from ..orbits.ephemeris import Ephemeris
-from ._numba_correlate import correlate_epl
+from ._numba_correlate_bits import correlate_epl_bits, mean_power
 from .acquisition import AcquisitionResult, acquire
 from .channel import Channel
 from .correlator import (
     CARRIER_BLOCK,
     CODE_PAD,
+    bit_windows,
     check_prn,
     correlate_table,
     padded_replicas,
@@ -182,7 +183,8 @@ class _Bank:
         self._m = np.arange(CARRIER_BLOCK, dtype=np.float64)
 
     def table(self, key: tuple, prns: list[int], reps: list[int]) -> np.ndarray:
-        """Replica rows: PRN ``prns[j]`` repeated ``reps[j]`` times (cached by ``key``)."""
+        """Replica bit-window rows (:func:`~sdr_di.receiver.correlator.bit_windows`): PRN
+        ``prns[j]`` repeated ``reps[j]`` times (cached by ``key``)."""
         tab = self.tables.get(key)
         if tab is None:
             rows = []
@@ -191,7 +193,7 @@ class _Bank:
                 if row is None:
                     from ..signal.codes import b3i_code
 
-                    row = padded_replicas(np.asarray(b3i_code(p)))[0]
+                    row = bit_windows(padded_replicas(np.asarray(b3i_code(p))))[0]
                     self.rows[p] = row
                 rows.extend([row] * r)
             tab = np.ascontiguousarray(np.stack(rows))
@@ -250,9 +252,11 @@ class _Bank:
         self.rot_im[slot] = -np.sin(a)
         self.rot_dphi[slot] = dphi
 
-    def correlate(self, x: np.ndarray, buf0: int, slots: tuple[int, ...], chans: list) -> list:
-        """Correlate every row of the channels' blocks; returns per-channel lists of
-        ``(E, P, L)`` complex triples."""
+    def correlate(self, x: np.ndarray, n_comp: int, buf0: int, slots: tuple[int, ...],
+                  chans: list) -> list:
+        """Correlate every row of the channels' blocks on the stored samples ``x``
+        (:meth:`~sdr_di.receiver.ifreader.IfSource.read_stored`, first sample ``buf0``);
+        returns per-channel lists of ``(E, P, L)`` complex triples."""
         params: list[tuple] = []
         reps = []
         for c, s in zip(chans, slots):
@@ -280,8 +284,8 @@ class _Bank:
         n_sub = 1 if threads <= 1 else int(min(max(1, math.ceil(4 * threads / n_rows)), nblk))
         out = np.empty((n_rows, 3, 2))
         t0 = time.perf_counter()
-        correlate_epl(x, tab, CODE_PAD, CODE_LENGTH_B3I, start, nsamp, par[2], par[3], par[4],
-                      par[5], rot_re, rot_im, self.spacing, n_sub, out)
+        correlate_epl_bits(x, n_comp, tab, CODE_PAD, CODE_LENGTH_B3I, start, nsamp, par[2],
+                           par[3], par[4], par[5], rot_re, rot_im, self.spacing, n_sub, out)
         self._record(threads, (time.perf_counter() - t0) / float(nsamp.sum()))
         o = out.tolist()
         res = []
@@ -448,7 +452,8 @@ class ScalarReceiver:
 
         n1 = round(fs * 1e-3)
         chunk = max(2 * n1, round(self.chunk_ms * 1e-3 * fs))
-        x = np.empty(0, dtype=source.dtype)
+        x = np.empty(0, dtype=np.float32)
+        n_comp = 2 if source.is_complex else 1
         buf0 = buf1 = start
         k_out = 1
         next_out = start + round(k_out * epoch_interval_s * fs)
@@ -528,18 +533,18 @@ class ScalarReceiver:
                 # read afresh from the earliest sample still needed: re-reading the short
                 # overlap (< 2 coherent blocks) is cheaper than concatenating the new chunk
                 n_read = min(max(chunk, need_end - t_now), stop - t_now)
-                x = source.read(t_now, n_read)
+                x, n_comp = source.read_stored(t_now, n_read)
                 buf0 = t_now
                 buf1 = t_now + n_read
                 # input noise power per sample, for the channels' C/N0 estimators
-                npow = float(np.vdot(x, x).real) / max(1, x.size)
+                npow = float(mean_power(x, n_comp))
                 for c in chans:
                     c.noise_power_per_sample = npow
                 prof["read"] += time.perf_counter() - t0
                 continue
             t0 = time.perf_counter()
             slots = tuple(slot_of[id(c)] for c in batch)
-            res = bank.correlate(x, buf0, slots, batch)
+            res = bank.correlate(x, n_comp, buf0, slots, batch)
             t1 = time.perf_counter()
             for c, o in zip(batch, res):
                 c.process_block(o)

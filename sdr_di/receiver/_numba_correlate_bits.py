@@ -1,0 +1,205 @@
+"""Numba kernel of the receiver's E/P/L correlator on stored samples with bit-packed replicas.
+
+Same conventions and results as :func:`~sdr_di.receiver._numba_correlate.correlate_epl`
+(module notes there: code phase ``theta_k = theta0 + k dchip`` recomputed from the interval
+start at every sample, table index ``int(theta + M + delta)``, carrier wipe-off per block of
+``B`` samples from an exact block phasor and a per-channel rotation table, float64 products
+and sums, the block split where the code wraps), with two differences that make it about 2.5x
+faster on the development machine (AMD EPYC, AVX-512; 7 channels at 25 MHz, one thread:
+~1.2 ns instead of ~3.1 ns per sample and channel):
+
+* **Input**: the samples as stored, 1-D ``int8``/``int16``/``float32`` with ``n_comp = 2``
+  (interleaved I, Q) or ``n_comp = 1`` (real), read through per-block slices (contiguous
+  loads the wipe-off loop vectorizes; the stored integers convert exactly to float64). No
+  ``complex64`` conversion of the whole chunk is needed. ``complex64`` data can be passed as
+  its ``float32`` view with ``n_comp = 2``.
+* **Replicas as bit windows** instead of a float table: ``bits[c, j]`` holds, in bit ``b``,
+  whether entry ``j + b`` of the channel's padded table (``codes[c, M + i] = code[i mod L]``)
+  is ``-1``. For a run of samples whose E/P/L indices stay within 128 entries of the run's
+  lowest index ``c0`` (runs of at most ``(124 - 2 d) / dchip`` samples: 256 at 25 MHz), the
+  two words ``bits[c, c0]`` and ``bits[c, c0 + 64]`` hold every chip the run needs, and the
+  replica value of index ``j`` is a shift and a select on them: no per-sample memory gather,
+  and the loop vectorizes. The window can never read outside the table whatever the phase
+  (``& 63`` and the select keep every shift in range).
+
+The index of the early replica is ``int(theta + (M + d - c0))`` instead of
+``int(theta + M + d) - c0``: the two may differ only for a sample within one float64 ulp of a
+chip boundary (~1e-12 chip), where either chip is as correct.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+#: Entries of the padded table one run may span (two 64-bit words, minus a safety margin).
+_SPAN = 124.0
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"}, boundscheck=False)
+def _run_sums(lo, hi, br, bi, k, th0, dc, off, ae, ap, al):
+    """E/P/L sums of one run: wiped samples ``br + j bi`` at interval samples ``k, k + 1, ..``
+    (code phase ``th0 + k dc - off``), replica bits in the words ``lo``, ``hi``; indices
+    relative to the run's lowest table index (offsets ``ae``, ``ap``, ``al``)."""
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    s4 = 0.0
+    s5 = 0.0
+    s6 = 0.0
+    for q in range(br.size):
+        th = (th0 + (k + q) * dc) - off
+        ie = np.int64(th + ae)
+        ip = np.int64(th + ap)
+        il = np.int64(th + al)
+        we = lo if ie < 64 else hi
+        wp = lo if ip < 64 else hi
+        wl = lo if il < 64 else hi
+        ce = -1.0 if (we >> (ie & 63)) & 1 else 1.0
+        cp = -1.0 if (wp >> (ip & 63)) & 1 else 1.0
+        cl = -1.0 if (wl >> (il & 63)) & 1 else 1.0
+        wr = br[q]
+        wi = bi[q]
+        s1 += ce * wr
+        s2 += ce * wi
+        s3 += cp * wr
+        s4 += cp * wi
+        s5 += cl * wr
+        s6 += cl * wi
+    return s1, s2, s3, s4, s5, s6
+
+
+@njit(cache=True, parallel=True, fastmath={"reassoc", "contract"}, boundscheck=False)
+def correlate_epl_bits(
+    xs,  # int8/int16/float32 (n * n_comp,): stored samples, I/Q interleaved when n_comp == 2
+    n_comp,  # int: 2 (complex, interleaved I, Q) or 1 (real)
+    bits,  # uint64 (n_ch, >= L + 2 M + 64): bit windows of the padded tables (module notes)
+    pad,  # int: M, the table padding (M > spacing + 1)
+    code_len,  # int: L, chips per code period
+    start,  # int64 (n_rows,): first sample of each row's interval (index into the samples)
+    nsamp,  # int64 (n_rows,): samples of each interval
+    theta0,  # float64 (n_rows,): code phase at the first sample [chips], in [0, L)
+    dchip,  # float64 (n_rows,): code phase step [chips/sample], > 0, B * dchip < L
+    phi0,  # float64 (n_rows,): carrier phase at the first sample [cycles], in [0, 1)
+    dphi,  # float64 (n_rows,): carrier phase step [cycles/sample]
+    rot_re,  # float64 (n_rows, B): cos(2 pi m dphi)
+    rot_im,  # float64 (n_rows, B): -sin(2 pi m dphi)
+    spacing,  # float64: early/late offset d [chips], 0 <= d < M - 1
+    n_sub,  # int: tasks per row
+    out,  # float64 (n_rows, 3, 2): E, P, L real/imag (written)
+):
+    """Fill ``out[r] = [[E.re, E.im], [P.re, P.im], [L.re, L.im]]`` for every row ``r``."""
+    n_rows = bits.shape[0]
+    blk = rot_re.shape[1]
+    lf = float(code_len)
+    part = np.zeros((n_rows * n_sub, 6))
+    two_pi = 2.0 * math.pi
+    a_e = pad + spacing
+    a_p = float(pad)
+    a_l = pad - spacing
+    for t in prange(n_rows * n_sub):
+        c = t // n_sub
+        s = t - c * n_sub
+        n = nsamp[c]
+        nblk = (n + blk - 1) // blk
+        b0 = (s * nblk) // n_sub
+        b1 = ((s + 1) * nblk) // n_sub
+        x0 = start[c]
+        th0 = theta0[c]
+        dc = dchip[c]
+        p0 = phi0[c]
+        dp = dphi[c]
+        bw = bits[c]
+        rr = rot_re[c]
+        ri = rot_im[c]
+        run = max(int((_SPAN - 2.0 * spacing) / dc), 1)
+        buf_r = np.empty(blk)
+        buf_i = np.empty(blk)
+        acc = np.zeros(6)
+        for b in range(b0, b1):
+            k0 = b * blk
+            m_end = min(blk, n - k0)
+            xo = x0 + k0
+            # pass 1: carrier wipe-off, exp(-j 2 pi phi_k) = block phasor x table entry
+            ph = p0 + k0 * dp
+            ph -= math.floor(ph)
+            cr = math.cos(two_pi * ph)
+            ci = -math.sin(two_pi * ph)
+            if n_comp == 2:
+                a = xs[2 * xo:2 * (xo + m_end)]
+                for m in range(m_end):
+                    wr_ = cr * rr[m] - ci * ri[m]
+                    wi_ = cr * ri[m] + ci * rr[m]
+                    xr = float(a[2 * m])
+                    xi = float(a[2 * m + 1])
+                    buf_r[m] = xr * wr_ - xi * wi_
+                    buf_i[m] = xr * wi_ + xi * wr_
+            else:
+                a = xs[xo:xo + m_end]
+                for m in range(m_end):
+                    wr_ = cr * rr[m] - ci * ri[m]
+                    wi_ = cr * ri[m] + ci * rr[m]
+                    xr = float(a[m])
+                    buf_r[m] = xr * wr_
+                    buf_i[m] = xr * wi_
+            # code phase at the block start in [w L, (w + 1) L); split at (w + 1) L
+            tb = th0 + k0 * dc
+            off = math.floor(tb / lf) * lf
+            lim = off + lf
+            mw = min(max(math.ceil((lim - tb) / dc), 0), m_end)
+            while mw > 0 and th0 + (k0 + mw - 1) * dc >= lim:
+                mw -= 1
+            while mw < m_end and th0 + (k0 + mw) * dc < lim:
+                mw += 1
+            # pass 2: E/P/L sums in runs of at most `run` samples, each within one segment
+            m = 0
+            while m < m_end:
+                seg_off = off if m < mw else lim
+                m2 = min(m + run, mw if m < mw else m_end)
+                th_first = (th0 + (k0 + m) * dc) - seg_off
+                c0 = int(th_first + a_l)
+                lo = np.int64(bw[c0])
+                hi = np.int64(bw[c0 + 64])
+                base = float(c0)
+                ae = a_e - base
+                ap = a_p - base
+                al = a_l - base
+                s1, s2, s3, s4, s5, s6 = _run_sums(lo, hi, buf_r[m:m2], buf_i[m:m2], k0 + m,
+                                                   th0, dc, seg_off, ae, ap, al)
+                acc[0] += s1
+                acc[1] += s2
+                acc[2] += s3
+                acc[3] += s4
+                acc[4] += s5
+                acc[5] += s6
+                m = m2
+        for j in range(6):
+            part[t, j] = acc[j]
+    for c in range(n_rows):
+        for j in range(3):
+            out[c, j, 0] = 0.0
+            out[c, j, 1] = 0.0
+        for s in range(n_sub):
+            t = c * n_sub + s
+            for j in range(3):
+                out[c, j, 0] += part[t, 2 * j]
+                out[c, j, 1] += part[t, 2 * j + 1]
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"}, boundscheck=False)
+def mean_power(xs, n_comp):
+    """Mean ``|x|^2`` per sample of stored samples (I/Q interleaved when ``n_comp == 2``).
+
+    Returns
+    -------
+    float
+        ``sum(xs**2) / (xs.size / n_comp)`` [stored units^2], float64 accumulation.
+    """
+    acc = 0.0
+    for k in range(xs.size):
+        v = float(xs[k])
+        acc += v * v
+    n = xs.size // n_comp
+    return acc / n if n > 0 else 0.0
