@@ -313,13 +313,13 @@ class DeepReceiver:
             raise ValueError(f"filter rate {cfg.filter_rate_hz} Hz must divide the IMU rate "
                              f"{imu.rate_hz} Hz")
         n_per = round(n_per)
-        if cfg.align == "truth" and truth is None:
-            raise ImuDataError("align='truth' needs the reference (truth) file; use "
-                               "align='gnss' without one")
         # filter name check before the (long) start-up
         make_filter(cfg.filter, InsErrorModel(), RangeRateMeasurementModel(), np.zeros(17),
                     np.eye(17), np.eye(17), None, dt=1.0 / cfg.filter_rate_hz,
                     **cfg.filter_options)
+        if cfg.align == "truth" and truth is None:
+            raise ImuDataError("align='truth' needs the reference (truth) file; use "
+                               "align='gnss' without one")
 
         # ---- scalar start-up until hand-over
         rx = self.scalar

@@ -1,0 +1,250 @@
+"""Deep integration: NCO model, pre-filter kernel, vector loop end to end, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sdr_di.cli import main
+from sdr_di.constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I
+from sdr_di.deep import (
+    DeepConfig,
+    DeepReceiver,
+    PreFilterBank,
+    nco_commands,
+    predict_ranges,
+)
+from sdr_di.deep._numba_prefilter import prefilter_epochs
+from sdr_di.deep.vector_loop import _Chan, _epoch_rows
+from sdr_di.errors import FilterError, ImuDataError
+from sdr_di.frames import llh_to_ecef
+from sdr_di.orbits.rinex_nav import load_nav
+from sdr_di.scenario import REPO_ROOT
+from sdr_di.sim.generate import broadcast_iono
+from sdr_di.sim.geometry import ReceiverPath, satellite_delays
+
+NAV = REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
+WEEK, SOW0 = 755, 369000.0
+
+
+@pytest.fixture(scope="module")
+def nav():
+    return load_nav(NAV)
+
+
+# ---- NCO model ------------------------------------------------------------------------------
+def test_predicted_pseudoranges_equal_the_generator_delays(nav):
+    """The vector loop's forward model is the generator's light-time/atmosphere model."""
+    iono = broadcast_iono(nav)[0]
+    r = llh_to_ecef(math.radians(40.0), math.radians(116.0), 100.0)
+    v = np.array([3.0, -20.0, 0.5])
+    path = ReceiverPath(np.array([0.0, 2.0]), np.stack([r - v, r + v]), np.stack([v, v]))
+    b_s = 2.5e-4
+    t = np.array([1.0])
+    for prn in (27, 8, 13):
+        eph = nav.select(prn, WEEK, SOW0)
+        d = satellite_delays(eph, path, t, SOW0, np.array([b_s]), iono, True)
+        pr = predict_ranges([eph], WEEK, [SOW0 + t[0] + b_s], [r], [C_LIGHT * b_s], iono)
+        assert pr.P[0, 0] == pytest.approx(C_LIGHT * d.d_code[0], abs=0.02)
+        assert pr.Pc[0, 0] == pytest.approx(C_LIGHT * d.d_carr[0], abs=0.02)
+        assert np.linalg.norm(pr.U[0, 0]) == pytest.approx(1.0)
+
+
+def test_nco_commands_interpolate_the_predictions():
+    P0, P1 = np.array([2.2e7, 2.4e7]), np.array([2.2e7 - 16.0, 2.4e7 + 8.0])   # 20 ms apart
+    fs = 2.5e6
+    cmd = nco_commands(P0, P0, P1, P1, 1000, 51000, fs, 1.0, 1.02)
+    c0 = CHIP_RATE_B3I * (1.0 - P0 / C_LIGHT)
+    c1 = CHIP_RATE_B3I * (1.02 - P1 / C_LIGHT)
+    assert np.allclose(cmd.chips0, c0)
+    assert np.allclose(cmd.chips_at(51000), c1)
+    # range rate -800 m/s -> Doppler +f/c*800; +400 m/s -> negative
+    assert cmd.doppler_hz == pytest.approx(-F_B3I / C_LIGHT * np.array([-800.0, 400.0]))
+    with pytest.raises(ValueError):
+        nco_commands(P0, P0, P1, P1, 10, 10, fs, 1.0, 1.0)
+
+
+def test_epoch_rows_are_contiguous_whole_code_periods():
+    from sdr_di.signal.codes import NH20
+
+    fs = 5e6
+    c = _Chan(prn=27, idx=0, is_d1=True, eph=None, next_start=1003, epoch=40,
+              phase=0.25, prompts=np.zeros(4, complex))
+    dc = CHIP_RATE_B3I * (1 + 1.7e-6) / fs
+    c0 = 40 * CODE_LENGTH_B3I + 0.3 - 1003 * dc      # chips(k) = c0 + k dc: 0.3 chip into 40
+    dp = 1234.5 / fs
+    s, n, th, ph, dph, nh = _epoch_rows(c, c0, dc, dp, 0, 100_000)
+    assert s[0] == 1003 and np.all(s[1:] == s[:-1] + n[:-1])
+    assert s[-1] < 100_000 <= s[-1] + n[-1] and c.next_start == s[-1] + n[-1]
+    assert th[0] == pytest.approx(0.3)
+    assert np.all((th[1:] >= 0) & (th[1:] < dc + 1e-9))            # each row starts a period
+    assert np.all(th + n * dc >= CODE_LENGTH_B3I)                   # and covers it
+    assert c.epoch == 40 + s.size
+    assert np.array_equal(nh, NH20[(40 + np.arange(s.size)) % 20])
+    expect = (0.25 + (s - 1003) * dp) % 1.0                         # continuous carrier phase
+    assert np.allclose(np.angle(np.exp(2j * np.pi * (ph - expect))), 0.0, atol=1e-9)
+    assert np.all(dph == dp)
+
+
+# ---- pre-filter ------------------------------------------------------------------------------
+def _reference_prefilter(x, P, E, Pr, L, T, d, beta, r_tau, r_phi, q_tau, q_phi, s_f):
+    """Plain matrix-form transcription of the pre-filter (prefilter.py module notes)."""
+    x = x.copy()
+    P = P.copy()
+    for j in range(len(Pr)):
+        H = np.array([[1.0, 0.0, beta * T[j] / 2], [0.0, 1.0, math.pi * T[j]]])
+        z = np.array([(1 - d) * (abs(E[j]) - abs(L[j])) / (abs(E[j]) + abs(L[j])),
+                      math.atan(Pr[j].imag / Pr[j].real)])
+        y = z - H @ x
+        y[1] -= math.pi * math.floor(y[1] / math.pi + 0.5)
+        S = H @ P @ H.T + np.diag([r_tau[j], r_phi[j]])
+        K = P @ H.T @ np.linalg.inv(S)
+        x = x + K @ y
+        P = P - K @ H @ P
+        P = 0.5 * (P + P.T)
+        x[1] -= math.pi * math.floor(x[1] / math.pi + 0.5)
+        F = np.array([[1, 0, beta * T[j]], [0, 1, 2 * math.pi * T[j]], [0, 0, 1.0]])
+        x = F @ x
+        P = F @ P @ F.T + np.diag([q_tau, q_phi, s_f * T[j]])
+    return x, P
+
+
+def test_prefilter_kernel_equals_matrix_reference():
+    rng = np.random.default_rng(4)
+    m = 25
+    E, Pr, L = (rng.normal(size=m) + 1j * rng.normal(size=m) + 3.0 for _ in range(3))
+    T = 1e-3 * (1 + 1e-3 * rng.normal(size=m))
+    r_tau, r_phi = rng.uniform(0.01, 0.05, m), rng.uniform(0.05, 0.2, m)
+    x0 = np.array([0.05, 0.3, 2.0])
+    P0 = np.diag([0.04, 0.5, 9.0])
+    x, P = x0.copy(), P0.copy()
+    prefilter_epochs(x, P, E, Pr, L, T, 0.5, CHIP_RATE_B3I / F_B3I, r_tau, r_phi, 1e-8, 1e-4,
+                     4.0)
+    xr, Pr_ = _reference_prefilter(x0, P0, E, Pr, L, T, 0.5, CHIP_RATE_B3I / F_B3I, r_tau,
+                                   r_phi, 1e-8, 1e-4, 4.0)
+    assert np.allclose(x, xr, rtol=1e-10, atol=1e-12)
+    assert np.allclose(P, Pr_, rtol=1e-10, atol=1e-14)
+
+
+def test_prefilter_estimates_code_and_frequency_errors_through_bit_flips():
+    """Synthetic 1 ms correlations at 40 dB-Hz with random data-bit signs: the estimates of a
+    known code offset and frequency error fall within 4 sigma of the truth."""
+    rng = np.random.default_rng(11)
+    cn0 = 10 ** 4.0
+    T = 1e-3
+    d = 0.5
+    beta = CHIP_RATE_B3I / F_B3I
+    tau0, f_err, phi0 = 0.12, 3.0, 0.4
+    bank = PreFilterBank(1, d, s_f=1.0)
+    bank.reset(0, sigma_tau=0.3, sigma_phi=1.0, sigma_f=8.0)
+    A = math.sqrt(2 * cn0 * T)             # unit noise per component
+    n_ep = 400
+    for blk in range(0, n_ep, 20):
+        k = np.arange(blk, blk + 20)
+        tau = tau0 + beta * f_err * k * T
+        phi = phi0 + 2 * math.pi * f_err * (k + 0.5) * T
+        sign = np.repeat(rng.choice([-1.0, 1.0]), 20)
+        def corr(off, tau=tau):
+            return np.maximum(1 - np.abs(tau - off), 0.0)
+
+        def noise():
+            return rng.normal(size=20) + 1j * rng.normal(size=20)
+        ph = np.exp(1j * phi) * sign * A
+        bank.process(0, ph * corr(d) + noise(), ph * corr(0.0) + noise(),
+                     ph * corr(-d) + noise(), np.full(20, T), cn0)
+    dtau, df, vt, vf = bank.outputs(0)
+    tau_end = tau0 + beta * f_err * n_ep * T
+    assert abs(dtau - tau_end) < 4 * math.sqrt(vt) and math.sqrt(vt) < 0.02
+    assert abs(df - f_err) < 4 * math.sqrt(vf) and math.sqrt(vf) < 0.5
+    assert 0.3 < bank.nis[0] < 3.0
+
+
+# ---- end to end ------------------------------------------------------------------------------
+DUR = "26"
+
+
+@pytest.fixture(scope="module")
+def gen26(tmp_path_factory):
+    out = tmp_path_factory.mktemp("deep")
+    assert main(["generate", "--no-progress", "--duration", DUR, "--fs", "2.5e6", "--out",
+                 str(out)]) == 0
+    return out
+
+
+@pytest.mark.slow
+def test_deep_mode_end_to_end(gen26, capsys):
+    """Deep mode on a generated default-scenario file (2.5 MHz in this test only): every
+    channel stays in the measurement vector for the whole vector-loop span (>= 10 s) and the
+    position RMSE is below 2 m."""
+    out = gen26 / "run_ff"
+    rc = main(["run", str(gen26 / "default.bin"), "--mode", "deep", "--filter", "ff-aukf",
+               "--no-progress", "--out", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    summ = json.loads((out / "default_deep_summary.json").read_text())
+    assert summ["prns"] and len(summ["prns"]) == 7
+    assert float(DUR) - summ["handover_s"] >= 10.0
+    assert summ["channels_always_used"] is True
+    m = summ["metrics"]
+    assert m["n"] >= 50
+    assert m["pos_m_rmse"] < 2.0, m
+    assert m["vel_mps_rmse"] < 0.2, m
+    rows = np.loadtxt(out / "default_deep.csv", delimiter=",", skiprows=2)
+    assert rows.shape[0] == m["n"] and np.all(rows[:, 14] == 7)
+    assert np.all(np.diff(rows[:, 0]) == pytest.approx(0.2))          # 5 Hz output
+
+
+def _imu_variant(src: Path, dst: Path, *, sow_shift: float = 0.0, keep_s: float | None = None):
+    lines = src.read_text().splitlines(keepends=True)
+    out = []
+    for ln in lines:
+        if ln.startswith("# bdt_sow_t0:") and sow_shift:
+            ln = f"# bdt_sow_t0: {float(ln.split(':')[1]) + sow_shift!r}\n"
+        if keep_s is not None and ln[:1].isdigit() and float(ln.split(",")[0]) > keep_s:
+            continue
+        out.append(ln)
+    dst.write_text("".join(out))
+    return dst
+
+
+def test_deep_bad_input(gen26, tmp_path, capsys):
+    d = gen26
+    bin_ = str(d / "default.bin")
+    short = _imu_variant(d / "default_imu.csv", tmp_path / "short_imu.csv", keep_s=10.0)
+    shifted = _imu_variant(d / "default_imu.csv", tmp_path / "late_imu.csv", sow_shift=30.0)
+    cases = [
+        (["--imu", str(short)], "IMU record spans"),
+        (["--imu", str(shifted)], "IMU/IF start times inconsistent"),
+        (["--filter", "kalman"], "unknown filter 'kalman'"),
+        (["--filter-rate", "30"], "must divide the IMU rate"),
+    ]
+    for extra, msg in cases:
+        out = tmp_path / "o"
+        rc = main(["run", bin_, "--mode", "deep", "--no-progress", "--out", str(out), *extra])
+        err = capsys.readouterr().err
+        assert rc == 2, (extra, err)
+        assert msg in err and err.count("\n") == 1, err
+        assert not list(out.glob("*_deep*")) if out.exists() else True
+    rc = main(["run", bin_, "--filter", "ekf", "--no-progress"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "only with --mode deep" in err
+
+
+def test_deep_receiver_rejects_bad_settings(gen26):
+    from sdr_di.io.imu_files import read_imu
+    from sdr_di.receiver.run_scalar import open_source
+
+    src = open_source(gen26 / "default.bin")
+    imu = read_imu(gen26 / "default_imu.csv")
+    with pytest.raises(FilterError, match="unknown filter"):
+        DeepReceiver(DeepConfig(filter="nope")).run(src, imu, prns=[27])
+    with pytest.raises(ImuDataError, match="needs the reference"):
+        DeepReceiver(DeepConfig(align="truth")).run(src, imu, prns=[27], truth=None)
+    with pytest.raises(ValueError, match="align"):
+        DeepConfig(align="compass")
+    shutil.rmtree(gen26 / "none", ignore_errors=True)
