@@ -204,3 +204,42 @@ def test_invalid_prn_and_parameters():
         acquire(x, 25e6, prns=[1], coherent_ms=1.5, noncoherent=1)
     with pytest.raises(ValueError, match="pfa"):
         detection_threshold(0.0, 100, 2)
+
+
+def test_acquire_zero_stuffs_below_14_mhz_by_itself():
+    """At 5 MHz the lags are 2.046 chips apart: a code phase half-way between two of them
+    (1 chip off both) is invisible to a plain FFT search; ``acquire`` zero-stuffs by 3."""
+    from sdr_di.receiver.acquisition import acquisition_upsampling
+
+    assert [acquisition_upsampling(f) for f in (25e6, 20e6, 10e6, 5e6, 2.5e6)] == [1, 1, 2, 3, 6]
+    rng = np.random.default_rng(31)
+    fs = 5e6
+    th0 = 2.046 * 1000 + 1.023  # lags fall at theta = 2.046 k (chips) at zero Doppler
+    sats = [(12, 42.0, 0.0, th0, 0.4)]
+    i, q = synth(sats, fs, 0.0, int(40e-3 * fs), True, rng)
+    x = (i + 1j * q).astype(np.complex64)
+    r = acquire(x, fs, prns=[12], noncoherent=40)[0]
+    assert r.detected and abs(r.doppler_hz) < 25.0, r
+    assert _code_err(r.code_phase_chips, th0) < 0.1, r
+    # code phase in samples refers to the original (not the stuffed) samples
+    assert abs(r.code_phase_samples - (L - th0) * fs / 10.23e6) < 0.1
+    plain = acquire(x, fs, prns=[12], noncoherent=40, upsample=1)[0]
+    assert not plain.detected, plain  # the peak falls between the lags
+
+
+def test_acquire_resolves_the_500_hz_doppler_ambiguity(monkeypatch):
+    """The squared-prompt Doppler is exact modulo 500 Hz; when it lands one 500 Hz step off
+    (noise at low C/N0), the prompt-power check in ``acquire`` puts it back."""
+    from sdr_di.receiver import acquisition
+
+    rng = np.random.default_rng(8)
+    fs = 25e6
+    sats = [(8, 40.0, 1234.0, 777.7, 0.2)]
+    i, q = synth(sats, fs, 0.0, int(40e-3 * fs), True, rng)
+    x = (i + 1j * q).astype(np.complex64)
+    good = acquisition._refine_doppler
+    for off in (500.0, -500.0):
+        monkeypatch.setattr(acquisition, "_refine_doppler",
+                            lambda *a, off=off: good(*a) + off)
+        r = acquire(x, fs, prns=[8], noncoherent=40)[0]
+        assert r.detected and abs(r.doppler_hz - 1234.0) < 25.0, (off, r)

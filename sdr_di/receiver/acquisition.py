@@ -22,6 +22,16 @@ flip between any two milliseconds, so 1 ms coherent blocks with non-coherent sum
 safe default; ``M > 1`` gains sensitivity only on signals without transitions (or at the cost
 of a random loss when a transition falls in a block).
 
+Low sample rates (zero-stuffing)
+--------------------------------
+The FFT search has one code delay per sample. Below about 1.4 samples per chip the lags leave
+holes of up to half a sample between them (a whole chip at 5 MHz: the correlation peak can be
+missed entirely), so the block is zero-stuffed by ``u = ceil(10.23e6 / (0.7 fs))``
+(:func:`acquisition_upsampling`; ``upsample`` overrides it) and searched at ``u fs``: the zero
+samples add nothing to any correlation, the lags fall every ``1 / (u fs)`` (worst-case
+misalignment 0.35 chip) and code phases still refer to the original samples. The refinement
+runs on the original samples.
+
 Statistic and threshold
 -----------------------
 ``S(tau, fd) = sum_b |R_b(tau, fd)|^2``. With noise only, each ``R_b`` is circular complex
@@ -53,6 +63,10 @@ Refinement (detected PRNs)
    Step 2 is then repeated at the refined Doppler.
 4. C/N0 = ``(mean |P_b|^2 - sigma_P^2) / sigma_P^2 / T`` with ``sigma_P^2 = sigma2 N / N_c``
    the noise variance of a 1 ms prompt (``N`` samples, ``T`` = 1 ms), in dB-Hz.
+5. Doppler ambiguity (``coherent_ms = 1``): the frequency of the squared prompts (step 3) is
+   exact modulo 500 Hz; at low C/N0 noise can put the coarse peak in a neighbouring 500 Hz bin,
+   which a 1 ms PLL/FLL cannot pull in. The mean epoch-aligned 1 ms prompt power at ``fd`` and
+   ``fd +- 500 Hz`` picks the right one (a 500 Hz error costs 3.9 dB of prompt power).
 
 Code phase conventions (as the correlator): ``code_phase_chips`` is the code NCO phase to load
 at the first sample of the block, ``theta0`` in ``[0, 10230)``: the received chip at sample
@@ -68,8 +82,8 @@ import hashlib
 import math
 import os
 from collections import OrderedDict
+from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, Iterable
 
 import numpy as np
 import scipy.fft
@@ -79,9 +93,10 @@ from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I
 from ._numba_acquire import accumulate_power
 from .correlator import check_prn, correlate_table, padded_replicas
 
-__all__ = ["AcquisitionResult", "acquire", "acquire_source", "detection_threshold"]
+__all__ = ["AcquisitionResult", "acquire", "acquire_source", "acquisition_upsampling",
+           "detection_threshold"]
 
-_REPLICA_CACHE: "OrderedDict[tuple, np.ndarray]" = OrderedDict()
+_REPLICA_CACHE: OrderedDict[tuple, np.ndarray] = OrderedDict()
 _REPLICA_CACHE_MAX = 256
 
 
@@ -158,8 +173,14 @@ def detection_threshold(pfa: float, n_cells: int, noncoherent: int) -> float:
     return float(special.gammainccinv(noncoherent, p_cell))
 
 
+def acquisition_upsampling(sampling_rate_hz: float) -> int:
+    """Zero-stuffing factor of the search at ``sampling_rate_hz`` [Hz] (module notes):
+    ``ceil(10.23e6 / (0.7 fs))``, at least 1."""
+    return max(1, math.ceil(CHIP_RATE_B3I / (0.7 * float(sampling_rate_hz)) - 1e-9))
+
+
 def _default_code_source() -> Callable[[int], np.ndarray]:
-    from ..signal.codes import b3i_code  # noqa: PLC0415 - written by the signal package
+    from ..signal.codes import b3i_code
 
     return b3i_code
 
@@ -199,7 +220,7 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
             pfa: float = 1e-3, refine: bool = True, carrier_hz: float = F_B3I,
             code_source: Callable[[int], np.ndarray] | None = None,
             workers: int | None = None, prn_batch: int = 8,
-            keep_grid: bool = False) -> list[AcquisitionResult]:
+            keep_grid: bool = False, upsample: int | None = None) -> list[AcquisitionResult]:
     """Search PRNs in a block of IF samples.
 
     Parameters
@@ -238,7 +259,11 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
         PRNs searched per pass over the Doppler grid (memory: about ``prn_batch x bins x
         fs / 1000 x 4`` bytes).
     keep_grid : bool, optional
-        Attach the normalized grid ``S / sigma2`` to each result.
+        Attach the normalized grid ``S / sigma2`` to each result (code delays in units of
+        the zero-stuffed samples when ``upsample > 1``).
+    upsample : int, optional
+        Zero-stuffing factor of the search (module notes); default
+        :func:`acquisition_upsampling` of ``sampling_rate_hz`` (1 at 14.6 MHz and above).
 
     Returns
     -------
@@ -265,16 +290,23 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
     x = np.asarray(samples)
     if x.ndim != 1:
         raise ValueError(f"samples must be 1-D, got shape {x.shape}")
-    n_ms = round(fs * 1e-3)  # samples per code period (lags searched)
-    n_c = round(m_ms * fs * 1e-3)  # samples per coherent block
-    need = k_nc * n_c
+    n_ms0 = round(fs * 1e-3)  # samples per code period
+    n_c0 = round(m_ms * fs * 1e-3)  # samples per coherent block
+    need = k_nc * n_c0
     if x.size < need:
         raise ValueError(f"acquisition needs {need} samples ({k_nc} x {m_ms} ms at "
                          f"{fs / 1e6:g} MHz), got {x.size}")
+    u = acquisition_upsampling(fs) if upsample is None else int(upsample)
+    if u < 1:
+        raise ValueError(f"upsample must be >= 1, got {upsample}")
+    # the search grid: zero-stuffed samples at u fs (module notes)
+    fs_g = fs * u
+    n_ms = u * n_ms0  # lags searched
+    n_c = u * n_c0
     workers = workers or os.cpu_count() or 1
-    t_c = n_c / fs
+    t_c = n_c / fs_g
     step = float(doppler_step_hz) if doppler_step_hz else 1.0 / (2.0 * t_c)
-    n_half = int(math.ceil(doppler_range_hz / step - 1e-9))
+    n_half = math.ceil(doppler_range_hz / step - 1e-9)
     dopplers = doppler_center_hz + step * np.arange(-n_half, n_half + 1)
     n_bins = dopplers.size
     if code_source is None:
@@ -284,7 +316,12 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
     threshold = detection_threshold(pfa, n_bins * n_ms, k_nc)
     median_gamma = float(special.gammaincinv(k_nc, 0.5))
 
-    blocks = x[:need].reshape(k_nc, n_c)
+    if u > 1:
+        xg = np.zeros(need * u, dtype=x.dtype)
+        xg[::u] = x[:need]
+        blocks = xg.reshape(k_nc, n_c)
+    else:
+        blocks = x[:need].reshape(k_nc, n_c)
     k_idx = np.arange(n_c, dtype=np.float64)
     b_idx = np.arange(k_nc)
     unique = list(codes)
@@ -298,33 +335,36 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
             grid = np.zeros((len(batch), n_bins, n_ms), np.float32)
             for j, fd in enumerate(dopplers):
                 eps = fd / carrier_hz
-                ph = (if_hz + fd) / fs * k_idx
+                ph = (if_hz + fd) / fs_g * k_idx
                 ph -= np.floor(ph)
                 wipe = np.exp(-2j * np.pi * ph).astype(np.complex64)
                 xf = scipy.fft.fft(blocks * wipe, axis=1, workers=workers, overwrite_x=True)
                 shifts = np.rint(eps * b_idx * n_c).astype(np.int64)
                 resample = abs(eps) * CHIP_RATE_B3I * t_c > 0.1
                 rate = CHIP_RATE_B3I * (1.0 + eps) if resample else CHIP_RATE_B3I
-                cfs = [_replica_fft(codes[prn], fs, n_c, rate, workers) for prn in batch]
+                cfs = [_replica_fft(codes[prn], fs_g, n_c, rate, workers) for prn in batch]
 
                 def one(ip: int, j: int = j, xf: np.ndarray = xf,
-                        shifts: np.ndarray = shifts, cfs: list = cfs) -> None:
+                        shifts: np.ndarray = shifts, cfs: list = cfs,
+                        grid: np.ndarray = grid) -> None:
                     r = scipy.fft.ifft(xf * cfs[ip], axis=1, workers=1, overwrite_x=True)
                     accumulate_power(r, shifts, grid[ip, j])
 
                 list(pool.map(one, range(len(batch))))
             for ip, prn in enumerate(batch):
-                found[prn] = _evaluate(grid[ip], prn, dopplers, x, fs, if_hz, n_ms, n_c, k_nc,
-                                       m_ms, threshold, median_gamma, pfa, refine, carrier_hz,
-                                       codes[prn], code_len, keep_grid)
+                found[prn] = _evaluate(grid[ip], prn, dopplers, x, fs, u, if_hz, n_ms0, n_c0,
+                                       k_nc, m_ms, threshold, median_gamma, pfa, refine,
+                                       carrier_hz, codes[prn], code_len, keep_grid)
     return [dataclasses.replace(found[p]) for p in prn_list]
 
 
-def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: float,
+def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: float, u: int,
               if_hz: float, n_ms: int, n_c: int, k_nc: int, m_ms: int, threshold: float,
               median_gamma: float, pfa: float, refine: bool, carrier_hz: float,
               code: np.ndarray, code_len: int, keep_grid: bool) -> AcquisitionResult:
-    """Detection and refinement from one PRN's grid ``s`` (n_bins, n_ms)."""
+    """Detection and refinement from one PRN's grid ``s`` (n_bins, u n_ms) searched at
+    ``u fs``; ``x``, ``fs``, ``n_ms``, ``n_c``: the original samples."""
+    n_lags = s.shape[1]
     flat = s.ravel()
     mid = flat.size // 2
     noise = float(np.partition(flat, mid)[mid]) / median_gamma
@@ -340,10 +380,10 @@ def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: 
     if detected:
         if 0 < j < n_bins - 1:
             fd += step * _parabola(float(s[j - 1, tau]), float(s[j, tau]), float(s[j + 1, tau]))
-        tau_f += _parabola(float(s[j, (tau - 1) % n_ms]), float(s[j, tau]),
-                           float(s[j, (tau + 1) % n_ms]))
+        tau_f += _parabola(float(s[j, (tau - 1) % n_lags]), float(s[j, tau]),
+                           float(s[j, (tau + 1) % n_lags]))
     rate = CHIP_RATE_B3I * (1.0 + fd / carrier_hz)
-    theta = float(np.mod(-tau_f * rate / fs, code_len))
+    theta = float(np.mod(-tau_f * rate / (fs * u), code_len))
     cn0 = math.nan
     if detected and refine:
         xs = x[:k_nc * n_c]
@@ -354,6 +394,8 @@ def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: 
         theta, p = _refine_code(xs, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
         snr = (float(np.mean(np.abs(p) ** 2)) - noise_1ms) / noise_1ms
         cn0 = 10.0 * math.log10(snr / (n_ms / fs)) if snr > 0 else math.nan
+        if m_ms == 1:
+            fd = _resolve_doppler(xs, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
     rate = CHIP_RATE_B3I * (1.0 + fd / carrier_hz)
     theta = float(np.mod(theta, code_len))
     if theta >= code_len:
@@ -429,7 +471,7 @@ def _refine_doppler(x, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
     p = _block_prompts(x, tab, code_len, np.array([theta]), fd, fs, if_hz, starts, n_ms,
                        carrier_hz, 0.1)[1]
     z = p * p
-    nfft = max(4096, 1 << int(math.ceil(math.log2(8 * starts.size))))
+    nfft = max(4096, 1 << math.ceil(math.log2(8 * starts.size)))
     spec = np.abs(np.fft.fft(z, nfft))
     i = int(np.argmax(spec))
     off = _parabola(float(spec[i - 1]), float(spec[i]), float(spec[(i + 1) % nfft]))
@@ -438,6 +480,26 @@ def _refine_doppler(x, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
         f2 -= 1.0
     t_blk = float(starts[-1] - starts[0]) / (starts.size - 1) / fs
     return fd + 0.5 * f2 / t_blk
+
+
+def _resolve_doppler(x, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
+    """The best of ``fd`` and ``fd +- 500 Hz`` by the mean epoch-aligned 1 ms prompt power
+    (module notes, refinement step 5)."""
+    cands = (fd, fd - 500.0, fd + 500.0)
+    starts = _epoch_starts(x.size, theta, fd, fs, n_ms, code_len, carrier_hz)
+    if starts.size < 4:
+        return fd
+    rate = CHIP_RATE_B3I * (1.0 + fd / carrier_hz)
+    n = min(math.floor(code_len * fs / rate), n_ms)
+    n_ep = starts.size
+    th = theta + starts * (rate / fs)
+    rows_ph = [(if_hz + f) * starts / fs for f in cands]
+    rows_fc = [np.full(n_ep, if_hz + f) for f in cands]
+    table = np.repeat(tab, 3 * n_ep, axis=0)
+    res = correlate_table(x, table, code_len, np.tile(th, 3), rate, np.concatenate(rows_ph),
+                          np.concatenate(rows_fc), n, fs, 0.5, np.tile(starts, 3))
+    power = np.abs(res.prompt.reshape(3, n_ep)) ** 2
+    return float(cands[int(np.argmax(power.mean(axis=1)))])
 
 
 def acquire_source(source, start_sample: int = 0, **kwargs) -> list[AcquisitionResult]:

@@ -4,18 +4,9 @@
 :class:`~sdr_di.receiver.ifreader.IfSource`:
 
 1. **Acquisition** of the requested PRNs on the first ``noncoherent`` ms (default 40 x 1 ms)
-   with :func:`~sdr_di.receiver.acquisition.acquire` (:func:`acquire_at`):
-
-   * below about 1.4 samples per chip the FFT delay grid (one lag per sample) leaves holes
-     of up to half a sample between lags (a whole chip at 5 MHz: no correlation at all), so
-     the block is zero-stuffed by ``u = ceil(10.23e6 / (0.7 fs))`` (``acq_upsample``) and
-     searched at ``u fs``: the zero samples add nothing to any correlation, the lags fall
-     every ``1 / (u fs)`` (worst-case misalignment 0.35 chip) and code phases still refer to
-     the original samples;
-   * the fine Doppler of ``acquire`` (from the squared prompts) is exact modulo 500 Hz; at
-     low C/N0 the coarse peak can sit in a neighbouring bin, which a 1 ms PLL/FLL cannot pull
-     in. :func:`acquire_at` picks the best of ``fd`` and ``fd +- 500 Hz`` by the mean
-     epoch-aligned prompt power.
+   with :func:`~sdr_di.receiver.acquisition.acquire_source` (zero-stuffing below about 14 MHz,
+   ``acq_upsample``, and the +-500 Hz Doppler check are done there: module notes of
+   :mod:`~sdr_di.receiver.acquisition`).
 2. **Tracking**: a sample buffer is read from the file in chunks (``chunk_ms``, default
    100 ms; memory bounded by the chunk size whatever the file length). At each step every
    tracking channel whose next *block* of epochs (one epoch before bit synchronization, one
@@ -63,103 +54,24 @@ from collections.abc import Callable, Iterable
 import numba
 import numpy as np
 
-from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I
+from ..constants import CODE_LENGTH_B3I
 from ..orbits.ephemeris import Ephemeris
 from ._numba_correlate_bits import correlate_epl_bits, mean_power
-from .acquisition import AcquisitionResult, acquire
+from .acquisition import AcquisitionResult, acquire_source, acquisition_upsampling
 from .channel import Channel
 from .correlator import (
     CARRIER_BLOCK,
     CODE_PAD,
     bit_windows,
     check_prn,
-    correlate_table,
     padded_replicas,
 )
 from .ifreader import IfSource
 from .tracking import ChannelObservation, ChannelState, TrackingConfig, TrackingLog
 
-__all__ = ["ScalarReceiver", "acquire_at", "acquisition_upsampling"]
+__all__ = ["ScalarReceiver", "acquisition_upsampling"]
 
 OnEpoch = Callable[[int, list[ChannelObservation], dict[int, Ephemeris]], bool | None]
-
-
-def acquisition_upsampling(sampling_rate_hz: float) -> int:
-    """Zero-stuffing factor of the acquisition search (module notes)."""
-    return max(1, math.ceil(CHIP_RATE_B3I / (0.7 * float(sampling_rate_hz)) - 1e-9))
-
-
-def acquire_at(source: IfSource, sample: int, prns: Iterable[int], *, upsample: int | None = None,
-               **kwargs) -> list[AcquisitionResult]:
-    """Acquire ``prns`` on the samples of ``source`` from ``sample`` (code phases at ``sample``).
-
-    Zero-stuffs the block by ``upsample`` (default :func:`acquisition_upsampling`) before
-    :func:`~sdr_di.receiver.acquisition.acquire`; keyword arguments go to ``acquire``.
-
-    Raises
-    ------
-    ValueError
-        Not enough samples left in the file.
-    """
-    fs = source.sampling_rate_hz
-    u = acquisition_upsampling(fs) if upsample is None else max(1, int(upsample))
-    m_ms = int(kwargs.get("coherent_ms", 1))
-    k_nc = int(kwargs.get("noncoherent", 20))
-    n = k_nc * round(m_ms * fs * 1e-3)
-    if sample + n > source.n_samples:
-        raise ValueError(f"{source.path}: acquisition needs samples [{sample}, {sample + n}), "
-                         f"the file has {source.n_samples}")
-    x = source.read(sample, n)
-    xa = x
-    if u > 1:
-        xa = np.zeros(n * u, dtype=x.dtype)
-        xa[::u] = x
-    kwargs.setdefault("carrier_hz", source.carrier_hz)
-    res = acquire(xa, fs * u, source.if_hz, prns, **kwargs)
-    if m_ms == 1:
-        for r in res:
-            if r.detected:
-                _resolve_doppler(r, x, fs, source.if_hz, kwargs["carrier_hz"])
-    return res
-
-
-def _resolve_doppler(r: AcquisitionResult, x: np.ndarray, fs: float, if_hz: float,
-                     carrier_hz: float) -> None:
-    """Remove the +-500 Hz ambiguity of the acquisition's fine Doppler (in place).
-
-    ``acquire`` refines the Doppler from the squared 1 ms prompts, which is exact modulo
-    500 Hz; when noise put the coarse peak in a neighbouring 500 Hz bin the result is off by
-    one bin. The mean 1 ms prompt power (code-epoch aligned) at ``fd`` and ``fd +- 500 Hz``
-    tells them apart (a 500 Hz error costs 3.9 dB of prompt power).
-    """
-    from ..signal.codes import b3i_code
-
-    tab1 = padded_replicas(np.asarray(b3i_code(r.prn)))
-    cands = (r.doppler_hz, r.doppler_hz - 500.0, r.doppler_hz + 500.0)
-    rate = CHIP_RATE_B3I * (1.0 + r.doppler_hz / carrier_hz)
-    dchip = rate / fs
-    per = CODE_LENGTH_B3I / dchip
-    first = ((CODE_LENGTH_B3I - r.code_phase_chips) % CODE_LENGTH_B3I) / dchip
-    n_ep = int((x.size - per - first) // per)
-    if n_ep < 4:
-        return
-    starts = np.ceil(first + per * np.arange(n_ep)).astype(np.int64)
-    n = math.floor(per)
-    th = r.code_phase_chips + starts * dchip
-    rows_th, rows_ph, rows_fc = [], [], []
-    for fd in cands:
-        fc = if_hz + fd
-        rows_th.append(th)
-        rows_ph.append(fc * starts / fs)
-        rows_fc.append(np.full(n_ep, fc))
-    table = np.repeat(tab1, 3 * n_ep, axis=0)
-    res = correlate_table(x, table, CODE_LENGTH_B3I, np.concatenate(rows_th), rate,
-                          np.concatenate(rows_ph), np.concatenate(rows_fc), n, fs, 0.5,
-                          np.tile(starts, 3))
-    power = np.abs(res.prompt.reshape(3, n_ep)) ** 2
-    best = int(np.argmax(power.mean(axis=1)))
-    if best:
-        r.doppler_hz = float(cands[best])
 
 
 class _Bank:
@@ -211,7 +123,7 @@ class _Bank:
         process competes for them (a worker thread descheduled at the barrier stalls the
         region for a time slice: measured 5x slower than one thread on a loaded 2-core
         machine). Unless fixed, the bank measures both settings (1 thread and all threads,
-        re-exploring the slower one for 2 calls in every 64) and uses the faster. The first call
+        re-exploring the slower one for 1 call in every 256) and uses the faster. The first call
         of each setting (thread pool start-up) is not counted.
         """
         if self.fixed_threads is not None:
@@ -227,7 +139,7 @@ class _Bank:
             else:
                 best = 1 if c1 <= cm else self.max_threads
                 other = self.max_threads if best == 1 else 1
-                t = other if self._calls % 64 < 2 else best
+                t = other if self._calls % 256 == 255 else best
         self._calls += 1
         if numba.get_num_threads() != t:
             numba.set_num_threads(t)
@@ -366,7 +278,7 @@ class ScalarReceiver:
                  **over) -> list[AcquisitionResult]:
         kw = dict(self.acq_kwargs)
         kw.update(over)
-        return acquire_at(source, sample, prns, upsample=self.acq_upsample, **kw)
+        return acquire_source(source, sample, prns=prns, upsample=self.acq_upsample, **kw)
 
     def _acq_len(self, fs: float) -> int:
         return int(self.acq_kwargs.get("noncoherent", 20)) * \
