@@ -48,6 +48,9 @@ __all__ = ["BUILTIN", "Experiment", "experiment_names", "get_experiment", "parse
 #: experiments (``count-change``, ``outage``, ``weak-signal``) are added here, one line each.
 BUILTIN: dict[str, str] = {
     "noise-mismatch": "sdr_di.experiments.noise_mismatch",
+    "count-change": "sdr_di.experiments.count_change",
+    "outage": "sdr_di.experiments.outage",
+    "weak-signal": "sdr_di.experiments.weak_signal",
 }
 
 _REGISTERED: dict[str, Experiment] = {}
