@@ -4,7 +4,7 @@
 Usage::
 
     python scripts/bench.py generate [--durations 10 60] [--out DIR] [--keep]
-    python scripts/bench.py run [--durations 10 40] [--keep]
+    python scripts/bench.py run [--durations 10 40] [--keep] [--if-file F] [--repeat N]
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
     python scripts/bench.py filters [options of scripts/bench_filters.py]
 
@@ -13,6 +13,14 @@ for each duration in a fresh process, and prints wall time, samples per second, 
 factor (data seconds per wall second) and the process's peak resident memory, so 10 s vs 60 s
 shows whether memory grows with the file length. The first run also pays numba compilation
 unless the cache is warm; a warm-up run of 0.2 s is made first.
+
+``run``: runs the scalar receiver (``run_scalar``, the pipeline of ``sdr-di run --mode
+scalar``: acquisition, tracking, decoding, PVT at 5 Hz, CSV/NMEA output) in a fresh process on
+a default-scenario file per duration (or ``--if-file``) and prints the process wall time, the
+real-time factor (file seconds per wall second of the whole process, and of the tracking loop
+alone), each stage's share of the wall time (``ScalarReceiver.profile``) and the peak RSS (10 s
+vs 40 s shows that memory does not grow with the file length). The machine's load average is
+printed: on a shared machine, repeat (``--repeat``) and report best and typical.
 """
 
 from __future__ import annotations
@@ -64,33 +72,72 @@ def bench_generate(args: argparse.Namespace) -> None:
             shutil.rmtree(out, ignore_errors=True)
 
 
+_RUN_CHILD = """
+import json, resource, sys
+from sdr_di.receiver.run_scalar import open_source, run_scalar
+from sdr_di.receiver.scalar import ScalarReceiver
+path, out, prns = sys.argv[1], sys.argv[2], [int(p) for p in sys.argv[3].split(",")]
+rx = ScalarReceiver(log=False)
+res = run_scalar(open_source(path), out, prns=prns, progress=False, receiver=rx)
+prof = {k: v for k, v in res.profile.items() if isinstance(v, (int, float))}
+print("RESULT", json.dumps({"profile": prof, "processed_s": res.processed_s,
+      "run_wall_s": res.wall_s,
+      "maxrss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+"""
+
+#: Stages of ``ScalarReceiver.profile`` printed as shares of the receiver's wall time.
+_STAGES = ("acquisition", "read", "correlate", "channels", "callback")
+
+
+def _run_receiver(path: Path, out: Path, prns: str) -> dict:
+    """``run_scalar`` (what ``sdr-di run --mode scalar`` runs) in a fresh process: the
+    process wall time and peak RSS, the receiver's profile."""
+    t0 = time.perf_counter()
+    res = subprocess.run([sys.executable, "-c", _RUN_CHILD, str(path), str(out), prns],
+                         check=False, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if res.returncode != 0:
+        raise SystemExit(f"run failed: {res.stderr.strip()}")
+    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
+    r = json.loads(line[len("RESULT "):])
+    r["process_wall_s"] = wall
+    return r
+
+
 def bench_run(args: argparse.Namespace) -> None:
-    """Scalar receiver real-time factor and peak memory on default-scenario files."""
+    """Scalar receiver real-time factor, per-stage shares and peak memory on default-scenario
+    files (generated for each duration, or ``--if-file``)."""
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sdr-di-bench-"))
     try:
-        print(f"machine: {os.cpu_count()} cores; scalar receiver, default scenario, "
-              "7 satellites, 25 MHz, 4-bit iq_int8, PVT at 5 Hz")
-        print(f"{'duration s':>10} {'wall s':>8} {'x real time':>12} {'peak RSS MiB':>13}")
-        for d in args.durations:
-            _run_generate(d, out)
-            meta = json.loads((out / "bench.json").read_text())
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+        print(f"machine: {os.cpu_count()} cores, load average {load:.2f} at start; scalar "
+              "receiver, default scenario, 7 satellites, 25 MHz, 4-bit iq_int8, PVT at 5 Hz")
+        print("x real time: file seconds per wall second of the whole process (imports, "
+              "acquisition, tracking, PVT, output); tracking: of the tracking loop alone")
+        print(f"{'file s':>6} {'wall s':>7} {'x real time':>11} {'tracking':>8} "
+              + " ".join(f"{s[:7]:>7}" for s in _STAGES) + f" {'other':>6} {'peak RSS MiB':>12}")
+        if args.if_file:
+            files = [Path(args.if_file)]
+        else:
+            files = []
+            for d in args.durations:
+                sub = out / f"d{d:g}"
+                _run_generate(d, sub)
+                files.append(sub / "bench.bin")
+        for f in files:
+            meta = json.loads(f.with_suffix(".json").read_text())
             prns = ",".join(str(s["prn"]) for s in meta["satellites"])
-            code = (
-                "import resource, sys; from sdr_di.cli import main; "
-                f"rc = main(['run', r'{out / 'bench.bin'}', '--prn', '{prns}', '--out', "
-                f"r'{out / 'run'}', '--no-progress']); "
-                "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss); "
-                "sys.exit(rc)")
-            t0 = time.perf_counter()
-            res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-            wall = time.perf_counter() - t0
-            if res.returncode != 0:
-                raise SystemExit(f"run failed: {res.stderr.strip()}")
-            rss = int(next(l for l in res.stdout.splitlines()
-                           if l.startswith("MAXRSS")).split()[1]) * 1024
-            print(f"{d:10.1f} {wall:8.2f} {d / wall:12.2f} {rss / 2**20:13.1f}")
-            print("           " + next(l for l in res.stdout.splitlines()
-                                        if l.startswith("processed")))
+            for _ in range(args.repeat):
+                r = _run_receiver(f, out / "run", prns)
+                p = r["profile"]
+                wall = r["process_wall_s"]
+                d = r["processed_s"]
+                shares = [100.0 * p[s] / wall for s in _STAGES]
+                print(f"{d:6.1f} {wall:7.2f} {d / wall:11.2f} {p['realtime_factor']:8.2f} "
+                      + " ".join(f"{v:6.1f}%" for v in shares)
+                      + f" {100.0 - sum(shares):5.1f}% {r['maxrss'] / 2**20:12.1f}")
+        print("stage shares: % of the process wall time (other: imports, numba cache loading, "
+              "setup, output files)")
     finally:
         if not args.keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -109,6 +156,11 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--durations", type=float, nargs="+", default=[10.0, 40.0])
     r.add_argument("--out", default=None, help="work directory (default: a temp dir)")
     r.add_argument("--keep", action="store_true", help="keep the files")
+    r.add_argument("--if-file", default=None,
+                   help="benchmark this default-scenario IF file (with its sidecar) instead "
+                        "of generating one per duration")
+    r.add_argument("--repeat", type=int, default=1, help="runs per file (timings are noisy "
+                                                          "on a shared machine)")
     r.set_defaults(func=bench_run)
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_correlate

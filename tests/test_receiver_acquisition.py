@@ -34,7 +34,7 @@ def _mseq(taps, init, n, reset=None):
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _icd_code(prn):
     """Independent B3I code (G1 xor G2 per the ICD, G2 phases from the reference table)."""
     rows = {int(r["prn"]): r for r in csv.DictReader(CSV.open())}
@@ -86,7 +86,7 @@ def synth(sats, fs, if_hz, n, is_complex, rng, bits=4):
             x += np.sqrt(4 * c / fs) * s * carrier.real
     step = 0.3352 if bits == 4 else 1.0 / 16  # Max quantizer step for 4 bits / sigma
     lvl = 2 ** (bits - 1) - 1
-    q = lambda v: np.clip(np.rint(v / step), -lvl, lvl)  # noqa: E731
+    q = lambda v: np.clip(np.rint(v / step), -lvl, lvl)
     if is_complex:
         return q(x.real), q(x.imag)
     return q(x), None

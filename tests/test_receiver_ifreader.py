@@ -157,7 +157,7 @@ def test_memory_mapped_reading_of_a_large_sparse_file(tmp_path):
     assert src.read(500, 1)[0] == 5 - 5j
     it = src.chunks(250_000, start=n // 2)  # lazy: only the blocks asked for are read
     for _ in range(4):
-        k, blk = next(it)
+        _k, blk = next(it)
         assert blk.size == 250_000 and not np.any(blk)
     wall = time.perf_counter() - t0
     rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

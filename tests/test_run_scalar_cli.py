@@ -42,10 +42,24 @@ def test_scalar_run_tracks_decodes_and_fixes(complex_file):
     rx = ScalarReceiver(log=False)
     res = run_scalar(open_source(d / "default.bin"), d / "run", prns=_prns(d) + [1, 40],
                      progress=False, receiver=rx)
-    # every simulated satellite tracked to the end, absent PRNs not
+    # every simulated satellite acquired: Doppler within 100 Hz, code phase within 0.5 chip
+    # of the generator's truth (at the file's first sample)
+    truth = {s["prn"]: s for s in json.loads((d / "default.json").read_text())["satellites"]}
+    acq = {r.prn: r for r in rx.acquisition_results}
+    for p, t in truth.items():
+        r = acq[p]
+        dcode = (r.code_phase_chips - t["code_phase_chips"] + 5115) % 10230 - 5115
+        assert r.detected and abs(r.doppler_hz - t["doppler_hz"]) < 100.0, (r, t)
+        assert abs(dcode) < 0.5, (r, t)
+    assert not acq[1].detected and not acq[40].detected
+    # every simulated satellite tracked for the whole file (never lost), absent PRNs not
     states = {r["prn"]: r["state"] for r in res.channels}
     assert all(states.get(p) == "TRACK" for p in _prns(d)), states
     assert 1 not in states and 40 not in states
+    for p in _prns(d):
+        c = rx.channels[p]
+        assert c.n_acquisitions == 1, c.transitions
+        assert all(st.name in ("PULL_IN", "TRACK") for _, st in c.transitions), c.transitions
     # decoded ephemerides equal the RINEX records within the ICD LSB
     nav = load_nav(Path(json.loads((d / "default.json").read_text())["ephemeris_file"]))
     assert len(rx.ephemerides) >= 4
