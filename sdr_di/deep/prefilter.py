@@ -35,10 +35,17 @@ Interaction with the vector loop (:mod:`sdr_di.deep.vector_loop`):
   interval move by the correction's projection on the channel, ``(f_code / c) (H x)_rho``
   chips and ``(f_carr / c) (H x)_rho_dot`` Hz; :meth:`PreFilterBank.shift` removes them from
   the state so it stays the error relative to the new NCOs;
-* **decorrelation**: the code and frequency variances are reset to their prior
-  (``sigma_tau0``, ``sigma_f0``) at the start of every interval, so successive outputs are
-  (nearly) independent measurements of the integration filter, as a federated filter's local
-  filters must be (the carried carrier phase keeps the channel phase-tracked).
+* **decorrelation**: the code variance is reset to its prior (``sigma_tau0``) at the start of
+  every interval, so successive code outputs are (nearly) independent measurements of the
+  integration filter, as a federated filter's local filters should be. The carrier states
+  (phase, frequency) keep their covariance (``reset_frequency=False``, the default): the
+  frequency then comes from the continuously tracked carrier phase rather than from the
+  phase slope inside one 20 ms interval, 4x more precise. Measured on a 26 s default-scenario
+  file (2.5 MHz, ``ekf``, 13.8 s of vector loop): velocity RMSE 0.0092 m/s with the carrier
+  states kept, 0.036 m/s with the frequency reset too (attitude 0.036 vs 0.043 deg, position
+  0.45 m both); keeping the code covariance as well made the filter overconfident (velocity
+  0.061 m/s, attitude 0.17 deg). The feedback shift keeps the carried state the residual
+  error, so the integration filter does not see an old error twice.
 """
 
 from __future__ import annotations
@@ -77,8 +84,10 @@ class PreFilterBank:
         Frequency random-walk PSD [Hz^2/s]. Default 4 (0.2 Hz, i.e. 5 cm/s, of unpredicted
         drift in 10 ms).
     sigma_tau0, sigma_f0 : float
-        Prior standard deviations of the code [chips] and frequency [Hz] errors at every
-        interval start (decorrelation). Defaults 0.2 chip, 5 Hz.
+        Prior standard deviations of the code [chips] and frequency [Hz] errors set at every
+        interval start when the state is reset (decorrelation). Defaults 0.2 chip, 5 Hz.
+    reset_code, reset_frequency : bool
+        Which variances :meth:`decorrelate` resets (module notes). Defaults True, False.
     q_tau, q_phi : float
         Process noise per epoch [chips^2], [rad^2].
 
@@ -94,7 +103,8 @@ class PreFilterBank:
 
     def __init__(self, n: int, spacing: float = 0.5, carrier_hz: float = F_B3I, *,
                  s_f: float = 4.0, sigma_tau0: float = 0.2, sigma_f0: float = 5.0,
-                 q_tau: float = 1e-8, q_phi: float = 1e-4):
+                 q_tau: float = 1e-8, q_phi: float = 1e-4, reset_code: bool = True,
+                 reset_frequency: bool = False):
         self.n = int(n)
         self.spacing = float(spacing)
         self.beta = CHIP_RATE_B3I / float(carrier_hz)
@@ -103,6 +113,8 @@ class PreFilterBank:
         self.sigma_f0 = float(sigma_f0)
         self.q_tau = float(q_tau)
         self.q_phi = float(q_phi)
+        self.reset_code = bool(reset_code)
+        self.reset_frequency = bool(reset_frequency)
         self.x = np.zeros((self.n, 3))
         self.P = np.zeros((self.n, 3, 3))
         self.nis = np.full(self.n, math.nan)
@@ -125,13 +137,15 @@ class PreFilterBank:
         self.x[i, 2] -= d_f_hz
 
     def decorrelate(self, i: int) -> None:
-        """Reset the code and frequency variances (and their cross terms) to the priors."""
+        """Reset the code (and, if ``reset_frequency``, frequency) variances and their cross
+        terms to the priors."""
         P = self.P[i]
-        p11 = P[1, 1]
-        P[:] = 0.0
-        P[0, 0] = self.sigma_tau0 ** 2
-        P[1, 1] = p11
-        P[2, 2] = self.sigma_f0 ** 2
+        for k, on, sig in ((0, self.reset_code, self.sigma_tau0),
+                           (2, self.reset_frequency, self.sigma_f0)):
+            if on:
+                P[k, :] = 0.0
+                P[:, k] = 0.0
+                P[k, k] = sig * sig
 
     def process(self, i: int, early, prompt, late, t_epoch, cn0_hz: float) -> None:
         """Run channel ``i`` over its epochs of the interval (NH already wiped off)."""

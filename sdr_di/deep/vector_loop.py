@@ -60,7 +60,7 @@ from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
 from ..errors import ImuDataError, NoEphemerisError, SdrDiError, UnknownPrnError
 from ..filters import make_filter
 from ..frames import ecef_to_llh, euler_to_C_b_n, llh_to_ecef
-from ..ins.error_model import InsErrorModel, NavState, process_noise
+from ..ins.error_model import ClockModel, InsErrorModel, NavState, process_noise
 from ..ins.mechanization import StrapdownINS
 from ..integration.measurements import RangeRateMeasurementModel
 from ..integration.metrics import nav_errors, summarize
@@ -79,6 +79,7 @@ __all__ = ["DeepConfig", "DeepReceiver", "DeepResult", "HandoverError"]
 
 _DEG_H = math.radians(1.0) / 3600.0
 _MG = 9.80665e-3
+_CLOCKS = {"tcxo": ClockModel(h0=2e-19, h_2=2e-20), "ocxo": ClockModel(h0=8e-20, h_2=4e-23)}
 _CN0_MIN_PROMPTS = 40  # 1 ms prompts before the loop's own C/N0 replaces the scalar one
 
 
@@ -109,6 +110,10 @@ class DeepConfig:
         IMU spec for ``Q`` and ``P0`` (paper 004 Table 4).
     bias_time_s : float
         Time for the bias random walk to reach the spec [s].
+    clock : str
+        Receiver oscillator model of the clock states' process noise (paper 004 eq 4):
+        ``"tcxo"`` (h0 = 2e-19 s, h-2 = 2e-20 1/s, the default) or ``"ocxo"`` (8e-20, 4e-23)
+        (Allan-variance coefficients of Brown & Hwang).
     prefilter : dict
         Keyword arguments of :class:`~sdr_di.deep.prefilter.PreFilterBank`.
     filter_options : dict
@@ -133,12 +138,15 @@ class DeepConfig:
     gyro_bias_deg_h: float = 8.0
     accel_bias_mg: float = 4.0
     bias_time_s: float = 3600.0
+    clock: str = "tcxo"
     prefilter: dict = dataclasses.field(default_factory=dict)
     filter_options: dict = dataclasses.field(default_factory=dict)
     p0_att_deg: tuple = (0.05, 0.05, 0.1)
     chunk_ms: int = 200
 
     def __post_init__(self) -> None:
+        if self.clock not in _CLOCKS:
+            raise ValueError(f"clock must be one of {', '.join(_CLOCKS)}, got {self.clock!r}")
         if self.align not in ("truth", "gnss"):
             raise ValueError(f"align must be 'truth' or 'gnss', got {self.align!r}")
         for name in ("filter_rate_hz", "output_rate_hz"):
@@ -162,6 +170,8 @@ class DeepResult:
         without a reference)
     prns : handed-over PRNs;  used : (n, n_ch) bool, channel in the measurement vector
     cn0_dbhz : (n, n_ch)
+    nis : (n,) integration-filter normalized innovation squared per measurement, averaged
+        over the filter epochs since the previous row (about 1 when ``R`` is consistent)
     handover_s : time of the hand-over [s since file start]
     filter_name : str;  adaptation_s : float (time in the adaptive rule, if any)
     profile : dict (seconds per stage: scalar, read, nco, correlate, prefilter, filter, ins)
@@ -182,6 +192,7 @@ class DeepResult:
     prns: tuple
     used: np.ndarray
     cn0_dbhz: np.ndarray
+    nis: np.ndarray
     handover_s: float
     filter_name: str
     adaptation_s: float
@@ -440,7 +451,8 @@ class DeepReceiver:
         gb = cfg.gyro_bias_deg_h * _DEG_H
         ab = cfg.accel_bias_mg * _MG
         Q0 = process_noise(T, gyro_random_walk_si=gyro_rw, accel_random_walk_si=accel_rw,
-                           gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=cfg.bias_time_s)
+                           gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=cfg.bias_time_s,
+                           clock=_CLOCKS[cfg.clock])
         lat0, h0 = float(llh_fix[0]), float(llh_fix[2])
         from ..frames import radii_of_curvature
 
@@ -453,7 +465,7 @@ class DeepReceiver:
                    (s_pos / (R_M + h0)) ** 2, (s_pos / ((R_N + h0) * math.cos(lat0))) ** 2,
                    (1.5 * s_pos) ** 2, [gb ** 2] * 3, [ab ** 2] * 3, (1.5 * s_pos) ** 2,
                    0.1 ** 2]
-        process = InsErrorModel()
+        process = InsErrorModel(_CLOCKS[cfg.clock])
         meas = RangeRateMeasurementModel()
         meas_all = RangeRateMeasurementModel()
         kf = make_filter(cfg.filter, process, meas, np.zeros(17), np.diag(p0), Q0, None, dt=T,
@@ -478,7 +490,8 @@ class DeepReceiver:
                 "prefilter": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
         out_every = max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz))
         rows = {k: [] for k in ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve",
-                                "pe", "used", "cn0")}
+                                "pe", "used", "cn0", "nis")}
+        nis_acc = [0.0, 0]
         truth_on_grid = (truth is not None and len(truth.t) == len(imu.t)
                          and np.allclose(truth.t, imu.t, atol=1e-6))
         x_buf = np.empty(0, dtype=source.dtype)
@@ -486,6 +499,7 @@ class DeepReceiver:
         npow = 1.0
         chunk = max(4 * n1, round(cfg.chunk_ms * 1e-3 * fs))
         tau_prev = pred0.tau
+        dp_prev = None
         i0 = i_h
         k0 = k_grid0
         j = 0
@@ -527,9 +541,13 @@ class DeepReceiver:
                     # initial frequency error: scalar loop Doppler minus the INS prediction
                     pre.x[c.idx, 2] = c.f_scalar - float(cmd.doppler_hz[c.idx])
                 first = False
+            dp1 = (source.if_hz + cmd.doppler_hz) / fs
+            if dp_prev is None:
+                dp_prev = dp1
             parts = [_epoch_rows(c, float(cmd.chips0[c.idx]), float(dchip[c.idx]),
-                                 (source.if_hz + float(cmd.doppler_hz[c.idx])) / fs, k0, k1)
+                                 float(dp_prev[c.idx]), float(dp1[c.idx]), k0, k1)
                      for c in chans]
+            dp_prev = dp1
             reps = [len(p[0]) for p in parts]
             prn_rows = [c.prn for c in chans]
             starts = np.concatenate([p[0] for p in parts])
@@ -613,6 +631,8 @@ class DeepReceiver:
                 meas.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[use, 0], pred.v_sat[use, 0],
                                b1, clk_d)
                 kf.update(np.r_[z_rho, z_rate], np.diag(np.r_[r_rho, r_rate]))
+                nis_acc[0] += kf.nis / (2 * n_used)
+                nis_acc[1] += 1
             x = kf.x.copy()
             tg = time.perf_counter()
             prof["filter"] += tg - tf
@@ -647,6 +667,8 @@ class DeepReceiver:
                 rows["n"].append(n_used)
                 rows["used"].append(use.copy())
                 rows["cn0"].append([c.cn0_dbhz for c in chans])
+                rows["nis"].append(nis_acc[0] / nis_acc[1] if nis_acc[1] else math.nan)
+                nis_acc = [0.0, 0]
                 if truth_on_grid:
                     ae, ve, pe = nav_errors(ins.llh, ins.v_n, ins.C_b_n, truth.llh[i1],
                                             truth.v_n[i1], truth.C_b_n[i1])
@@ -679,16 +701,21 @@ class DeepReceiver:
             n_used=np.asarray(rows["n"], int), att_err=arr("ae", 3), vel_err=arr("ve", 3),
             pos_err=arr("pe", 3), prns=tuple(c.prn for c in chans),
             used=np.asarray(rows["used"], bool).reshape(-1, n_ch),
-            cn0_dbhz=arr("cn0", n_ch), handover_s=k_grid0 / fs, filter_name=kf.name,
+            cn0_dbhz=arr("cn0", n_ch), nis=arr("nis"), handover_s=k_grid0 / fs, filter_name=kf.name,
             adaptation_s=_adaptation_s(kf) - adapt0, profile=prof)
 
 
-def _epoch_rows(c: _Chan, c0: float, dc: float, dp: float, k0: int, k1: int):
+def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int, k1: int):
     """Correlator rows of channel ``c``: its code epochs that start in ``[next_start, k1)``.
 
     The code NCO's chip count is ``c0 + (k - k0) dc`` over the interval; epoch ``e`` ends at
-    the first sample where it reaches ``(e + 1) L``. The carrier phase stays continuous
-    (``dp`` cycles per sample). Advances the channel's ``next_start``, ``epoch``, ``phase``.
+    the first sample where it reaches ``(e + 1) L``. The carrier NCO frequency of each epoch
+    [cycles per sample] is ramped linearly in time between ``dp0`` (the previous interval's
+    average, placed at its middle ``k0 - N/2``) and ``dp1`` (this interval's average, at
+    ``k0 + N/2``), so it follows the Doppler rate of the dynamics (7 m/s^2 in the circling
+    phases = 0.6 Hz over a 20 ms interval) while its integral over the interval still equals
+    the predicted carrier-phase change; the phase stays continuous. Advances the channel's
+    ``next_start``, ``epoch`` and ``phase``.
 
     Returns ``(starts, n, theta, phi, dphi, nh_sign)`` arrays (one row per epoch).
     """
@@ -705,14 +732,18 @@ def _epoch_rows(c: _Chan, c0: float, dc: float, dp: float, k0: int, k1: int):
     keep = starts < k1
     starts, ends = starts[keep], ends[keep]
     m = starts.size
+    n = ends - starts
     ep = e0 + np.arange(m)
     theta = c0 + (starts - k0) * dc - ep * L
-    phi = c.phase + (starts - s0) * dp
+    N = float(k1 - k0)
+    dphi = dp0 + (dp1 - dp0) * ((starts + 0.5 * n - k0) / N + 0.5)
+    adv = np.cumsum(n * dphi)
+    phi = c.phase + np.concatenate(([0.0], adv[:-1]))
     phi -= np.floor(phi)
-    end_phase = c.phase + (int(ends[-1]) - s0) * dp
+    end_phase = c.phase + float(adv[-1])
     c.next_start, c.epoch, c.phase = int(ends[-1]), e0 + m, end_phase - math.floor(end_phase)
     nh = NH20[ep % 20].astype(float) if c.is_d1 else np.ones(m)
-    return starts, ends - starts, theta, phi, np.full(m, dp), nh
+    return starts, n, theta, phi, dphi, nh
 
 
 def _adaptation_s(kf) -> float:
