@@ -78,7 +78,7 @@ def test_epoch_rows_are_contiguous_whole_code_periods():
     dc = CHIP_RATE_B3I * (1 + 1.7e-6) / fs
     c0 = 40 * CODE_LENGTH_B3I + 0.3 - 1003 * dc      # chips(k) = c0 + k dc: 0.3 chip into 40
     dp = 1234.5 / fs
-    s, n, th, ph, dph, nh = _epoch_rows(c, c0, dc, dp, 0, 100_000)
+    s, n, th, ph, dph, nh = _epoch_rows(c, c0, dc, dp, dp, 0, 100_000)
     assert s[0] == 1003 and np.all(s[1:] == s[:-1] + n[:-1])
     assert s[-1] < 100_000 <= s[-1] + n[-1] and c.next_start == s[-1] + n[-1]
     assert th[0] == pytest.approx(0.3)
@@ -88,7 +88,16 @@ def test_epoch_rows_are_contiguous_whole_code_periods():
     assert np.array_equal(nh, NH20[(40 + np.arange(s.size)) % 20])
     expect = (0.25 + (s - 1003) * dp) % 1.0                         # continuous carrier phase
     assert np.allclose(np.angle(np.exp(2j * np.pi * (ph - expect))), 0.0, atol=1e-9)
-    assert np.all(dph == dp)
+    assert np.allclose(dph, dp)
+    # a Doppler ramp: frequencies interpolated between the two interval averages, and the
+    # phase advance over the interval equals the new average times the interval
+    c2 = _Chan(prn=27, idx=0, is_d1=False, eph=None, next_start=0, epoch=0, phase=0.0,
+               prompts=np.zeros(4, complex))
+    s2, n2, _, _, dph2, nh2 = _epoch_rows(c2, 0.0, dc, 1000.0 / fs, 1010.0 / fs, 0, 100_000)
+    mid = (s2 + 0.5 * n2) / 100_000
+    assert np.allclose(dph2 * fs, 1000.0 + 10.0 * (mid + 0.5))
+    assert np.all(nh2 == 1.0)
+    assert np.sum(n2 * dph2) == pytest.approx(1010.0 / fs * (s2[-1] + n2[-1]), rel=2e-3)
 
 
 # ---- pre-filter ------------------------------------------------------------------------------
