@@ -1,0 +1,128 @@
+#!/usr/bin/env python
+"""Deep receiver cost: real-time factor, time shares of its stages, peak memory.
+
+Usage::
+
+    python scripts/bench_deep.py [--duration 60] [--filter ff-aukf] [--if-file F.bin]
+                                 [--filter-rate 50] [--keep] [--repeat 1]
+
+Generates the default scenario (7 satellites, 25 MHz, 4-bit ``iq_int8``; ``--duration`` s)
+unless ``--if-file`` names one with its sidecar, then runs the deep receiver (the pipeline of
+``sdr-di run --mode deep``: scalar start-up and hand-over, vector loop with pre-filters and
+the integration filter, CSV/JSON output) in a fresh process and prints:
+
+* the wall time of the whole process and the real-time factor (file seconds per wall second);
+* the start-up (scalar receiver until the hand-over) and the vector loop separately, with the
+  loop's real-time factor over the seconds it processed;
+* the share of the loop's time in correlation, pre-filters, integration filter, INS (and
+  feedback), NCO commands and sample reading;
+* the peak RSS of the process, and the load average (the machine is shared: repeat and report
+  best and typical).
+
+``run(args)`` is the entry point of ``scripts/bench.py deep``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+_CHILD = """
+import json, resource, sys, time
+from pathlib import Path
+from sdr_di.deep.run_deep import run_deep
+from sdr_di.deep.vector_loop import DeepConfig
+from sdr_di.receiver.run_scalar import open_source
+path, out, filt, rate = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
+meta = json.loads(Path(path).with_suffix('.json').read_text())
+prns = [s['prn'] for s in meta['satellites']]
+t0 = time.perf_counter()
+res = run_deep(open_source(path), out, config=DeepConfig(filter=filt, filter_rate_hz=rate),
+               prns=prns, progress=False)
+wall = time.perf_counter() - t0
+print('RESULT', json.dumps({'wall': wall, 'profile': res.result.profile,
+      'maxrss_kb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+      'metrics': {k: v for k, v in res.metrics.items() if not k.endswith('axes')}}))
+"""
+
+
+def _generate(duration: float, out: Path) -> Path:
+    cmd = [sys.executable, "-m", "sdr_di.cli", "generate", "--duration", str(duration), "--out",
+           str(out), "--no-progress"]
+    subprocess.run(cmd, check=True, capture_output=True)
+    return out / "default.bin"
+
+
+def _one(path: Path, out: Path, filt: str, rate: float) -> dict:
+    t0 = time.perf_counter()
+    res = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(out), filt, str(rate)],
+                         check=False, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if res.returncode != 0:
+        raise SystemExit(f"deep run failed: {res.stderr.strip()[-2000:]}")
+    d = json.loads(next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT"))[7:])
+    d["process_wall"] = wall
+    return d
+
+
+def run(args: argparse.Namespace) -> list[dict]:
+    tmp = Path(tempfile.mkdtemp(prefix="sdr-di-bench-deep-"))
+    rows = []
+    try:
+        path = Path(args.if_file) if args.if_file else _generate(args.duration, tmp)
+        print(f"machine: {os.cpu_count()} cores, load average "
+              f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; file {path.name}; filter "
+              f"{args.filter} at {args.filter_rate:g} Hz")
+        print(f"{'run':>3} {'file s':>7} {'wall s':>7} {'x RT':>6} {'start-up s':>10} "
+              f"{'loop s':>7} {'loop xRT':>8} {'corr%':>6} {'pref%':>6} {'filt%':>6} "
+              f"{'ins%':>5} {'nco%':>5} {'read%':>6} {'RSS MiB':>8}")
+        for i in range(args.repeat):
+            d = _one(path, tmp / f"out{i}", args.filter, args.filter_rate)
+            p = d["profile"]
+            loop = max(p["loop"], 1e-9)
+            sh = {k: 100 * p[k] / loop for k in ("correlate", "prefilter", "filter", "ins",
+                                                 "nco", "read")}
+            print(f"{i:3d} {p['processed_s']:7.1f} {d['process_wall']:7.1f} "
+                  f"{p['processed_s'] / d['process_wall']:6.2f} {p['scalar']:10.1f} "
+                  f"{loop:7.1f} {p['deep_s'] / loop:8.2f} {sh['correlate']:6.0f} "
+                  f"{sh['prefilter']:6.0f} {sh['filter']:6.0f} {sh['ins']:5.0f} "
+                  f"{sh['nco']:5.0f} {sh['read']:6.0f} {d['maxrss_kb'] / 1024:8.0f}")
+            m = d["metrics"]
+            print(f"    errors: pos {m['pos_m_rmse']:.3f} m, vel {m['vel_mps_rmse']:.4f} m/s, "
+                  f"att {m['att_deg_rmse']:.4f} deg RMSE over {m['n']} rows")
+            rows.append(d)
+    finally:
+        if not args.keep:
+            shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            print(f"kept {tmp}")
+    return rows
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--duration", type=float, default=60.0, help="generated file length [s]")
+    p.add_argument("--filter", default="ff-aukf")
+    p.add_argument("--filter-rate", type=float, default=50.0)
+    p.add_argument("--if-file", default=None, help="existing IF file (with its sidecar)")
+    p.add_argument("--repeat", type=int, default=1)
+    p.add_argument("--keep", action="store_true", help="keep the temporary folder")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_arguments(ap)
+    run(ap.parse_args(argv))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
