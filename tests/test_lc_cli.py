@@ -112,7 +112,9 @@ def test_lc_non_positive_definite_p0(tmp_path, capsys):
 
 @pytest.mark.parametrize("extra, word", [("q_scale = -1.0", "q_scale"),
                                          ("colour = 3", "unknown key"),
-                                         ("r_windows = [[7.0, 3.0, 16.0]]", "t0 < t1")])
+                                         ("r_windows = [[7.0, 3.0, 16.0]]", "t0 < t1"),
+                                         ("bias_noise = 1", "bias_noise"),
+                                         ("[lc.options.kalman]\nx = 1", "unknown filter")])
 def test_lc_bad_lc_table(tmp_path, capsys, extra, word):
     sc = tmp_path / "bad.toml"
     text = DEFAULT_SCENARIO.read_text().replace('"../ephemeris/',

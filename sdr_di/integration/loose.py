@@ -13,8 +13,10 @@ Decisions
 ---------
 * Filter rate = GNSS rate (default 1 Hz, papers 000/003). The IMU rate is the scenario's.
 * Filter ``Q`` = ``q_scale`` x :func:`~sdr_di.ins.error_model.process_noise` of the
-  scenario's IMU spec (random walks; bias random walk reaching the spec in ``bias_time_s``);
-  ``q_scale = 16`` reproduces paper 000's wrong ``Q``. The clock states are carried (same
+  scenario's IMU spec (random walks; bias random walk reaching the spec in ``bias_time_s``,
+  or none with ``bias_noise = false``: the simulated biases are constants, so that is the
+  true ``Q``, the form of paper 000 eq 57); ``q_scale = 16`` reproduces paper 000's wrong
+  ``Q``. The clock states are carried (same
   layout as deep mode) but unobserved; their ``Q`` is tiny.
 * Filter ``R`` = ``r_scale`` x nominal GNSS variances; the true noise follows the schedule
   (``r_windows``: paper 003's 16 R during 500-700 s). The filter is never told the schedule.
@@ -30,7 +32,9 @@ optional): ``filter``, ``gnss_rate_hz``, ``sigma_pos_h_m``, ``sigma_pos_v_m``,
 ``sigma_vel_mps``, ``r_windows = [[t0, t1, factor], ...]``, ``q_scale``, ``r_scale``,
 ``init_att_err_arcmin`` (3: E, N, U), ``init_vel_err_mps`` (3), ``init_pos_err_m`` (3: E, N, U),
 ``p0_sigma_att_arcmin``, ``p0_sigma_vel_mps``, ``p0_sigma_pos_m`` (3 each), ``bias_time_s``,
-``imu_draw`` ("gaussian" or "fixed").
+``bias_noise`` (bool), ``imu_draw`` ("gaussian" or "fixed"), and sub-tables
+``[lc.options.<filter name>]`` of :func:`~sdr_di.filters.make_filter` options applied only
+when that filter runs (e.g. ``[lc.options.ml-q-ukf] mask = [...]``).
 """
 
 from __future__ import annotations
@@ -82,8 +86,10 @@ class LcSettings:
     p0_sigma_vel_mps: tuple | None = None
     p0_sigma_pos_m: tuple | None = None
     bias_time_s: float = 3600.0
+    bias_noise: bool = True
     imu_draw: str = "gaussian"
     filter_options: dict = dataclasses.field(default_factory=dict)
+    options_by_filter: dict = dataclasses.field(default_factory=dict)
 
     def replace(self, **kw) -> LcSettings:
         return dataclasses.replace(self, **kw)
@@ -143,6 +149,23 @@ def _parse_lc(table, where: str) -> LcSettings:
             if key.startswith("p0") and min(v) < 0:
                 raise ScenarioError(f"{where}: [lc].{key}: standard deviations must be >= 0")
             kw[key] = v
+    if "bias_noise" in t:
+        v = t.pop("bias_noise")
+        if not isinstance(v, bool):
+            raise ScenarioError(f"{where}: [lc].bias_noise: expected true or false, got {v!r}")
+        kw["bias_noise"] = v
+    if "options" in t:
+        from ..filters import FILTER_NAMES
+
+        opts = t.pop("options")
+        if not isinstance(opts, dict) or not all(isinstance(v, dict) for v in opts.values()):
+            raise ScenarioError(f"{where}: [lc.options]: expected sub-tables "
+                                "[lc.options.<filter name>]")
+        bad = sorted(k for k in opts if k not in FILTER_NAMES)
+        if bad:
+            raise ScenarioError(f"{where}: [lc.options]: unknown filter(s) "
+                                f"{', '.join(map(repr, bad))}; valid: {', '.join(FILTER_NAMES)}")
+        kw["options_by_filter"] = {k: dict(v) for k, v in opts.items()}
     if "imu_draw" in t:
         v = t.pop("imu_draw")
         if v not in ("gaussian", "fixed"):
@@ -189,6 +212,10 @@ class LcResult:
     nis : (n,) normalized innovation squared
     filter_name : str
     elapsed_s : float
+        Wall time of the run [s].
+    adaptation_time_s : float
+        Time spent in the filter's adaptive rule (``filter.rule.adaptation_time_s``) [s];
+        NaN for a filter without a rule.
     """
 
     t: np.ndarray
@@ -201,6 +228,7 @@ class LcResult:
     nis: np.ndarray
     filter_name: str
     elapsed_s: float = 0.0
+    adaptation_time_s: float = math.nan
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of attitude [deg], velocity [m/s], position [m] (``t0 <= t <= t1``)."""
@@ -282,7 +310,8 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     gyro_rw, accel_rw = imu_model.gyro_random_walk_si, imu_model.accel_random_walk_si
     gb, ab = imu_model.gyro_bias_si, imu_model.accel_bias_si
     Q_model = process_noise(dt_f, gyro_random_walk_si=gyro_rw, accel_random_walk_si=accel_rw,
-                            gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=s.bias_time_s,
+                            gyro_bias_si=gb, accel_bias_si=ab,
+                            bias_time_s=s.bias_time_s if s.bias_noise else None,
                             with_clock=False)
     # keep Q positive definite on the IMU states even for a perfect IMU
     floor = np.r_[[1e-14] * 3, [1e-10] * 3, [0.0] * 3, [1e-20] * 3, [1e-16] * 3, 0.0, 0.0]
@@ -306,8 +335,9 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
                sp[2]**2, [max(gb, 1e-7)**2] * 3, [max(ab, 1e-5)**2] * 3, 1.0, 0.01]
     process = InsErrorModel()
     meas = LooseMeasurementModel(truth.llh[0])
+    options = {**s.options_by_filter.get(s.filter.strip().lower(), {}), **s.filter_options}
     kf = make_filter(s.filter, process, meas, np.zeros(17), np.diag(p0), Q0, R0, dt=dt_f,
-                     **s.filter_options)
+                     **options)
 
     # ---- INS
     C0 = rotvec_to_dcm(-att0) @ truth.C_b_n[0]
@@ -352,7 +382,9 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
                     vel_err=np.array(V).reshape(-1, 3), pos_err=np.array(P).reshape(-1, 3),
                     r_diag=np.array(RD).reshape(-1, 6), r_true=np.array(RT).reshape(-1, 6),
                     q_diag=np.array(QD).reshape(-1, 17), nis=np.array(NIS),
-                    filter_name=kf.name, elapsed_s=time.perf_counter() - t_start)
+                    filter_name=kf.name, elapsed_s=time.perf_counter() - t_start,
+                    adaptation_time_s=(kf.rule.adaptation_time_s if kf.rule is not None
+                                       else math.nan))
 
 
 def run_loose_scenario(sc: Scenario, settings: LcSettings,
