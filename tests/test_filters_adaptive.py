@@ -220,6 +220,9 @@ def test_adaptation_time_excludes_kernel_compilation():
         kf, _ = _run_deep(name, seed=1, epochs=40, change_every=25, window=5)
         assert [len(k.signatures) for k in kernels] == before
         assert 0.0 < kf.rule.adaptation_time_s < 0.5
+        assert kf.adaptation_time_s == kf.rule.adaptation_time_s
+    assert make_filter("ukf", LinearProcessModel(np.eye(2)), None, np.zeros(2), np.eye(2),
+                       np.eye(2)).adaptation_time_s == 0.0
 
 
 # --------------------------------------------------------------------------- rae-aukf

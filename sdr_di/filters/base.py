@@ -33,6 +33,9 @@ Attributes (``n`` states, ``m_k`` measurements at the last update):
     list of recorded covariance repairs (``psd_fallback='clip'``)
 ``rule``
     the attached adaptive rule, or ``None``
+``adaptation_time_s``
+    cumulative wall time [s] spent in the rule's hooks, ``rule.adaptation_time_s``
+    (paper 004 section IV.B figure); ``0.0`` for a filter without a rule
 
 Methods: :meth:`predict` ``(dt=None, Q=None)``, :meth:`update`
 ``(z, R=None, measurement_model=None)``, :meth:`predict_measurement`.
@@ -63,9 +66,14 @@ import math
 
 import numpy as np
 
-from ._linalg import (cholesky_lower, clip_eigenvalues, min_eigenvalue,
-                      spd_inverse_from_cholesky, symmetrize)
 from ..errors import CovarianceError, FilterError
+from ._linalg import (
+    cholesky_lower,
+    clip_eigenvalues,
+    min_eigenvalue,
+    spd_inverse_from_cholesky,
+    symmetrize,
+)
 from .models import MeasurementModel, ProcessModel
 
 __all__ = ["KalmanFilterBase", "MeasurementPrediction"]
@@ -218,6 +226,13 @@ class KalmanFilterBase:
     def dim_x(self) -> int:
         """State dimension ``n``."""
         return self.x.size
+
+    @property
+    def adaptation_time_s(self) -> float:
+        """Cumulative time [s] in the adaptive rule's hooks (``rule.adaptation_time_s``;
+        0.0 without a rule). Reset with ``rule.reset_timer()``."""
+        rule = self.rule
+        return 0.0 if rule is None else float(rule.adaptation_time_s)
 
     def attach_rule(self, rule) -> None:
         """Attach an adaptive rule (replaces any previous one) and let it bind to the filter."""

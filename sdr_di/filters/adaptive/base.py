@@ -16,7 +16,10 @@ A rule is attached to a core filter (``filter.attach_rule(rule)``, done by
 
 A rule overrides only the hooks it needs; the filter calls only those. Every call of an
 overridden hook is timed with :func:`time.perf_counter` around the hook body only, summed in
-:attr:`AdaptiveRule.adaptation_time_s` (the adaptation-time figure of paper 004, section IV.B).
+:attr:`AdaptiveRule.adaptation_time_s` (the adaptation-time figure of paper 004, section IV.B),
+reached from a filter as ``filt.rule.adaptation_time_s`` [s] (cumulative since construction
+or :meth:`AdaptiveRule.reset_timer`). Rules with compiled kernels compile them when bound,
+so the timer never includes compilation.
 
 Noise floors (positive definiteness)
 ------------------------------------

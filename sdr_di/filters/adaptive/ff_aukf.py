@@ -40,12 +40,17 @@ Change of the measurement count N
 Storage per epoch: ``n + n_blocks`` numbers (vs. two ``m``-vectors for the Sage window of
 :mod:`.rae_aukf`, which also forms full ``m x m`` and ``n x n`` products). Work per epoch:
 ``O(n m)`` for ``(K o K)(v o v)``, ``O(W (n + n_blocks))`` for the weighted window sums
-(one product with a precomputed ring-aligned weight table), ``O(m)`` for the block traces
-(a diagonal ``R^-`` is detected and handled with vectors only) -- against
-``O(W m^2 + n m^2 + n^2 m + m^3)`` for the Sage window. At the receiver's size
-(``n = 17``, ``m = 14``, ``W = 20``) both rules cost about a dozen small numpy calls per epoch
-and take about the same time; the flop advantage shows as ``m`` and ``W`` grow
-(``scripts/bench_filters.py`` prints both).
+(eq 30 and 39 share one pass over the ring; the weights depend on the age, so the sums are
+re-formed each epoch), ``O(m)`` for the block traces (``R^-`` diagonal as in eq 34; a full
+``R^-`` costs ``O(m^3)``) -- against ``O(W m^2 + n m^2 + n^2 m + m^3)`` for the Sage window.
+
+Implementation: each hook is one numba kernel (:mod:`._numba_ff`; ``jit=True``, default),
+compiled when the rule is bound, so the timed hooks never compile. Written as numpy
+expressions (``jit=False``, kept as the tested reference) the after-update hook is about
+twenty small array calls whose fixed cost (~0.5 us each) exceeds the arithmetic at the
+receiver's size (``n = 17``, ``m = 14``, ``W = 20``), and its adaptation time is then no lower
+than the Sage window's (a dozen calls); with both rules compiled alike (``rae-aukf`` has the
+same option) the timing compares the arithmetic (``scripts/bench_filters.py``).
 """
 
 from __future__ import annotations

@@ -10,7 +10,10 @@ ref [38])::
 
 with full ``m_k x m_k`` covariance matrices (``H P^+ H^T = R - R S^-1 R`` as in
 :mod:`.ff_aukf`). The rule stores the last ``m`` innovation and residual vectors (ring
-buffers) and forms the window covariances with one matrix product each. Positive
+buffers) and forms the window covariances with one matrix product each (numpy, ``jit=False``)
+or in one numba kernel (:mod:`._numba_rae`, default; same results to rounding, compiled
+at bind time with the same options as ``ff-aukf``'s kernels, so the two adaptation times
+compare like with like). Positive
 definiteness: ``R_{k+1}`` gets ``r_floor_rel * diag(R^-)`` added and ``Q_{k+1}`` the ``Q`` floor
 added (both are sums of positive semi-definite terms; the tiny additive floor makes them
 definite). Window ``m`` default 20 epochs (paper 004 gives no value; same default as
