@@ -182,9 +182,12 @@ def test_receiver_kernel_on_stored_samples_matches_numpy_reference(fs, complex_i
     scale = np.sqrt(n.max())
     for n_sub in (1, 3):
         out = np.empty((n_ch, 3, 2))
-        correlate_epl_bits(xs, n_comp, bit_windows(padded_replicas(codes)), CODE_PAD, L,
-                           start.astype(np.int64), n.astype(np.int64), theta0, rate / fs,
-                           phi0, dphi, np.cos(arg), -np.sin(arg), spacing, n_sub, out)
+        # tables shared through the row indices: replica rows reversed, rotation rows as given
+        idx = np.arange(n_ch, dtype=np.int64)
+        correlate_epl_bits(xs, n_comp, bit_windows(padded_replicas(codes[::-1])), idx[::-1].copy(),
+                           CODE_PAD, L, start.astype(np.int64), n.astype(np.int64), theta0,
+                           rate / fs, phi0, dphi, np.cos(arg), -np.sin(arg), idx, spacing, n_sub,
+                           out)
         got = out[..., 0] + 1j * out[..., 1]
         np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * scale)
     assert mean_power(xs, n_comp) == pytest.approx(np.mean(np.abs(x.astype(complex)) ** 2),

@@ -21,6 +21,8 @@ faster on the development machine (AMD EPYC, AVX-512; 7 channels at 25 MHz, one 
   replica value of index ``j`` is a shift and a select on them: no per-sample memory gather,
   and the loop vectorizes. The window can never read outside the table whatever the phase
   (``& 63`` and the select keep every shift in range).
+* **Shared tables**: each row names its replica row (``tab_idx``) and rotation-table row
+  (``rot_idx``), so the epochs of one channel share one of each (no repeated copies).
 
 The index of the early replica is ``int(theta + (M + d - c0))`` instead of
 ``int(theta + M + d) - c0``: the two may differ only for a sample within one float64 ulp of a
@@ -75,7 +77,8 @@ def _run_sums(lo, hi, br, bi, k, th0, dc, off, ae, ap, al):
 def correlate_epl_bits(
     xs,  # int8/int16/float32 (n * n_comp,): stored samples, I/Q interleaved when n_comp == 2
     n_comp,  # int: 2 (complex, interleaved I, Q) or 1 (real)
-    bits,  # uint64 (n_ch, >= L + 2 M + 64): bit windows of the padded tables (module notes)
+    bits,  # uint64 (n_tab, >= L + 2 M + 64): bit windows of the padded tables (module notes)
+    tab_idx,  # int64 (n_rows,): row of `bits` (the PRN) of each row
     pad,  # int: M, the table padding (M > spacing + 1)
     code_len,  # int: L, chips per code period
     start,  # int64 (n_rows,): first sample of each row's interval (index into the samples)
@@ -84,14 +87,15 @@ def correlate_epl_bits(
     dchip,  # float64 (n_rows,): code phase step [chips/sample], > 0, B * dchip < L
     phi0,  # float64 (n_rows,): carrier phase at the first sample [cycles], in [0, 1)
     dphi,  # float64 (n_rows,): carrier phase step [cycles/sample]
-    rot_re,  # float64 (n_rows, B): cos(2 pi m dphi)
-    rot_im,  # float64 (n_rows, B): -sin(2 pi m dphi)
+    rot_re,  # float64 (n_rot, B): cos(2 pi m dphi)
+    rot_im,  # float64 (n_rot, B): -sin(2 pi m dphi)
+    rot_idx,  # int64 (n_rows,): row of rot_re/rot_im of each row (one with its dphi)
     spacing,  # float64: early/late offset d [chips], 0 <= d < M - 1
     n_sub,  # int: tasks per row
     out,  # float64 (n_rows, 3, 2): E, P, L real/imag (written)
 ):
     """Fill ``out[r] = [[E.re, E.im], [P.re, P.im], [L.re, L.im]]`` for every row ``r``."""
-    n_rows = bits.shape[0]
+    n_rows = start.shape[0]
     blk = rot_re.shape[1]
     lf = float(code_len)
     part = np.zeros((n_rows * n_sub, 6))
@@ -111,9 +115,9 @@ def correlate_epl_bits(
         dc = dchip[c]
         p0 = phi0[c]
         dp = dphi[c]
-        bw = bits[c]
-        rr = rot_re[c]
-        ri = rot_im[c]
+        bw = bits[tab_idx[c]]
+        rr = rot_re[rot_idx[c]]
+        ri = rot_im[rot_idx[c]]
         run = max(int((_SPAN - 2.0 * spacing) / dc), 1)
         buf_r = np.empty(blk)
         buf_i = np.empty(blk)

@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import OrderedDict
 from collections.abc import Callable, Iterable
 
 import numba
@@ -86,35 +85,19 @@ class _Bank:
         self._cost = {1: 0.0, self.max_threads: 0.0}
         self._warm: set[int] = set()
         self._calls = 0
-        self.rows: dict[int, np.ndarray] = {}
-        self.tables: OrderedDict[tuple, np.ndarray] = OrderedDict()
+        self.tab = np.zeros((0, 1), np.uint64)
         self.rot_re = np.ones((n_slots, CARRIER_BLOCK))
         self.rot_im = np.zeros((n_slots, CARRIER_BLOCK))
         self.rot_dphi = [math.nan] * n_slots
-        self.all_slots = tuple(range(n_slots))
         self._m = np.arange(CARRIER_BLOCK, dtype=np.float64)
 
-    def table(self, key: tuple, prns: list[int], reps: list[int]) -> np.ndarray:
-        """Replica bit-window rows (:func:`~sdr_di.receiver.correlator.bit_windows`): PRN
-        ``prns[j]`` repeated ``reps[j]`` times (cached by ``key``)."""
-        tab = self.tables.get(key)
-        if tab is None:
-            rows = []
-            for p, r in zip(prns, reps):
-                row = self.rows.get(p)
-                if row is None:
-                    from ..signal.codes import b3i_code
+    def set_prns(self, prns: list[int]) -> None:
+        """Replica bit windows (:func:`~sdr_di.receiver.correlator.bit_windows`) of the slots'
+        PRNs, one row per slot."""
+        from ..signal.codes import b3i_code
 
-                    row = bit_windows(padded_replicas(np.asarray(b3i_code(p))))[0]
-                    self.rows[p] = row
-                rows.extend([row] * r)
-            tab = np.ascontiguousarray(np.stack(rows))
-            self.tables[key] = tab
-            if len(self.tables) > 32:
-                self.tables.popitem(last=False)
-        else:
-            self.tables.move_to_end(key)
-        return tab
+        self.tab = np.ascontiguousarray(np.concatenate(
+            [bit_windows(padded_replicas(np.asarray(b3i_code(p)))) for p in prns]))
 
     def _pick_threads(self) -> int:
         """Thread count of the next kernel call.
@@ -154,15 +137,19 @@ class _Bank:
         old = self._cost[threads]
         self._cost[threads] = cost if old == 0.0 else 0.7 * old + 0.3 * cost
 
-    def _rot(self, slot: int, dphi: float) -> None:
-        if self.rot_dphi[slot] == dphi:
+    def _rot(self, slots: list[int], dphis: list[float]) -> None:
+        """Carrier rotation tables ``exp(-j 2 pi m dphi)`` of the slots whose ``dphi`` changed."""
+        new = [(s, d) for s, d in zip(slots, dphis) if self.rot_dphi[s] != d]
+        if not new:
             return
-        a = self._m * dphi
+        idx = [s for s, _ in new]
+        a = np.multiply.outer(np.array([d for _, d in new]), self._m)
         a -= np.floor(a)
         a *= 2.0 * math.pi
-        self.rot_re[slot] = np.cos(a)
-        self.rot_im[slot] = -np.sin(a)
-        self.rot_dphi[slot] = dphi
+        self.rot_re[idx] = np.cos(a)
+        self.rot_im[idx] = -np.sin(a)
+        for s, d in new:
+            self.rot_dphi[s] = d
 
     def correlate(self, x: np.ndarray, n_comp: int, buf0: int, slots: tuple[int, ...],
                   chans: list) -> list:
@@ -171,33 +158,24 @@ class _Bank:
         returns per-channel lists of ``(E, P, L)`` complex triples."""
         params: list[tuple] = []
         reps = []
-        for c, s in zip(chans, slots):
+        for c in chans:
             blk = c.block
             params.extend(blk)
             reps.append(len(blk))
-            self._rot(s, blk[0][5])
+        self._rot(list(slots), [c.block[0][5] for c in chans])
         n_rows = len(params)
         par = np.array(params, dtype=np.float64).T.copy()
         start = par[0].astype(np.int64) - buf0
         nsamp = par[1].astype(np.int64)
-        if n_rows == len(slots):
-            if slots == self.all_slots:
-                rot_re, rot_im = self.rot_re, self.rot_im
-            else:
-                idx = list(slots)
-                rot_re, rot_im = self.rot_re[idx], self.rot_im[idx]
-        else:
-            idx = np.repeat(np.array(slots), reps)
-            rot_re, rot_im = self.rot_re[idx], self.rot_im[idx]
-        key = (slots, tuple(reps))
-        tab = self.table(key, [c.prn for c in chans], reps)
+        row_slot = np.repeat(np.array(slots, dtype=np.int64), reps)
         threads = self._pick_threads()
         nblk = max(1, (int(nsamp.max()) + CARRIER_BLOCK - 1) // CARRIER_BLOCK)
         n_sub = 1 if threads <= 1 else int(min(max(1, math.ceil(4 * threads / n_rows)), nblk))
         out = np.empty((n_rows, 3, 2))
         t0 = time.perf_counter()
-        correlate_epl_bits(x, n_comp, tab, CODE_PAD, CODE_LENGTH_B3I, start, nsamp, par[2],
-                           par[3], par[4], par[5], rot_re, rot_im, self.spacing, n_sub, out)
+        correlate_epl_bits(x, n_comp, self.tab, row_slot, CODE_PAD, CODE_LENGTH_B3I, start,
+                           nsamp, par[2], par[3], par[4], par[5], self.rot_re, self.rot_im,
+                           row_slot, self.spacing, n_sub, out)
         self._record(threads, (time.perf_counter() - t0) / float(nsamp.sum()))
         o = out.tolist()
         res = []
@@ -342,6 +320,7 @@ class ScalarReceiver:
         self.klobuchar = None
         slot_of = {id(c): i for i, c in enumerate(chans)}
         bank = _Bank(len(chans), cfg.spacing_chips, self.threads)
+        bank.set_prns(prn_list)
         threads_before = numba.get_num_threads()
         prof = {"acquisition": 0.0, "read": 0.0, "correlate": 0.0, "channels": 0.0, "callback": 0.0,
                     "steps": 0}
