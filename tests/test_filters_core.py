@@ -7,10 +7,20 @@ import numpy as np
 import pytest
 
 from sdr_di.errors import SdrDiError
-from sdr_di.filters import (EKF, FILTER_NAMES, UKF, CovarianceError, CubaturePoints,
-                            FilterError, FunctionMeasurementModel, FunctionProcessModel,
-                            LinearMeasurementModel, LinearProcessModel,
-                            MerweScaledSigmaPoints, make_filter)
+from sdr_di.filters import (
+    EKF,
+    FILTER_NAMES,
+    UKF,
+    CovarianceError,
+    CubaturePoints,
+    FilterError,
+    FunctionMeasurementModel,
+    FunctionProcessModel,
+    LinearMeasurementModel,
+    LinearProcessModel,
+    MerweScaledSigmaPoints,
+    make_filter,
+)
 
 
 def _random_spd(rng, n, scale=1.0, jitter=0.1):

@@ -9,9 +9,9 @@ overall and at (almost) every step.
 
 import numpy as np
 import pytest
+from filter_problems import cv2d
 from scipy.stats import chi2
 
-from filter_problems import cv2d
 from sdr_di.filters import FunctionMeasurementModel, LinearProcessModel, make_filter
 
 RUNS, STEPS, DT = 50, 100, 1.0

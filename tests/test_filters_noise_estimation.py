@@ -3,12 +3,15 @@ ml-r-ckf (paper 003) on synthetic problems."""
 
 import numpy as np
 import pytest
-
 from filter_problems import cv2d
-from sdr_di.filters import (FilterError, LinearMeasurementModel, LinearProcessModel,
-                            ProcessModel, make_filter)
 
-
+from sdr_di.filters import (
+    FilterError,
+    LinearMeasurementModel,
+    LinearProcessModel,
+    ProcessModel,
+    make_filter,
+)
 
 
 def _run_cv2d(names, seed, *, epochs, sa, sr, n_meas, q_factor=1.0, r_factor=1.0,

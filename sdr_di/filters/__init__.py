@@ -28,24 +28,58 @@ Modules
 ``errors``        :class:`FilterError`, :class:`CovarianceError`
 """
 
-from .adaptive import (AdaptiveRule, ForgettingFactorAUKF, MLMeasurementNoiseCKF,
-                       MLProcessNoiseUKF, ProcessNoiseScaling, SageHusaUKF, SageWindowAUKF)
+from ..errors import CovarianceError, FilterError
+from .adaptive import (
+                       AdaptiveRule,
+                       ForgettingFactorAUKF,
+                       MLMeasurementNoiseCKF,
+                       MLProcessNoiseUKF,
+                       ProcessNoiseScaling,
+                       SageHusaUKF,
+                       SageWindowAUKF,
+)
 from .base import KalmanFilterBase, MeasurementPrediction
 from .ekf import EKF
-from ..errors import CovarianceError, FilterError
-from .models import (FunctionMeasurementModel, FunctionProcessModel, LinearMeasurementModel,
-                     LinearProcessModel, MeasurementModel, ProcessModel, numerical_jacobian)
+from .models import (
+                       FunctionMeasurementModel,
+                       FunctionProcessModel,
+                       LinearMeasurementModel,
+                       LinearProcessModel,
+                       MeasurementModel,
+                       ProcessModel,
+                       numerical_jacobian,
+)
 from .registry import FILTER_NAMES, filter_options, make_filter
 from .sigma_filter import CKF, UKF, SigmaPointFilter
 from .sigma_points import CubaturePoints, MerweScaledSigmaPoints, SigmaPoints
 
 __all__ = [
-    "make_filter", "FILTER_NAMES", "filter_options",
-    "KalmanFilterBase", "MeasurementPrediction", "EKF", "UKF", "CKF", "SigmaPointFilter",
-    "SigmaPoints", "MerweScaledSigmaPoints", "CubaturePoints",
-    "ProcessModel", "MeasurementModel", "LinearProcessModel", "LinearMeasurementModel",
-    "FunctionProcessModel", "FunctionMeasurementModel", "numerical_jacobian",
-    "AdaptiveRule", "ForgettingFactorAUKF", "SageWindowAUKF", "MLProcessNoiseUKF",
-    "SageHusaUKF", "ProcessNoiseScaling", "MLMeasurementNoiseCKF",
-    "FilterError", "CovarianceError",
+                       "CKF",
+                       "EKF",
+                       "FILTER_NAMES",
+                       "UKF",
+                       "AdaptiveRule",
+                       "CovarianceError",
+                       "CubaturePoints",
+                       "FilterError",
+                       "ForgettingFactorAUKF",
+                       "FunctionMeasurementModel",
+                       "FunctionProcessModel",
+                       "KalmanFilterBase",
+                       "LinearMeasurementModel",
+                       "LinearProcessModel",
+                       "MLMeasurementNoiseCKF",
+                       "MLProcessNoiseUKF",
+                       "MeasurementModel",
+                       "MeasurementPrediction",
+                       "MerweScaledSigmaPoints",
+                       "ProcessModel",
+                       "ProcessNoiseScaling",
+                       "SageHusaUKF",
+                       "SageWindowAUKF",
+                       "SigmaPointFilter",
+                       "SigmaPoints",
+                       "filter_options",
+                       "make_filter",
+                       "numerical_jacobian",
 ]

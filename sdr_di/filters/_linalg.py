@@ -14,8 +14,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import lapack
 
-__all__ = ["symmetrize", "cholesky_lower", "spd_inverse_from_cholesky", "clip_eigenvalues",
-           "floor_pd", "min_eigenvalue"]
+__all__ = [
+    "cholesky_lower",
+    "clip_eigenvalues",
+    "floor_pd",
+    "min_eigenvalue",
+    "spd_inverse_from_cholesky",
+    "symmetrize",
+]
 
 _dpotrf = lapack.dpotrf
 _dtrtri = lapack.dtrtri

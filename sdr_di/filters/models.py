@@ -32,8 +32,15 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["ProcessModel", "MeasurementModel", "LinearProcessModel", "LinearMeasurementModel",
-           "FunctionProcessModel", "FunctionMeasurementModel", "numerical_jacobian"]
+__all__ = [
+    "FunctionMeasurementModel",
+    "FunctionProcessModel",
+    "LinearMeasurementModel",
+    "LinearProcessModel",
+    "MeasurementModel",
+    "ProcessModel",
+    "numerical_jacobian",
+]
 
 
 def numerical_jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray,

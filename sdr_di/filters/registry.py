@@ -24,15 +24,21 @@ from __future__ import annotations
 
 import inspect
 
-from .adaptive import (ForgettingFactorAUKF, MLMeasurementNoiseCKF, MLProcessNoiseUKF,
-                       ProcessNoiseScaling, SageHusaUKF, SageWindowAUKF)
+from ..errors import FilterError
+from .adaptive import (
+    ForgettingFactorAUKF,
+    MLMeasurementNoiseCKF,
+    MLProcessNoiseUKF,
+    ProcessNoiseScaling,
+    SageHusaUKF,
+    SageWindowAUKF,
+)
 from .base import KalmanFilterBase
 from .ekf import EKF
-from ..errors import FilterError
 from .models import MeasurementModel, ProcessModel
 from .sigma_filter import CKF, UKF
 
-__all__ = ["make_filter", "FILTER_NAMES", "filter_options"]
+__all__ = ["FILTER_NAMES", "filter_options", "make_filter"]
 
 _REGISTRY = {
     "ekf": (EKF, None),

@@ -29,12 +29,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import KalmanFilterBase, MeasurementPrediction
 from ..errors import FilterError
+from .base import KalmanFilterBase, MeasurementPrediction
 from .models import MeasurementModel
 from .sigma_points import CubaturePoints, MerweScaledSigmaPoints, SigmaPoints
 
-__all__ = ["SigmaPointFilter", "UKF", "CKF", "weighted_moments"]
+__all__ = ["CKF", "UKF", "SigmaPointFilter", "weighted_moments"]
 
 
 def weighted_moments(Y: np.ndarray, wm: np.ndarray, wc: np.ndarray

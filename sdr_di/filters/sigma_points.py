@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-__all__ = ["SigmaPoints", "MerweScaledSigmaPoints", "CubaturePoints"]
+__all__ = ["CubaturePoints", "MerweScaledSigmaPoints", "SigmaPoints"]
 
 
 class SigmaPoints:

@@ -18,8 +18,19 @@ constants are for the models that plug into them.
 
 from __future__ import annotations
 
-__all__ = ["N_STATES", "ATT", "VEL", "POS", "GYRO_BIAS", "ACCEL_BIAS", "CLOCK_BIAS",
-           "CLOCK_DRIFT", "CLOCK", "STATE_NAMES", "measurement_blocks"]
+__all__ = [
+    "ACCEL_BIAS",
+    "ATT",
+    "CLOCK",
+    "CLOCK_BIAS",
+    "CLOCK_DRIFT",
+    "GYRO_BIAS",
+    "N_STATES",
+    "POS",
+    "STATE_NAMES",
+    "VEL",
+    "measurement_blocks",
+]
 
 N_STATES = 17
 ATT = slice(0, 3)

@@ -30,6 +30,14 @@ from .q_scaling import ProcessNoiseScaling
 from .rae_aukf import SageWindowAUKF
 from .sage_husa import SageHusaUKF
 
-__all__ = ["AdaptiveRule", "default_q_floor", "ForgettingFactorAUKF", "forgetting_weights",
-           "SageWindowAUKF", "MLProcessNoiseUKF", "SageHusaUKF", "ProcessNoiseScaling",
-           "MLMeasurementNoiseCKF"]
+__all__ = [
+           "AdaptiveRule",
+           "ForgettingFactorAUKF",
+           "MLMeasurementNoiseCKF",
+           "MLProcessNoiseUKF",
+           "ProcessNoiseScaling",
+           "SageHusaUKF",
+           "SageWindowAUKF",
+           "default_q_floor",
+           "forgetting_weights",
+]

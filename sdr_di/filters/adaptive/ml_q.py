@@ -39,8 +39,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import chi2
 
-from .._linalg import floor_pd
 from ...errors import FilterError
+from .._linalg import floor_pd
 from .base import AdaptiveRule
 
 __all__ = ["MLProcessNoiseUKF"]

@@ -44,8 +44,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._linalg import floor_pd
 from ...errors import FilterError
+from .._linalg import floor_pd
 from .base import AdaptiveRule
 
 __all__ = ["SageHusaUKF"]
