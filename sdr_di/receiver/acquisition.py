@@ -85,13 +85,15 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
 import scipy.fft
 from scipy import special
 
 from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I
 from ._numba_acquire import accumulate_power
-from .correlator import check_prn, correlate_table, padded_replicas
+from ._numba_correlate_bits import correlate_epl_bits
+from .correlator import CARRIER_BLOCK, CODE_PAD, bit_windows, check_prn, padded_replicas
 
 __all__ = ["AcquisitionResult", "acquire", "acquire_source", "acquisition_upsampling",
            "detection_threshold"]
@@ -386,9 +388,9 @@ def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: 
     theta = float(np.mod(-tau_f * rate / (fs * u), code_len))
     cn0 = math.nan
     if detected and refine:
-        xs = x[:k_nc * n_c]
+        xs = _samples(x[:k_nc * n_c])
         noise_1ms = noise * n_ms / n_c
-        tab = padded_replicas(code)
+        tab = bit_windows(padded_replicas(code))
         theta, _ = _refine_code(xs, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
         fd = _refine_doppler(xs, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
         theta, p = _refine_code(xs, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
@@ -423,7 +425,49 @@ def _epoch_starts(x_size: int, theta: float, fd: float, fs: float, n_ms: int, co
     return np.ceil(first + per * np.arange(max(n, 0))).astype(np.int64)
 
 
-def _block_prompts(x, tab, code_len, thetas, fd, fs, if_hz, starts, n_ms, carrier_hz, spacing):
+def _samples(x: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """``(values, n_comp, n)`` for the bit-window kernel: complex samples as their interleaved
+    real view (``n_comp = 2``), real ones as they are; ``n`` samples."""
+    x = np.ascontiguousarray(x)
+    if np.iscomplexobj(x):
+        if x.dtype not in (np.complex64, np.complex128):
+            x = x.astype(np.complex64)
+        return x.view(np.float32 if x.dtype == np.complex64 else np.float64), 2, x.size
+    if x.dtype not in (np.float32, np.float64):
+        x = x.astype(np.float32)
+    return x, 1, x.size
+
+
+def _epl(smp, bits, code_len, th, rate, ph, fcs, rot_idx, n, fs, spacing, starts):
+    """E/P/L rows with one PRN's replica (bit windows ``bits``) on the samples ``smp``
+    (:func:`_samples`): row ``r`` starts at sample ``starts[r]`` with code phase ``th[r]``,
+    carrier phase ``ph[r]`` and carrier ``fcs[rot_idx[r]]`` [Hz]; ``n`` samples, code rate
+    ``rate`` [chips/s]. Returns complex (3, n_rows)."""
+    xv, n_comp, _ = smp
+    n_rows = th.size
+    theta = np.mod(th, float(code_len))
+    theta[theta >= code_len] = 0.0
+    phi = ph - np.floor(ph)
+    dphi_c = np.asarray(fcs, dtype=np.float64) / fs
+    arg = np.multiply.outer(dphi_c, np.arange(CARRIER_BLOCK, dtype=np.float64))
+    arg -= np.floor(arg)
+    arg *= 2.0 * np.pi
+    rot_idx = np.ascontiguousarray(rot_idx, dtype=np.int64)
+    out = np.empty((n_rows, 3, 2))
+    threads = numba.get_num_threads()
+    n_sub = 1 if threads <= 1 else max(1, min(math.ceil(4 * threads / max(n_rows, 1)),
+                                              (n + CARRIER_BLOCK - 1) // CARRIER_BLOCK))
+    correlate_epl_bits(xv, n_comp, bits, np.zeros(n_rows, np.int64), CODE_PAD, code_len,
+                       np.ascontiguousarray(starts, dtype=np.int64),
+                       np.full(n_rows, n, np.int64), theta, np.full(n_rows, rate / fs), phi,
+                       dphi_c[rot_idx], np.cos(arg), -np.sin(arg), rot_idx, float(spacing),
+                       n_sub, out)
+    res = out[..., 0] + 1j * out[..., 1]
+    return res.T
+
+
+def _block_prompts(smp, bits, code_len, thetas, fd, fs, if_hz, starts, n_ms, carrier_hz,
+                   spacing):
     """E/P/L of the ``n_ms``-sample blocks at ``starts`` for code-phase hypotheses at sample 0.
 
     Returns complex (n_hyp * 3, n_blocks): rows hypothesis-major, offsets (+spacing, 0,
@@ -435,20 +479,20 @@ def _block_prompts(x, tab, code_len, thetas, fd, fs, if_hz, starts, n_ms, carrie
     th = (np.asarray(thetas, dtype=np.float64)[:, None] + rate * starts[None, :] / fs).ravel()
     ph = np.tile(fc * starts / fs, n_hyp)
     st = np.tile(starts, n_hyp)
-    table = np.repeat(tab, th.size, axis=0)
-    r = correlate_table(x, table, code_len, th, rate, ph, fc, n_ms, fs, spacing, st)
-    out = np.stack([r.early.reshape(n_hyp, n_blocks), r.prompt.reshape(n_hyp, n_blocks),
-                    r.late.reshape(n_hyp, n_blocks)], axis=1)
+    r = _epl(smp, bits, code_len, th, rate, ph, [fc], np.zeros(th.size, np.int64), n_ms, fs,
+             spacing, st)
+    out = np.stack([r[0].reshape(n_hyp, n_blocks), r[1].reshape(n_hyp, n_blocks),
+                    r[2].reshape(n_hyp, n_blocks)], axis=1)
     return out.reshape(3 * n_hyp, n_blocks)
 
 
-def _refine_code(x, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
+def _refine_code(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
     """Code phase on a 0.1 chip grid of +-0.4 chip (parabolic vertex); epoch-aligned 1 ms
     prompts at the best phase."""
     d = 0.1
-    starts = _epoch_starts(x.size, theta, fd, fs, n_ms, code_len, carrier_hz)
+    starts = _epoch_starts(smp[2], theta, fd, fs, n_ms, code_len, carrier_hz)
     hyps = np.array([theta + 0.3, theta, theta - 0.3])
-    rows = _block_prompts(x, tab, code_len, hyps, fd, fs, if_hz, starts, n_ms, carrier_hz, d)
+    rows = _block_prompts(smp, tab, code_len, hyps, fd, fs, if_hz, starts, n_ms, carrier_hz, d)
     offsets = (hyps[:, None] + np.array([d, 0.0, -d])[None, :]).ravel()
     power = np.sum(np.abs(rows) ** 2, axis=1)
     order = np.argsort(offsets)
@@ -457,18 +501,18 @@ def _refine_code(x, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
     best = float(offsets[i])
     if 0 < i < offsets.size - 1:
         best += d * _parabola(float(power[i - 1]), float(power[i]), float(power[i + 1]))
-    starts = _epoch_starts(x.size, best, fd, fs, n_ms, code_len, carrier_hz)
-    p = _block_prompts(x, tab, code_len, np.array([best]), fd, fs, if_hz, starts, n_ms,
+    starts = _epoch_starts(smp[2], best, fd, fs, n_ms, code_len, carrier_hz)
+    p = _block_prompts(smp, tab, code_len, np.array([best]), fd, fs, if_hz, starts, n_ms,
                        carrier_hz, d)[1]
     return best, p
 
 
-def _refine_doppler(x, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
+def _refine_doppler(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
     """Doppler residual from the frequency of the squared 1 ms prompts (bit signs removed)."""
-    starts = _epoch_starts(x.size, theta, fd, fs, n_ms, code_len, carrier_hz)
+    starts = _epoch_starts(smp[2], theta, fd, fs, n_ms, code_len, carrier_hz)
     if starts.size < 4:
         return fd
-    p = _block_prompts(x, tab, code_len, np.array([theta]), fd, fs, if_hz, starts, n_ms,
+    p = _block_prompts(smp, tab, code_len, np.array([theta]), fd, fs, if_hz, starts, n_ms,
                        carrier_hz, 0.1)[1]
     z = p * p
     nfft = max(4096, 1 << math.ceil(math.log2(8 * starts.size)))
@@ -482,23 +526,21 @@ def _refine_doppler(x, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
     return fd + 0.5 * f2 / t_blk
 
 
-def _resolve_doppler(x, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
+def _resolve_doppler(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
     """The best of ``fd`` and ``fd +- 500 Hz`` by the mean epoch-aligned 1 ms prompt power
     (module notes, refinement step 5)."""
     cands = (fd, fd - 500.0, fd + 500.0)
-    starts = _epoch_starts(x.size, theta, fd, fs, n_ms, code_len, carrier_hz)
+    starts = _epoch_starts(smp[2], theta, fd, fs, n_ms, code_len, carrier_hz)
     if starts.size < 4:
         return fd
     rate = CHIP_RATE_B3I * (1.0 + fd / carrier_hz)
     n = min(math.floor(code_len * fs / rate), n_ms)
     n_ep = starts.size
     th = theta + starts * (rate / fs)
-    rows_ph = [(if_hz + f) * starts / fs for f in cands]
-    rows_fc = [np.full(n_ep, if_hz + f) for f in cands]
-    table = np.repeat(tab, 3 * n_ep, axis=0)
-    res = correlate_table(x, table, code_len, np.tile(th, 3), rate, np.concatenate(rows_ph),
-                          np.concatenate(rows_fc), n, fs, 0.5, np.tile(starts, 3))
-    power = np.abs(res.prompt.reshape(3, n_ep)) ** 2
+    ph = np.concatenate([(if_hz + f) * starts / fs for f in cands])
+    res = _epl(smp, tab, code_len, np.tile(th, 3), rate, ph, [if_hz + f for f in cands],
+               np.repeat(np.arange(3), n_ep), n, fs, 0.5, np.tile(starts, 3))
+    power = np.abs(res[1].reshape(3, n_ep)) ** 2
     return float(cands[int(np.argmax(power.mean(axis=1)))])
 
 
