@@ -191,3 +191,24 @@ def test_weak_signal_step_is_an_attenuation_window():
     f = gen.outage_factor(gen.sats[0].prn, np.array([1.9, 2.0, 3.9]))
     assert f == pytest.approx([1.0, 10 ** (-12.5 / 20), 10 ** (-12.5 / 20)])
     assert Path(sc.satellites.ephemeris).is_file()
+
+
+def test_weak_signal_pass_criteria():
+    p = dict(weak_signal.default_params)
+    kept = np.ones((40, 3), bool)
+    err = np.full(40, 2.0)
+    valid = np.ones(40, bool)
+    assert weak_signal._judge(kept, err, valid, p)["pass"] == 1
+    k = kept.copy()
+    k[:3, 1] = False                                   # 92.5 % < 95 %
+    j = weak_signal._judge(k, err, valid, p)
+    assert j["pass"] == 0 and j["keep_min"] == pytest.approx(37 / 40)
+    k = kept.copy()
+    k[-1, 2] = False                                   # lost at the end
+    assert weak_signal._judge(k, err, valid, p)["pass"] == 0
+    e = err.copy()
+    e[20] = 10.5                                       # one epoch over 10 m
+    assert weak_signal._judge(kept, e, valid, p)["pass"] == 0
+    v = valid.copy()
+    v[5] = False                                       # an epoch without a fix
+    assert weak_signal._judge(kept, err, v, p)["pass"] == 0

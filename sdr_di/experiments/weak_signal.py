@@ -35,8 +35,8 @@ kept fraction), ``.all_kept_last``, ``.pos_m_max``, ``.pos_m_rmse``, ``.fix_frac
 (scalar), ``.handover_s`` (deep), ``.error`` (when it raised); per mode
 ``<m>.threshold_dbhz``; ``deep_gain_db`` = scalar threshold - deep threshold.
 
-Files: ``sweep.csv`` (one row per level and mode) and ``sweep.png`` (kept fraction and max
-position error against C/N0 per mode).
+Files: ``sweep_levels.csv`` (one row per level and mode, with errors) and ``sweep.png``
+(kept fraction and max position error against C/N0 per mode).
 """
 
 from __future__ import annotations
@@ -216,21 +216,23 @@ def scalar_run(inp, t_eval: float) -> dict:
     def on_epoch(sample, observations, ephemerides):
         ephs.decoded = ephemerides
         engine.iono = rx.klobuchar if rx.klobuchar is not None else nav_iono
-        sol = engine.process(observations)
+        # every channel lost: PvtEngine refuses an empty epoch; it is an epoch without a fix
+        sol = engine.process(observations) if observations else None
         t = sample / fs
         if t < t_eval:
             return False
-        used = {int(p) for p in sol.prns} if sol.valid else set()
+        valid = sol is not None and sol.valid
+        used = {int(p) for p in sol.prns} if valid else set()
         by = {o.prn: o for o in observations}
         kept = [p in by and by[p].state == "TRACK" and bool(by[p].code_lock) and p in used
                 for p in prns]
         err = math.nan
-        if sol.valid:
+        if valid:
             truth_r = np.array([np.interp(t, tt, rr[:, j]) for j in range(3)])
             err = float(np.linalg.norm(np.asarray(sol.r_e, float) - truth_r))
         rows["t"].append(t)
         rows["kept"].append(kept)
-        rows["valid"].append(bool(sol.valid))
+        rows["valid"].append(valid)
         rows["pos_err"].append(err)
         return False
 
@@ -265,7 +267,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     seed : int
         Scenario seed (IF noise, IMU errors); the same for every level.
     out_dir : Path
-        Existing directory for ``sweep.csv`` and ``sweep.png``.
+        Existing directory for ``sweep_levels.csv`` and ``sweep.png``.
 
     Returns
     -------
@@ -325,7 +327,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
         fig[f"{mode}.threshold_dbhz"] = threshold(passed[mode])
     if "scalar" in modes and "deep" in modes:
         fig["deep_gain_db"] = fig["scalar.threshold_dbhz"] - fig["deep.threshold_dbhz"]
-    _write_csv(Path(out_dir) / "sweep.csv", rows)
+    _write_csv(Path(out_dir) / "sweep_levels.csv", rows)
     if params["plots"]:
         note = plotting.matplotlib_missing()
         if note is None:
