@@ -28,9 +28,10 @@ data so that both see the same machine load. Both rules use the same window (20 
 Three figures per implementation: the plain totals (best run; every run is listed),
 ``epochs x median epoch`` (robust to a hook being preempted on a shared machine), and the
 hooks alone with warm caches (the rule's own work, called repeatedly on a frozen epoch).
-The ratio is given for both implementations of the two rules: ``jit`` (the default: each
-rule's hooks run as numba kernels compiled with the same options, outside the timed hooks)
-and ``numpy`` (``jit=False``: plain numpy expressions). At 14 measurements a numpy call costs
+The ratio is given for both implementations of the two rules: ``jit`` (the defaults:
+ff-aukf's hooks as numba kernels; rae-aukf as a numba kernel compiled with the same options
+or with BLAS products, whichever is faster for the size -- ``jit=None``) and ``numpy``
+(``jit=False`` for both: plain numpy expressions). At 14 measurements a numpy call costs
 about as much as its arithmetic, so the numpy ratio mostly counts calls (about twenty small
 ones for ff-aukf, a dozen incl. five matrix products for rae-aukf); the kernels compare the
 rules' arithmetic, which is what paper 004 claims is smaller.
@@ -248,8 +249,12 @@ def _paired_adaptation(proc, meas, P0, Q, R, zs, warmup, window=None, jit=True,
     ``robust``: return ``epochs x median`` of the per-epoch adaptation times instead of the
     plain totals (a preempted hook adds milliseconds to one epoch of one filter).
     """
-    opts = {"jit": jit} if window is None else {"window": window, "jit": jit}
-    kfs = [make_filter(name, proc, meas, np.zeros(17), P0, Q, R0=np.diag(R), dt=DT, **opts)
+    win = {} if window is None else {"window": window}
+    # compiled: ff-aukf's kernels, rae-aukf's faster of kernel and BLAS for the size (its
+    # default); numpy: both rules as numpy expressions
+    jits = {"ff-aukf": jit, "rae-aukf": None if jit else False}
+    kfs = [make_filter(name, proc, meas, np.zeros(17), P0, Q, R0=np.diag(R), dt=DT,
+                       jit=jits[name], **win)
            for name in ("ff-aukf", "rae-aukf")]
     for z in zs[:warmup]:
         for kf in kfs:
@@ -278,8 +283,10 @@ def _warm_hook_times(proc, meas, P0, Q, R, zs, warmup, jit=True, calls=2000
     on it (best of 5 batches). Measures the rules' own work without the cache misses that the
     filter's sigma-point step causes between two hooks."""
     out = []
+    jits = {"ff-aukf": jit, "rae-aukf": None if jit else False}
     for name in ("ff-aukf", "rae-aukf"):
-        kf = make_filter(name, proc, meas, np.zeros(17), P0, Q, R0=np.diag(R), dt=DT, jit=jit)
+        kf = make_filter(name, proc, meas, np.zeros(17), P0, Q, R0=np.diag(R), dt=DT,
+                         jit=jits[name])
         for z in zs[:warmup]:
             kf.predict()
             kf.update(z)

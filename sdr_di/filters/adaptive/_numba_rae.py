@@ -44,6 +44,7 @@ def rae_window_estimates(V, E, R_used, S_inv, K, rho, r_floor_rel, q_floor, adap
     inv_w = 1.0 / W
     R_hat = np.empty((0, 0))
     Q_hat = np.empty((0, 0))
+    # all inner loops run along rows (contiguous)
     if adapt_r:
         T = np.zeros((m, m))                            # R S^-1
         for i in range(m):
@@ -52,28 +53,34 @@ def rae_window_estimates(V, E, R_used, S_inv, K, rho, r_floor_rel, q_floor, adap
                 if a != 0.0:
                     for j in range(m):
                         T[i, j] += a * S_inv[k, j]
-        R_hat = np.empty((m, m))
-        for i in range(m):
+        R_hat = np.zeros((m, m))
+        for w in range(W):                              # C_r = E^T E / W (upper triangle)
+            for i in range(m):
+                a = E[w, i] * inv_w
+                for j in range(i, m):
+                    R_hat[i, j] += a * E[w, j]
+        for i in range(m):                              # + R - R S^-1 R
+            for k in range(m):
+                a = T[i, k]
+                if a != 0.0:
+                    for j in range(i, m):
+                        R_hat[i, j] -= a * R_used[k, j]
             for j in range(i, m):
-                acc = 0.0
-                for k in range(m):
-                    acc += T[i, k] * R_used[k, j]
-                c = 0.0
-                for w in range(W):
-                    c += E[w, i] * E[w, j]
-                val = c * inv_w + R_used[i, j] - acc
-                R_hat[i, j] = val
-                R_hat[j, i] = val
+                R_hat[i, j] += R_used[i, j]
             R_hat[i, i] += r_floor_rel * rho[i]
-    if adapt_q:
-        C = np.empty((m, m))
         for i in range(m):
-            for j in range(i, m):
-                c = 0.0
-                for w in range(W):
-                    c += V[w, i] * V[w, j]
-                C[i, j] = c * inv_w
-                C[j, i] = c * inv_w
+            for j in range(i + 1, m):
+                R_hat[j, i] = R_hat[i, j]
+    if adapt_q:
+        C = np.zeros((m, m))
+        for w in range(W):                              # C_v = V^T V / W
+            for i in range(m):
+                a = V[w, i] * inv_w
+                for j in range(i, m):
+                    C[i, j] += a * V[w, j]
+        for i in range(m):
+            for j in range(i + 1, m):
+                C[j, i] = C[i, j]
         KC = np.zeros((n, m))
         for i in range(n):
             for k in range(m):
