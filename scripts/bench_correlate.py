@@ -6,11 +6,18 @@ Usage::
     python scripts/bench_correlate.py [--channels 7] [--fs 25e6] [--ms 1] [--seconds 2]
                                       [--threads 1 2] [--real]
 
-For each thread count, correlates ``--channels`` channels (E/P/L, complex64 input unless
-``--real``) over 1-ms coherent intervals at ``--fs`` for ``--seconds`` seconds of data (random
-samples, random code phases and Dopplers, as in tracking) and prints the wall time, the
-throughput in sample-channels per second and the real-time factor (data seconds processed per
-wall second for all the channels). Numba compilation is excluded (warm-up call first).
+For each kernel and thread count, correlates ``--channels`` channels (E/P/L) over 1-ms
+coherent intervals at ``--fs`` for ``--seconds`` seconds of data (random samples, random code
+phases and Dopplers, as in tracking) and prints the wall time, the thread CPU time, the
+throughput in sample-channels per second (of wall time) and the real-time factor (data seconds
+processed per wall second for all the channels). Numba compilation is excluded (warm-up call
+first). Kernels:
+
+* ``table``: :func:`~sdr_di.receiver.correlator.correlate_table` (float replica table,
+  ``complex64``/``float32`` samples; the public correlator API, used by the deep receiver);
+* ``receiver``: the scalar receiver's kernel
+  (:mod:`~sdr_di.receiver._numba_correlate_bits`: stored 4-bit-in-int8 samples, bit-window
+  replicas, one kernel call for all channels, NCO values given directly).
 
 ``run(args)`` is the entry point for a later ``scripts/bench.py correlate`` dispatcher; ``args``
 needs the attributes ``channels``, ``fs``, ``ms``, ``seconds``, ``threads`` and ``real``.
@@ -25,7 +32,14 @@ import time
 import numba
 import numpy as np
 
-from sdr_di.receiver.correlator import correlate_table, padded_replicas
+from sdr_di.receiver._numba_correlate_bits import correlate_epl_bits
+from sdr_di.receiver.correlator import (
+    CARRIER_BLOCK,
+    CODE_PAD,
+    bit_windows,
+    correlate_table,
+    padded_replicas,
+)
 
 
 def _one_rate(x: np.ndarray, table: np.ndarray, n_int: int, n_intervals: int, fs: float,
@@ -43,11 +57,40 @@ def _one_rate(x: np.ndarray, table: np.ndarray, n_int: int, n_intervals: int, fs
     return time.perf_counter() - t0
 
 
+def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int: int,
+                       n_intervals: int, fs: float, rng: np.random.Generator) -> float:
+    """The receiver's kernel on the same intervals (all channels in one call, as the bank)."""
+    n_ch = bits.shape[0]
+    n_comp = 2 if is_complex else 1
+    n_x = xs.size // n_comp
+    theta = rng.uniform(0, 10230, n_ch)
+    dchip = 10.23e6 * (1 + rng.uniform(-3e-6, 3e-6, n_ch)) / fs
+    phi = rng.uniform(0, 1, n_ch)
+    dphi = rng.uniform(-5e3, 5e3, n_ch) / fs
+    arg = np.multiply.outer(dphi, np.arange(CARRIER_BLOCK, dtype=np.float64))
+    arg = 2 * np.pi * (arg - np.floor(arg))
+    rot_re, rot_im = np.cos(arg), -np.sin(arg)
+    idx = np.arange(n_ch, dtype=np.int64)
+    nsamp = np.full(n_ch, n_int, np.int64)
+    out = np.empty((n_ch, 3, 2))
+    threads = numba.get_num_threads()
+    n_sub = 1 if threads <= 1 else max(1, -(-4 * threads // n_ch))
+    t0 = time.perf_counter()
+    for j in range(n_intervals):
+        off = (j * n_int) % (n_x - n_int + 1)
+        correlate_epl_bits(xs, n_comp, bits, idx, CODE_PAD, 10230,
+                           np.full(n_ch, off, np.int64), nsamp, theta, dchip, phi, dphi,
+                           rot_re, rot_im, idx, 0.5, n_sub, out)
+        theta = np.mod(theta + n_int * dchip, 10230.0)
+        phi = np.mod(phi + n_int * dphi, 1.0)
+    return time.perf_counter() - t0
+
+
 def run(args: argparse.Namespace) -> list[dict]:
     """Run the benchmark and print a table; returns the rows (dicts)."""
     rng = np.random.default_rng(1)
     fs = float(args.fs)
-    n_int = int(round(fs * args.ms * 1e-3))
+    n_int = round(fs * args.ms * 1e-3)
     n_ch = int(args.channels)
     n_block = n_int * 50
     if args.real:
@@ -55,25 +98,39 @@ def run(args: argparse.Namespace) -> list[dict]:
     else:
         x = (rng.normal(size=n_block) + 1j * rng.normal(size=n_block)).astype(np.complex64)
     table = padded_replicas(rng.choice(np.array([-1, 1], np.int8), size=(n_ch, 10230)))
-    n_intervals = max(1, int(round(args.seconds * 1e3 / args.ms)))
+    n_intervals = max(1, round(args.seconds * 1e3 / args.ms))
     max_threads = numba.config.NUMBA_NUM_THREADS
     threads = [t for t in args.threads if 1 <= t <= max_threads] or [numba.get_num_threads()]
     print(f"machine: {os.cpu_count()} cores, numba threads available: {max_threads}")
     print(f"correlator: {n_ch} channels x E/P/L, {'real' if args.real else 'complex'} input, "
           f"fs = {fs / 1e6:g} MHz, {args.ms:g} ms intervals, {args.seconds:g} s of data")
-    print(f"{'threads':>7} {'wall s':>8} {'Msample-ch/s':>13} {'x real time':>12}")
+    print(f"{'kernel':>8} {'threads':>7} {'wall s':>8} {'CPU s':>7} {'Msample-ch/s':>13} "
+          f"{'x real time':>12}")
     rows = []
     old = numba.get_num_threads()
+    bits = bit_windows(table)
+    xs = x.view(np.float32) if not args.real else x
+    xs = np.clip(np.rint(xs * 2.5), -7, 7).astype(np.int8)  # 4-bit values stored in int8
     try:
-        for t in threads:
-            numba.set_num_threads(t)
-            _one_rate(x, table, n_int, 2, fs, rng)  # compile / warm up
-            wall = _one_rate(x, table, n_int, n_intervals, fs, rng)
-            sc = n_intervals * n_int * n_ch / wall
-            rt = n_intervals * n_int / fs / wall
-            rows.append({"threads": t, "wall_s": wall, "sample_channels_per_s": sc,
-                         "real_time_factor": rt})
-            print(f"{t:7d} {wall:8.3f} {sc / 1e6:13.1f} {rt:12.3f}")
+        for kernel in ("table", "receiver"):
+            for t in threads:
+                numba.set_num_threads(t)
+                if kernel == "table":
+                    def one(n_iv):
+                        return _one_rate(x, table, n_int, n_iv, fs, rng)
+                else:
+                    def one(n_iv):
+                        return _one_rate_receiver(xs, not args.real, bits, n_int, n_iv, fs,
+                                                  rng)
+                one(2)  # compile / warm up
+                c0 = time.thread_time() if t == 1 else time.process_time()
+                wall = one(n_intervals)
+                cpu = (time.thread_time() if t == 1 else time.process_time()) - c0
+                sc = n_intervals * n_int * n_ch / wall
+                rt = n_intervals * n_int / fs / wall
+                rows.append({"kernel": kernel, "threads": t, "wall_s": wall, "cpu_s": cpu,
+                             "sample_channels_per_s": sc, "real_time_factor": rt})
+                print(f"{kernel:>8} {t:7d} {wall:8.3f} {cpu:7.3f} {sc / 1e6:13.1f} {rt:12.3f}")
     finally:
         numba.set_num_threads(old)
     return rows
