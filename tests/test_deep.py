@@ -257,3 +257,37 @@ def test_deep_receiver_rejects_bad_settings(gen26):
     with pytest.raises(ValueError, match="align"):
         DeepConfig(align="compass")
     shutil.rmtree(gen26 / "none", ignore_errors=True)
+
+
+def test_every_filter_runs_the_deep_measurement_model_with_a_changing_channel_count(nav):
+    """The integration step of the vector loop (17-state error model, eq 6-12 measurements,
+    R from pre-filter variances) for every filter name, with N_k going 7 -> 5 -> 7."""
+    from sdr_di.filters import FILTER_NAMES, make_filter
+    from sdr_di.ins.error_model import InsErrorModel, NavState, process_noise
+    from sdr_di.integration.measurements import RangeRateMeasurementModel
+
+    llh = np.array([math.radians(40.0), math.radians(116.0), 100.0])
+    v = np.array([0.0, 20.0, 0.0])
+    nav_state = NavState(llh, v, np.eye(3))
+    r = llh_to_ecef(*llh)
+    prns = [27, 8, 13, 10, 30, 28, 32]
+    ephs = [nav.select(p, WEEK, SOW0) for p in prns]
+    pr = predict_ranges(ephs, WEEK, [SOW0], [r], [0.0], None)
+    T = 0.02
+    Q = process_noise(T, gyro_random_walk_si=1e-5, accel_random_walk_si=1e-3,
+                      gyro_bias_si=4e-5, accel_bias_si=0.04)
+    P0 = np.diag([1e-6] * 3 + [0.01] * 3 + [1e-14, 1e-14, 1.0] + [1e-9] * 3 + [1e-3] * 3
+                 + [1.0, 0.01])
+    rng = np.random.default_rng(3)
+    for name in FILTER_NAMES:
+        process = InsErrorModel()
+        meas = RangeRateMeasurementModel()
+        kf = make_filter(name, process, meas, np.zeros(17), P0, Q, None, dt=T)
+        for k, n in enumerate([7] * 30 + [5] * 30 + [7] * 30):
+            process.set_interval(nav_state, nav_state, np.array([0, 0, 9.8]), np.zeros(3))
+            kf.predict(T)
+            meas.set_epoch(llh, v, pr.r_sat[:n, 0], pr.v_sat[:n, 0])
+            z = np.r_[rng.normal(0, 1.0, n), rng.normal(0, 0.05, n)]
+            kf.update(z, np.diag([1.0] * n + [0.0025] * n))
+            assert np.all(np.isfinite(kf.x)) and np.all(np.isfinite(kf.P)), (name, k)
+        assert np.all(np.linalg.eigvalsh(0.5 * (kf.P + kf.P.T)) > -1e-12), name
