@@ -74,8 +74,9 @@ from __future__ import annotations
 import math
 import os
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -84,7 +85,7 @@ from ..errors import SampleFormatError
 from ..io.sample_formats import SampleFormat, get_format, unpack_iq_int4
 from ..io.sidecar import read_sidecar
 
-__all__ = ["IfSource", "IfFileWarning", "check_format_statistics"]
+__all__ = ["IfFileWarning", "IfSource", "check_format_statistics"]
 
 
 class IfFileWarning(UserWarning):
@@ -212,7 +213,7 @@ class IfSource:
 
     # -- construction from a sidecar ---------------------------------------------------------
     @classmethod
-    def from_sidecar(cls, path: str | os.PathLike, check_format: bool = True) -> "IfSource":
+    def from_sidecar(cls, path: str | os.PathLike, check_format: bool = True) -> IfSource:
         """Open the IF file described by a ``sdr-di-if/1`` sidecar.
 
         Parameters
@@ -372,24 +373,20 @@ class IfSource:
             dt = np.float32 if fmt.name == "gr_complex" else \
                 np.int8 if fmt.name == "iq_int4" else fmt.dtype
             return np.empty(0, dt), n_comp
+        # one read() into a fresh array: cheaper than mapping the range and copying it
+        # (no page faults on a new mapping per chunk)
         bps = fmt.bytes_per_sample
-        raw = np.memmap(self.path, dtype=np.uint8, mode="r", offset=start_sample * bps,
-                        shape=(n * bps,))
-        try:
-            if fmt.name == "iq_int4":
-                out = _IQ_INT4_PAIRS[raw].reshape(-1)
-            elif fmt.name == "gr_complex":
-                out = raw.view(np.dtype("<f4")).astype(np.float32)
-            else:
-                out = raw.view(fmt.dtype).astype(fmt.dtype.newbyteorder("="))
-        finally:
-            mm = getattr(raw, "_mmap", None)
-            del raw
-            if mm is not None:
-                try:
-                    mm.close()
-                except BufferError:  # pragma: no cover - a view still alive
-                    pass
+        if fmt.name == "iq_int4":
+            raw = np.fromfile(self.path, dtype=np.uint8, count=n, offset=start_sample * bps)
+            out = _IQ_INT4_PAIRS[raw].reshape(-1)
+        else:
+            dt = np.dtype("<f4") if fmt.name == "gr_complex" else fmt.dtype
+            out = np.fromfile(self.path, dtype=dt, count=n * bps // dt.itemsize,
+                              offset=start_sample * bps)
+            if not out.dtype.isnative:
+                out = out.astype(out.dtype.newbyteorder("="))
+        if out.size != n * n_comp:
+            raise SampleFormatError(f"IF file {self.path}: short read at sample {start_sample}")
         return out, n_comp
 
     def chunks(self, n_per_chunk: int, start: int = 0,
