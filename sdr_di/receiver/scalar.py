@@ -7,14 +7,16 @@
    with :func:`~sdr_di.receiver.acquisition.acquire_source` (zero-stuffing below about 14 MHz,
    ``acq_upsample``, and the +-500 Hz Doppler check are done there: module notes of
    :mod:`~sdr_di.receiver.acquisition`).
-2. **Tracking**: a sample buffer is read from the file in chunks (``chunk_ms``, default
-   100 ms; memory bounded by the chunk size whatever the file length). At each step every
-   tracking channel whose next *block* of epochs (one epoch before bit synchronization, one
-   coherent interval after: 10 ms for D1, 2 ms for D2 by default) starts before the earliest
-   block end is correlated: all epochs of all those channels in **one** call of the numba
-   E/P/L kernel :func:`~sdr_di.receiver._numba_correlate.correlate_epl` (per-row NCO
-   parameters and intervals; replica tables cached per channel set, carrier rotation tables
-   per channel). Each channel then updates its loops and synchronization
+2. **Tracking**: the samples are read from the file in chunks (``chunk_ms``, default
+   100 ms; memory bounded by the chunk size whatever the file length) as stored
+   (:meth:`~sdr_di.receiver.ifreader.IfSource.read_stored`: ``int8`` for the default 4-bit
+   ``iq_int8`` files, no conversion to ``complex64``). At each step every tracking channel
+   whose next *block* of epochs (one epoch before bit synchronization, one coherent interval
+   after: 10 ms for D1, 2 ms for D2 by default) starts before the earliest block end is
+   correlated: all epochs of all those channels in **one** call of the numba E/P/L kernel
+   :func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_bits` (per-row NCO parameters
+   and intervals; one bit-window replica row per channel, one carrier rotation table per
+   channel, both named per row). Each channel then updates its loops and synchronization
    (:meth:`Channel.process_block`). The input noise power per sample (mean ``|x|^2`` of each
    chunk) is handed to the channels for their C/N0 estimators.
 3. **Output epochs** every ``epoch_interval_s`` (sample ``start + round(k dt fs)``, k >= 1):
@@ -28,19 +30,17 @@
    found (``PULL_IN``). PRNs not found by the initial acquisition are searched again (all
    together) every ``retry_acquisition_s`` when that is set (default: never).
 
-Processing cost (measured on the 2-core development machine, which is shared, so figures
-vary from run to run; 10 s of the default scenario: 7 D1 channels, 25 MHz complex 4-bit
-samples, ``on_epoch`` at 5 Hz, ``scripts/check_scalar.py --duration 10``): 1.2-1.9x real time
-in total (10 s of file in 5.4-8.7 s, the initial acquisition of 7 PRNs included, ~1.1-1.4 s;
-~6 s for all 63), of which the correlator kernel takes 3.5-5.4 s (2.0-3.1 ns per sample and
-channel with 2 threads; ~3.2 ns with 1 in a kernel micro-benchmark), the channels' Python work
-0.4-0.6 s (loops, lock detection, sync, decoding, logging), reading and converting the samples
-0.3-0.4 s (1.2 s once). The kernel does the carrier wipe-off of each 256-sample block into float64
-buffers in a separate (vectorized) pass, then the E/P/L sums with the code index
-``int(theta + offset)`` on a non-negative argument and the block split at the code wrap
-instead of a per-sample branch. The previous kernel (per-sample wrap branch, ``floor``,
-wipe-off fused with the look-ups) measured in the same sessions 0.5-1.1x real time, 7.0-14.7 s
-of correlation (4-8 ns per sample and channel with 2 threads, ~7 ns with 1).
+Processing cost (``python scripts/bench.py run --if-file F --repeat 3`` on a 40 s
+default-scenario file: 7 D1 channels, 25 MHz complex 4-bit ``iq_int8``, PVT and CSV/NMEA
+output at 5 Hz; the 2-core development machine is shared with other sessions, load average 3-5
+during these runs, so wall times depend mostly on the load): whole process 22-28 s wall
+(1.4-1.8x real time), 20.6 s of CPU time (user + system, all threads: below the 20 s of one
+free core that 2x real time needs only by a small margin), peak RSS 227 MiB for 10 s and 40 s
+alike. Shares of the wall time: correlation 58-66 % (kernel ~1.4 ns per sample and channel
+with one thread, thread CPU time), channels' Python work 7-10 %, acquisition 7-11 % (FFT
+search ~1.8 s of CPU for 7 PRNs), reading 3-6 %, PVT/output 3-5 %, imports and set-up 5-7 %.
+Before this kernel (``correlate_epl`` on ``complex64`` chunks, ~3.1 ns per sample and channel)
+the same runs took 1.4x real time at load ~1 (27.7 s).
 ``ScalarReceiver.profile`` gives the breakdown of every run.
 """
 
@@ -177,11 +177,12 @@ class _Bank:
                            nsamp, par[2], par[3], par[4], par[5], self.rot_re, self.rot_im,
                            row_slot, self.spacing, n_sub, out)
         self._record(threads, (time.perf_counter() - t0) / float(nsamp.sum()))
-        o = out.tolist()
+        # (re, im) pairs are contiguous: a complex128 view gives Python complex E, P, L
+        o = out.view(np.complex128).reshape(n_rows, 3).tolist()
         res = []
         j = 0
         for r in reps:
-            res.append([(complex(*v[0]), complex(*v[1]), complex(*v[2])) for v in o[j:j + r]])
+            res.append(o[j:j + r])
             j += r
         return res
 
