@@ -147,7 +147,7 @@ def warm_up() -> None:
     n, m, W = 2, 2, 2
     R = np.eye(m)
     Rj, diag = scale_r(R, np.ones(2), 2)
-    for rho in (R.diagonal(), np.ones(m)):             # strided view (the rule's) and plain
-        ff_after_update(np.zeros((n, m)), np.zeros(m), np.zeros(m), Rj, R, rho, diag,
-                        np.zeros((W, n + 2)), 0, np.zeros(W), 2, np.ones(n), True, True,
-                        np.ones(2), 1e-3, 1e6)
+    # rho is always R_prior.diagonal(): a read-only strided view
+    ff_after_update(np.zeros((n, m)), np.zeros(m), np.zeros(m), Rj, R, R.diagonal(), diag,
+                    np.zeros((W, n + 2)), 0, np.zeros(W), 2, np.ones(n), True, True,
+                    np.ones(2), 1e-3, 1e6)

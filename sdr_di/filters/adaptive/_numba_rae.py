@@ -103,6 +103,6 @@ def warm_up() -> None:
     """Compile (or load from the cache) the kernel with the argument types the rule uses."""
     W, m, n = 2, 2, 2
     R = np.eye(m)
-    for rho in (R.diagonal(), np.ones(m)):             # strided view (the rule's) and plain
-        rae_window_estimates(np.zeros((W, m)), np.zeros((W, m)), R, R, np.zeros((n, m)), rho,
-                             1e-6, np.ones(n), True, True)
+    # rho is always R_prior.diagonal(): a read-only strided view
+    rae_window_estimates(np.zeros((W, m)), np.zeros((W, m)), R, R, np.zeros((n, m)),
+                         R.diagonal(), 1e-6, np.ones(n), True, True)
