@@ -51,9 +51,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 
+import numba
 import numpy as np
 
 from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
@@ -64,7 +64,8 @@ from ..ins.error_model import ClockModel, InsErrorModel, NavState, process_noise
 from ..ins.mechanization import StrapdownINS
 from ..integration.measurements import RangeRateMeasurementModel
 from ..integration.metrics import nav_errors, summarize
-from ..receiver.correlator import CODE_PAD, correlate_table, padded_replicas
+from ..receiver._numba_correlate_bits import correlate_epl_bits, mean_power
+from ..receiver.correlator import CARRIER_BLOCK, CODE_PAD, bit_windows, padded_replicas
 from ..receiver.ifreader import IfSource
 from ..receiver.lock import cn0_known_noise
 from ..receiver.observables import ReceiverTime
@@ -412,8 +413,10 @@ class DeepReceiver:
         pre = PreFilterBank(n_ch, self.scalar.config.spacing_chips, source.carrier_hz,
                             **cfg.prefilter)
         spacing = pre.spacing
-        code_rows = {c.prn: padded_replicas(np.asarray(b3i_code(c.prn)))[0] for c in chans}
-        tables: OrderedDict = OrderedDict()
+        bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
+                                     for c in chans]))
+        chan_idx = np.arange(len(chans), dtype=np.int64)
+        carrier_m = np.arange(CARRIER_BLOCK, dtype=np.float64)
 
         # ---- IMU grid and INS alignment
         dt_imu = 1.0 / imu.rate_hz
@@ -494,7 +497,8 @@ class DeepReceiver:
         nis_acc = [0.0, 0]
         truth_on_grid = (truth is not None and len(truth.t) == len(imu.t)
                          and np.allclose(truth.t, imu.t, atol=1e-6))
-        x_buf = np.empty(0, dtype=source.dtype)
+        x_buf = np.empty(0, dtype=np.int8)
+        n_comp = 2
         buf0 = buf1 = 0
         npow = 1.0
         chunk = max(4 * n1, round(cfg.chunk_ms * 1e-3 * fs))
@@ -549,7 +553,6 @@ class DeepReceiver:
                      for c in chans]
             dp_prev = dp1
             reps = [len(p[0]) for p in parts]
-            prn_rows = [c.prn for c in chans]
             starts = np.concatenate([p[0] for p in parts])
             nsamp = np.concatenate([p[1] for p in parts])
             theta = np.concatenate([p[2] for p in parts])
@@ -564,31 +567,36 @@ class DeepReceiver:
                 break
             if need0 < buf0 or need1 > buf1:
                 n_read = min(max(chunk, need1 - need0), stop - need0)
-                x_buf = source.read(need0, n_read)
+                x_buf, n_comp = source.read_stored(need0, n_read)
                 buf0, buf1 = need0, need0 + n_read
-                npow = float(np.vdot(x_buf, x_buf).real) / max(1, x_buf.size)
+                npow = mean_power(x_buf, n_comp)
             td = time.perf_counter()
             prof["read"] += td - tc
-            # -- correlation (every epoch of every channel in one kernel call)
-            key = tuple(reps)
-            tab = tables.get(key)
-            if tab is None:
-                tab = np.ascontiguousarray(np.repeat(
-                    np.stack([code_rows[p] for p in prn_rows]), reps, axis=0))
-                tables[key] = tab
-                if len(tables) > 64:
-                    tables.popitem(last=False)
-            else:
-                tables.move_to_end(key)
-            st = starts - buf0
+            # -- correlation: every epoch of every channel in one call of the receiver's
+            # kernel on the stored samples (bit-window replicas, one rotation row per epoch)
+            n_rows = starts.size
+            tab_idx = np.repeat(chan_idx, reps)
+            a_rot = np.multiply.outer(dphi, carrier_m)
+            a_rot -= np.floor(a_rot)
+            a_rot *= 2.0 * math.pi
+            rot_re = np.cos(a_rot)
+            rot_im = -np.sin(a_rot)
+            th = np.mod(theta, float(CODE_LENGTH_B3I))
+            th[th >= CODE_LENGTH_B3I] = 0.0
+            threads = numba.get_num_threads()
+            nblk = max(1, (int(nsamp.max()) + CARRIER_BLOCK - 1) // CARRIER_BLOCK)
+            n_sub = 1 if threads <= 1 else int(min(max(1, math.ceil(4 * threads / n_rows)),
+                                                   nblk))
+            out = np.empty((n_rows, 3, 2))
+            correlate_epl_bits(x_buf, n_comp, bits, tab_idx, CODE_PAD, CODE_LENGTH_B3I,
+                               starts - buf0, nsamp, th, np.repeat(dchip, reps), phi, dphi,
+                               rot_re, rot_im, np.arange(n_rows, dtype=np.int64), spacing,
+                               n_sub, out)
             ns = nsamp
-            res = correlate_table(x_buf, tab, CODE_LENGTH_B3I, theta,
-                                  np.repeat(cmd.code_rate_cps, reps), phi, dphi * fs, ns, fs,
-                                  spacing, st, pad=CODE_PAD)
-            sgn = nh
-            E = res.early * sgn
-            P = res.prompt * sgn
-            L = res.late * sgn
+            epl = out.view(np.complex128)[..., 0]
+            E = epl[:, 0] * nh
+            P = epl[:, 1] * nh
+            L = epl[:, 2] * nh
             te = time.perf_counter()
             prof["correlate"] += te - td
             # -- pre-filters and channel management
@@ -748,11 +756,4 @@ def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int,
 
 def _adaptation_s(kf) -> float:
     """Seconds spent so far in the filter's adaptive rule (0 without one)."""
-    rule = getattr(kf, "rule", None)
-    if rule is None:
-        return 0.0
-    for name in ("adaptation_time_s", "adaptation_s", "elapsed_s", "time_s"):
-        v = getattr(rule, name, None)
-        if isinstance(v, (int, float)):
-            return float(v)
-    return 0.0
+    return float(getattr(kf, "adaptation_time_s", 0.0))
