@@ -92,15 +92,20 @@ _STAGES = ("acquisition", "read", "correlate", "channels", "callback")
 def _run_receiver(path: Path, out: Path, prns: str) -> dict:
     """``run_scalar`` (what ``sdr-di run --mode scalar`` runs) in a fresh process: the
     process wall time and peak RSS, the receiver's profile."""
+    import resource
+
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", _RUN_CHILD, str(path), str(out), prns],
                          check=False, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if res.returncode != 0:
         raise SystemExit(f"run failed: {res.stderr.strip()}")
     line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
     r = json.loads(line[len("RESULT "):])
     r["process_wall_s"] = wall
+    r["cpu_s"] = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     return r
 
 
@@ -113,8 +118,11 @@ def bench_run(args: argparse.Namespace) -> None:
         print(f"machine: {os.cpu_count()} cores, load average {load:.2f} at start; scalar "
               "receiver, default scenario, 7 satellites, 25 MHz, 4-bit iq_int8, PVT at 5 Hz")
         print("x real time: file seconds per wall second of the whole process (imports, "
-              "acquisition, tracking, PVT, output); tracking: of the tracking loop alone")
-        print(f"{'file s':>6} {'wall s':>7} {'x real time':>11} {'tracking':>8} "
+              "acquisition, tracking, PVT, output); tracking: of the tracking loop alone; "
+              "CPU s: the process's user + system time (all threads; on a shared machine the "
+              "load-independent cost: below half the file length = 2x real time on one free "
+              "core)")
+        print(f"{'file s':>6} {'wall s':>7} {'CPU s':>6} {'x real time':>11} {'tracking':>8} "
               + " ".join(f"{s[:7]:>7}" for s in _STAGES) + f" {'other':>6} {'peak RSS MiB':>12}")
         if args.if_file:
             files = [Path(args.if_file)]
@@ -133,7 +141,8 @@ def bench_run(args: argparse.Namespace) -> None:
                 wall = r["process_wall_s"]
                 d = r["processed_s"]
                 shares = [100.0 * p[s] / wall for s in _STAGES]
-                print(f"{d:6.1f} {wall:7.2f} {d / wall:11.2f} {p['realtime_factor']:8.2f} "
+                print(f"{d:6.1f} {wall:7.2f} {r['cpu_s']:6.1f} {d / wall:11.2f} "
+                      f"{p['realtime_factor']:8.2f} "
                       + " ".join(f"{v:6.1f}%" for v in shares)
                       + f" {100.0 - sum(shares):5.1f}% {r['maxrss'] / 2**20:12.1f}")
         print("stage shares: % of the process wall time (other: imports, numba cache loading, "

@@ -55,8 +55,8 @@ Refinement (detected PRNs)
 --------------------------
 1. Doppler and delay by parabolic interpolation of ``S`` over the neighbouring bins/delays.
 2. Code phase: prompt power summed over 1 ms blocks on a 0.1-chip grid of +-0.4 chip around the
-   estimate (the numba correlators, E/P/L at 0.1 chip spacing on three offsets), parabolic
-   interpolation of the maximum.
+   estimate (the receiver's bit-window correlator kernel, E/P/L at 0.1 chip spacing on three
+   offsets), parabolic interpolation of the maximum.
 3. Doppler: the 1 ms prompts ``P_b`` are squared (removing NH/data signs) and the frequency of
    ``P_b^2`` is found by a zero-padded FFT and parabolic interpolation; the residual is half of
    it (unambiguous within +-250 Hz, the coarse grid leaves at most +-250 Hz before step 1).

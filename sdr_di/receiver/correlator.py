@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numba
 import numpy as np
@@ -279,7 +279,7 @@ def check_prn(prn) -> int:
 
 
 def _default_code_source() -> Callable[[int], np.ndarray]:
-    from ..signal.codes import b3i_code  # noqa: PLC0415 - written by the signal package
+    from ..signal.codes import b3i_code
 
     return b3i_code
 

@@ -30,17 +30,20 @@
    found (``PULL_IN``). PRNs not found by the initial acquisition are searched again (all
    together) every ``retry_acquisition_s`` when that is set (default: never).
 
-Processing cost (``python scripts/bench.py run --if-file F --repeat 3`` on a 40 s
-default-scenario file: 7 D1 channels, 25 MHz complex 4-bit ``iq_int8``, PVT and CSV/NMEA
-output at 5 Hz; the 2-core development machine is shared with other sessions, load average 3-5
-during these runs, so wall times depend mostly on the load): whole process 22-28 s wall
-(1.4-1.8x real time), 20.6 s of CPU time (user + system, all threads: below the 20 s of one
-free core that 2x real time needs only by a small margin), peak RSS 227 MiB for 10 s and 40 s
-alike. Shares of the wall time: correlation 58-66 % (kernel ~1.4 ns per sample and channel
-with one thread, thread CPU time), channels' Python work 7-10 %, acquisition 7-11 % (FFT
-search ~1.8 s of CPU for 7 PRNs), reading 3-6 %, PVT/output 3-5 %, imports and set-up 5-7 %.
-Before this kernel (``correlate_epl`` on ``complex64`` chunks, ~3.1 ns per sample and channel)
-the same runs took 1.4x real time at load ~1 (27.7 s).
+Processing cost (2-core development machine, AMD EPYC with AVX-512, shared with other
+sessions: load average 2.7-5 during these measurements, so wall times follow the load and the
+CPU time is the better figure). ``python scripts/bench.py run --if-file F --repeat 3`` on a
+40 s default-scenario file (7 D1 channels, 25 MHz complex 4-bit ``iq_int8``, PVT and CSV/NMEA
+output at 5 Hz, whole ``run_scalar`` process): 19.3-30.0 s wall (2.07x real time at load 3.4,
+1.33-1.64x at load 4-5; tracking loop alone 1.6-2.6x), 19.3-20.1 s of CPU (user + system, all
+threads: about 2x real time on one free core), peak RSS 227 MiB (226 MiB for a 10 s file: the
+memory does not grow with the file). Shares of the wall time: correlation 57-63 % (kernel
+1.35-1.5 ns per sample and channel, one thread), acquisition 12-16 % (~2 s of CPU, mostly the
+FFT search of 7 PRNs x 21 Doppler bins x 40 ms), channels' Python work 9-11 %, reading 4-5 %,
+PVT/output 4 %, imports and set-up 7-9 %. Side by side on the same file and load (3.4-3.8),
+the code before this kernel (``correlate_epl`` on ``complex64`` chunks, ~3.1 ns per sample and
+channel, 2-thread calls explored 2 in every 64) took 58-72 s wall and 40-49 s of CPU against
+27 s and 18-20 s now.
 ``ScalarReceiver.profile`` gives the breakdown of every run.
 """
 
@@ -204,7 +207,8 @@ class ScalarReceiver:
     log_every_ms : int, optional
         Log one epoch in this many. Default 1.
     acq_upsample : int, optional
-        Zero-stuffing factor of acquisition (default automatic, see module notes).
+        Zero-stuffing factor of acquisition (default automatic: module notes of
+        :mod:`~sdr_di.receiver.acquisition`).
     retry_acquisition_s : float, optional
         Search again for PRNs not found, this often [s]. Default None (never).
     threads : int, optional
