@@ -31,19 +31,23 @@
    together) every ``retry_acquisition_s`` when that is set (default: never).
 
 Processing cost (2-core development machine, AMD EPYC with AVX-512, shared with other
-sessions: load average 2.7-5 during these measurements, so wall times follow the load and the
-CPU time is the better figure). ``python scripts/bench.py run --if-file F --repeat 3`` on a
-40 s default-scenario file (7 D1 channels, 25 MHz complex 4-bit ``iq_int8``, PVT and CSV/NMEA
-output at 5 Hz, whole ``run_scalar`` process): 19.3-30.0 s wall (2.07x real time at load 3.4,
-1.33-1.64x at load 4-5; tracking loop alone 1.6-2.6x), 19.3-20.1 s of CPU (user + system, all
-threads: about 2x real time on one free core), peak RSS 227 MiB (226 MiB for a 10 s file: the
-memory does not grow with the file). Shares of the wall time: correlation 57-63 % (kernel
-1.35-1.5 ns per sample and channel, one thread), acquisition 12-16 % (~2 s of CPU, mostly the
-FFT search of 7 PRNs x 21 Doppler bins x 40 ms), channels' Python work 9-11 %, reading 4-5 %,
-PVT/output 4 %, imports and set-up 7-9 %. Side by side on the same file and load (3.4-3.8),
-the code before this kernel (``correlate_epl`` on ``complex64`` chunks, ~3.1 ns per sample and
-channel, 2-thread calls explored 2 in every 64) took 58-72 s wall and 40-49 s of CPU against
-27 s and 18-20 s now.
+sessions, so wall times follow the machine's load; the CPU time is the load-independent
+figure). ``python scripts/bench.py run --if-file F --repeat 3`` on a 40 s default-scenario
+file (7 D1 channels, 25 MHz complex 4-bit ``iq_int8``, PVT and CSV/NMEA output at 5 Hz, whole
+``run_scalar`` process including imports): at load average 1.1-1.5, 11.1-14.6 s wall
+(2.7-3.6x real time; tracking loop alone 3.2-4.2x); at load 3.2-3.7, 18.5-19.4 s (2.1-2.2x);
+at load 4-5, 24-30 s (1.3-1.6x). CPU time (user + system, both threads) 17.7-20.2 s, i.e.
+about 2x real time even on a single free core; peak RSS 227 MiB for a 40 s file and 226 MiB
+for a 10 s one (memory bounded by the chunk size). Shares of the wall time: correlation
+56-63 % (kernel 1.35-1.6 ns per sample and channel, one thread), acquisition 7-12 % (~2 s of
+CPU, mostly the FFT search of 7 PRNs x 21 Doppler bins x 40 ms), channels' Python work
+8-11 %, reading 5-8 % (more when the file is not in the page cache), PVT/output 4-7 %, imports
+and set-up 6-8 %. Side by side on the same file at the same load, the code before the
+bit-window kernel (``correlate_epl`` on ``complex64`` chunks, ~3.1 ns per sample and channel,
+2-thread calls explored 2 in every 64) took 27.4 s wall / 49.8 s CPU at load 1.5 (new: 15.0 s
+/ 21.4 s) and 58-72 s / 40-49 s at load 3.5 (new: 27 s / 18-20 s). On a 20 MHz real ``int16``
+file at 5 MHz IF (``scripts/check_scalar.py --fs 20e6 --if 5e6 --format real_int16 --bits
+12``) the receiver ran 5.1x real time (before: 1.7x), same accuracy.
 ``ScalarReceiver.profile`` gives the breakdown of every run.
 """
 
