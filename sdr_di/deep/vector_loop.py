@@ -71,6 +71,7 @@ from ..receiver.lock import cn0_known_noise
 from ..receiver.observables import ReceiverTime
 from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
+from ..receiver.threads import KernelThreads
 from ..receiver.tracking import ChannelState
 from ..signal.codes import NH20, b3i_code
 from .nco import nco_commands, predict_ranges
@@ -417,6 +418,8 @@ class DeepReceiver:
                                      for c in chans]))
         chan_idx = np.arange(len(chans), dtype=np.int64)
         carrier_m = np.arange(CARRIER_BLOCK, dtype=np.float64)
+        kthreads = KernelThreads()
+        threads_before = numba.get_num_threads()
 
         # ---- IMU grid and INS alignment
         dt_imu = 1.0 / imu.rate_hz
@@ -583,7 +586,7 @@ class DeepReceiver:
             rot_im = -np.sin(a_rot)
             th = np.mod(theta, float(CODE_LENGTH_B3I))
             th[th >= CODE_LENGTH_B3I] = 0.0
-            threads = numba.get_num_threads()
+            threads = kthreads.pick()
             nblk = max(1, (int(nsamp.max()) + CARRIER_BLOCK - 1) // CARRIER_BLOCK)
             n_sub = 1 if threads <= 1 else int(min(max(1, math.ceil(4 * threads / n_rows)),
                                                    nblk))
@@ -592,6 +595,7 @@ class DeepReceiver:
                                starts - buf0, nsamp, th, np.repeat(dchip, reps), phi, dphi,
                                rot_re, rot_im, np.arange(n_rows, dtype=np.int64), spacing,
                                n_sub, out)
+            kthreads.record(threads, (time.perf_counter() - td) / float(nsamp.sum()))
             ns = nsamp
             epl = out.view(np.complex128)[..., 0]
             E = epl[:, 0] * nh
@@ -690,6 +694,7 @@ class DeepReceiver:
                     next_progress = k1 / fs + 1.0
             prof["output"] += time.perf_counter() - th
             i0, k0 = i1, k1
+        numba.set_num_threads(threads_before)
         prof["total"] = time.perf_counter() - t_all
         prof["processed_s"] = k0 / fs
         prof["deep_s"] = (k0 - k_grid0) / fs

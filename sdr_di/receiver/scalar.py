@@ -73,6 +73,7 @@ from .correlator import (
     padded_replicas,
 )
 from .ifreader import IfSource
+from .threads import KernelThreads
 from .tracking import ChannelObservation, ChannelState, TrackingConfig, TrackingLog
 
 __all__ = ["ScalarReceiver", "acquisition_upsampling"]
@@ -85,13 +86,8 @@ class _Bank:
 
     def __init__(self, n_slots: int, spacing: float, threads: int | None = None):
         self.spacing = float(spacing)
-        self.max_threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
-        self.fixed_threads = None if threads is None else max(1, min(int(threads),
-                                                                      self.max_threads))
-        # auto: cost [s per sample-row] of 1 thread / all threads, explored now and then
-        self._cost = {1: 0.0, self.max_threads: 0.0}
-        self._warm: set[int] = set()
-        self._calls = 0
+        # kernel thread count chosen by measured cost [s per sample-row]
+        self.threads = KernelThreads(threads)
         self.tab = np.zeros((0, 1), np.uint64)
         self.rot_re = np.ones((n_slots, CARRIER_BLOCK))
         self.rot_im = np.zeros((n_slots, CARRIER_BLOCK))
@@ -105,44 +101,6 @@ class _Bank:
 
         self.tab = np.ascontiguousarray(np.concatenate(
             [bit_windows(padded_replicas(np.asarray(b3i_code(p)))) for p in prns]))
-
-    def _pick_threads(self) -> int:
-        """Thread count of the next kernel call.
-
-        Parallel regions of ~1 ms are cheap on idle cores but very slow when another
-        process competes for them (a worker thread descheduled at the barrier stalls the
-        region for a time slice: measured 5x slower than one thread on a loaded 2-core
-        machine). Unless fixed, the bank measures both settings (1 thread and all threads,
-        re-exploring the slower one for 1 call in every 256) and uses the faster. The first call
-        of each setting (thread pool start-up) is not counted.
-        """
-        if self.fixed_threads is not None:
-            t = self.fixed_threads
-        elif self.max_threads == 1:
-            t = 1
-        else:
-            c1, cm = self._cost[1], self._cost[self.max_threads]
-            if c1 == 0.0:
-                t = 1
-            elif cm == 0.0:
-                t = self.max_threads
-            else:
-                best = 1 if c1 <= cm else self.max_threads
-                other = self.max_threads if best == 1 else 1
-                t = other if self._calls % 256 == 255 else best
-        self._calls += 1
-        if numba.get_num_threads() != t:
-            numba.set_num_threads(t)
-        return t
-
-    def _record(self, threads: int, cost: float) -> None:
-        if threads not in self._cost:
-            return
-        if threads not in self._warm:  # first call of a setting: thread start-up, skip
-            self._warm.add(threads)
-            return
-        old = self._cost[threads]
-        self._cost[threads] = cost if old == 0.0 else 0.7 * old + 0.3 * cost
 
     def _rot(self, slots: list[int], dphis: list[float]) -> None:
         """Carrier rotation tables ``exp(-j 2 pi m dphi)`` of the slots whose ``dphi`` changed."""
@@ -175,7 +133,7 @@ class _Bank:
         start = par[0].astype(np.int64) - buf0
         nsamp = par[1].astype(np.int64)
         row_slot = np.repeat(np.array(slots, dtype=np.int64), reps)
-        threads = self._pick_threads()
+        threads = self.threads.pick()
         nblk = max(1, (int(nsamp.max()) + CARRIER_BLOCK - 1) // CARRIER_BLOCK)
         n_sub = 1 if threads <= 1 else int(min(max(1, math.ceil(4 * threads / n_rows)), nblk))
         out = np.empty((n_rows, 3, 2))
@@ -183,7 +141,7 @@ class _Bank:
         correlate_epl_bits(x, n_comp, self.tab, row_slot, CODE_PAD, CODE_LENGTH_B3I, start,
                            nsamp, par[2], par[3], par[4], par[5], self.rot_re, self.rot_im,
                            row_slot, self.spacing, n_sub, out)
-        self._record(threads, (time.perf_counter() - t0) / float(nsamp.sum()))
+        self.threads.record(threads, (time.perf_counter() - t0) / float(nsamp.sum()))
         # (re, im) pairs are contiguous: a complex128 view gives Python complex E, P, L
         o = out.view(np.complex128).reshape(n_rows, 3).tolist()
         res = []
@@ -217,7 +175,7 @@ class ScalarReceiver:
         Search again for PRNs not found, this often [s]. Default None (never).
     threads : int, optional
         Threads of the tracking correlator kernel. Default None: chosen at run time between
-        1 and numba's thread count by measured speed (see ``_Bank._pick_threads``: short
+        1 and numba's thread count by measured speed (see :mod:`~sdr_di.receiver.threads`: short
         parallel regions collapse when other processes load the cores).
 
     Attributes (after :meth:`run`)
@@ -454,7 +412,7 @@ class ScalarReceiver:
             prof["steps"] += 1
         self._collect_ephemerides()
         numba.set_num_threads(threads_before)
-        prof["kernel_s_per_msample"] = {t: c * 1e6 for t, c in bank._cost.items()}
+        prof["kernel_s_per_msample"] = {t: c * 1e6 for t, c in bank.threads.cost.items()}
         end = time.perf_counter()
         prof["tracking"] = end - t_track
         prof["total"] = end - t_total
