@@ -7,6 +7,7 @@ Usage::
     python scripts/bench.py run [--durations 10 40] [--keep] [--if-file F] [--repeat N]
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
     python scripts/bench.py filters [options of scripts/bench_filters.py]
+    python scripts/bench.py deep [options of scripts/bench_deep.py]
 
 ``generate``: runs ``sdr-di generate`` on the default scenario (7 satellites, 25 MHz, 4-bit)
 for each duration in a fresh process, and prints wall time, samples per second, real-time
@@ -182,6 +183,11 @@ def main(argv: list[str] | None = None) -> None:
     f = sub.add_parser("filters", help="filter step time, 17 states, 2N measurements")
     bench_filters.add_arguments(f)
     f.set_defaults(func=bench_filters.run)
+    import bench_deep
+
+    dp = sub.add_parser("deep", help="deep receiver real-time factor, stage shares, memory")
+    bench_deep.add_arguments(dp)
+    dp.set_defaults(func=bench_deep.run)
     args = parser.parse_args(argv)
     args.func(args)
 
