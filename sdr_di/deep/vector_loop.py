@@ -32,8 +32,9 @@ Decisions
 * **INS initial alignment**: ``align="truth"``: from the first record of the reference (the
   scenario's initial state, paper 004 Table 3) at the IMU start, then coasting on the IMU
   until the hand-over, where position and velocity are replaced by the WLS fix;
-  ``align="gnss"``: at the hand-over from the fix, pitch and heading from the velocity
-  vector, roll 0 (the vehicle must move).
+  ``align="gnss"``: at the hand-over from the fix velocity and the IMU (:func:`gnss_alignment`:
+  heading along the velocity, tilt from the specific force with the turn's centripetal
+  acceleration; the vehicle must move).
 * **Time**: IMU sample ``i`` (BDT epoch in its header) is IF sample
   ``round((t_i + sow_imu0 - sow_if0) fs)``: the IMU is taken as time-stamped in the receiver
   clock's scale (exact for generated files, whose receiver clock defaults to BDT).
@@ -59,7 +60,7 @@ import numpy as np
 from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
 from ..errors import ImuDataError, NoEphemerisError, SdrDiError, UnknownPrnError
 from ..filters import make_filter
-from ..frames import ecef_to_llh, euler_to_C_b_n, llh_to_ecef
+from ..frames import ecef_to_llh, llh_to_ecef
 from ..ins.error_model import ClockModel, InsErrorModel, NavState, process_noise
 from ..ins.mechanization import StrapdownINS
 from ..integration.measurements import RangeRateMeasurementModel
@@ -122,7 +123,7 @@ class DeepConfig:
         Options of :func:`~sdr_di.filters.make_filter` (e.g. ``window`` of ``ff-aukf``).
     p0_att_deg : tuple
         Initial attitude sigmas (E, N, U) [deg] for ``align="truth"`` (``"gnss"`` uses
-        (1, 1, 2) deg).
+        (3, 3, 5) deg: the no-sideslip, coordinated-turn assumptions).
     chunk_ms : int
         Samples read per refill [ms].
     """
@@ -257,6 +258,41 @@ def _imu_offset_s(source: IfSource, imu) -> float:
         raise ImuDataError("IMU file has no BDT time tag (bdt_week_t0/bdt_sow_t0): cannot "
                            "align it with the IF file")
     return (imu.week - source.start_week) * 604800.0 + (imu.sow - source.start_sow)
+
+
+def gnss_alignment(v_n, f_b, w_ib_b, g: float = 9.80) -> np.ndarray:
+    """Body-to-ENU rotation from the GNSS velocity and the IMU at one instant (TRIAD).
+
+    Assumes no sideslip (the velocity lies along the body Front axis) and a turn about the
+    specific-force axis: the horizontal centripetal acceleration is ``omega x v`` with
+    ``omega`` the gyro rate about the measured specific force, so the specific force in ENU
+    is ``f_n = omega_up x v_n + (0, 0, g)``. TRIAD then pairs ``f_n`` with the measured
+    ``f_b`` (primary: tilt, including the bank of a coordinated turn) and ``v_n`` with the
+    Front axis (secondary: heading); ``omega_up`` is re-evaluated about the estimated Up axis
+    (4 passes).
+
+    Parameters
+    ----------
+    v_n : (3,) ENU velocity [m/s]; f_b : (3,) specific force [m/s^2] and w_ib_b : (3,)
+        angular rate [rad/s], body Right-Front-Up, averaged around the instant.
+    """
+    v = np.asarray(v_n, float)
+    fb = np.asarray(f_b, float)
+    wb = np.asarray(w_ib_b, float)
+
+    def frame(a, b):
+        t1 = a / np.linalg.norm(a)
+        t2 = np.cross(a, b)
+        t2 /= np.linalg.norm(t2)
+        return np.column_stack([t1, t2, np.cross(t1, t2)])
+
+    up_b = fb / max(np.linalg.norm(fb), 1e-9)     # first guess of the Up axis in the body
+    body = frame(fb, np.array([0.0, 1.0, 0.0]))
+    for _ in range(4):                             # turn rate about the estimated Up axis
+        w_up = float(np.dot(wb, up_b))
+        C = frame(np.array([-w_up * v[1], w_up * v[0], g]), v) @ body.T
+        up_b = C.T @ np.array([0.0, 0.0, 1.0])
+    return C
 
 
 class DeepReceiver:
@@ -444,10 +480,11 @@ class DeepReceiver:
             if sp < 2.0:
                 raise HandoverError(f"align='gnss' needs a moving receiver at the hand-over "
                                     f"(horizontal speed {sp:.2f} m/s < 2 m/s)")
-            att0 = np.array([math.atan2(v[2], sp), 0.0, math.atan2(v[0], v[1])])
-            ins = StrapdownINS(llh_fix, v, C_b_n=euler_to_C_b_n(*att0), t=float(imu.t[i_h]))
+            lo, hi = max(i_h - 10, 0), min(i_h + 11, len(imu.t))
+            C0 = gnss_alignment(v, imu.f_b[lo:hi].mean(axis=0), imu.w_ib_b[lo:hi].mean(axis=0))
+            ins = StrapdownINS(llh_fix, v, C_b_n=C0, t=float(imu.t[i_h]))
             ins.set_previous_increments(imu.f_b[i_h], imu.w_ib_b[i_h], dt_imu)
-            att_sig = np.radians([1.0, 1.0, 2.0])
+            att_sig = np.radians([3.0, 3.0, 5.0])
         clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
         clk_d = float(sol.clock_drift_mps)
 
