@@ -136,12 +136,13 @@ class PreFilterBank:
         self.x[i, 0] -= d_tau_chips
         self.x[i, 2] -= d_f_hz
 
-    def decorrelate(self, i: int) -> None:
-        """Reset the code (and, if ``reset_frequency``, frequency) variances and their cross
-        terms to the priors."""
+    def decorrelate(self, i: int, frequency: bool | None = None) -> None:
+        """Reset the code (and, if ``frequency``, default ``reset_frequency``, the frequency)
+        variances and their cross terms to the priors."""
         P = self.P[i]
+        freq = self.reset_frequency if frequency is None else bool(frequency)
         for k, on, sig in ((0, self.reset_code, self.sigma_tau0),
-                           (2, self.reset_frequency, self.sigma_f0)):
+                           (2, freq, self.sigma_f0)):
             if on:
                 P[k, :] = 0.0
                 P[:, k] = 0.0

@@ -41,8 +41,11 @@ Decisions
 * **Channel management**: a channel leaves the measurement vector (``N_k`` changes) while
   its C/N0 (known-noise estimator over the last ``cn0_window`` intervals) is below
   ``cn0_min_dbhz`` or its pre-filter innovations are inconsistent (NIS above
-  ``nis_max``); its NCOs stay driven by the INS and its pre-filter is restarted every
-  interval, so it rejoins as soon as the signal is back, without an acquisition search.
+  ``nis_max``); a fast test on each interval's own 20 prompts (C/N0 below ``cn0_min_dbhz -
+  fast_loss_margin_db``) drops it at once and empties its C/N0 window, so it rejoins only
+  on fresh prompts (40 ms) rather than on a window still full of signal from before a
+  blockage. Its NCOs stay driven by the INS and its pre-filter is restarted every interval
+  while out, so it rejoins as soon as the signal is back, without an acquisition search.
 * **Process noise** from the IMU spec (random walks; bias random walk reaching the spec in
   ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`ClockModel`).
 """
@@ -107,8 +110,13 @@ class DeepConfig:
     handover_wait_s : float
         Seconds after the first fix to wait for every tracked channel before handing over
         with at least 4.
-    cn0_min_dbhz, cn0_window, nis_max
+    cn0_min_dbhz, cn0_window, fast_loss_margin_db, nis_max
         Channel management (module notes).
+    carrier_cn0_min_dbhz : float
+        Below this C/N0 a channel's pre-filter frequency variance is reset every interval too
+        (module notes of :mod:`~sdr_di.deep.prefilter`): its rate measurement then comes from
+        the phase slope inside the interval, with an honest (large) variance, instead of from
+        a carrier track that may be slipping.
     gyro_random_walk_deg_sqrth, accel_random_walk_mps_sqrth, gyro_bias_deg_h, accel_bias_mg
         IMU spec for ``Q`` and ``P0`` (paper 004 Table 4).
     bias_time_s : float
@@ -135,6 +143,8 @@ class DeepConfig:
     handover_wait_s: float = 6.0
     cn0_min_dbhz: float = 25.0
     cn0_window: int = 10
+    fast_loss_margin_db: float = 6.0
+    carrier_cn0_min_dbhz: float = 30.0
     nis_max: float = 4.0
     gyro_random_walk_deg_sqrth: float = 0.04
     accel_random_walk_mps_sqrth: float = 0.05
@@ -654,7 +664,13 @@ class DeepReceiver:
                     c.prompts[-m:] = pp[-m:]
                     c.n_prompts = min(c.n_prompts + m, c.prompts.size)
                     nbar = float(ns[sl].mean())
-                    if c.n_prompts >= _CN0_MIN_PROMPTS:
+                    fast = cn0_known_noise(pp, nbar * npow, nbar / fs)
+                    if not (fast >= cfg.cn0_min_dbhz - cfg.fast_loss_margin_db):
+                        # signal gone in this interval: out at once, and back only on a
+                        # window of fresh prompts
+                        c.n_prompts = 0
+                        c.cn0_dbhz = math.nan
+                    elif c.n_prompts >= _CN0_MIN_PROMPTS:
                         c.cn0_dbhz = cn0_known_noise(c.prompts[-c.n_prompts:], nbar * npow,
                                                      nbar / fs)
                     cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
@@ -697,7 +713,7 @@ class DeepReceiver:
                 i = c.idx
                 pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
                 if c.used:
-                    pre.decorrelate(i)
+                    pre.decorrelate(i, frequency=not c.cn0_dbhz >= cfg.carrier_cn0_min_dbhz)
                 else:
                     pre.reset(i, sigma_phi=1.0)
             kf.x = np.zeros(17)
