@@ -43,8 +43,9 @@ Decisions
   ``cn0_min_dbhz`` or its pre-filter innovations are inconsistent (NIS above
   ``nis_max``); a fast test on each interval's own 20 prompts (C/N0 below ``cn0_min_dbhz -
   fast_loss_margin_db``) drops it at once and empties its C/N0 window, so it rejoins only
-  on fresh prompts (40 ms) rather than on a window still full of signal from before a
-  blockage. Its NCOs stay driven by the INS and its pre-filter is restarted every interval
+  on fresh prompts rather than on a window still full of signal from before a
+  blockage (a whole window, 200 ms by default: shorter windows of noise alone pass the
+  C/N0 test too often). Its NCOs stay driven by the INS and its pre-filter is restarted every interval
   while out, so it rejoins as soon as the signal is back, without an acquisition search.
 * **Process noise** from the IMU spec (random walks; bias random walk reaching the spec in
   ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`ClockModel`).
@@ -255,6 +256,7 @@ class _Chan:
     cn0_dbhz: float = math.nan
     used: bool = True
     f_scalar: float = 0.0    # scalar loop Doppler at the hand-over [Hz]
+    rejoining: bool = False  # lost: waits for a whole window of fresh prompts
 
 
 def _imu_offset_s(source: IfSource, imu) -> float:
@@ -667,10 +669,13 @@ class DeepReceiver:
                     fast = cn0_known_noise(pp, nbar * npow, nbar / fs)
                     if not (fast >= cfg.cn0_min_dbhz - cfg.fast_loss_margin_db):
                         # signal gone in this interval: out at once, and back only on a
-                        # window of fresh prompts
+                        # whole window of fresh prompts (noise alone reads above 25 dB-Hz
+                        # on a few percent of 40-prompt windows, on none of 200)
                         c.n_prompts = 0
                         c.cn0_dbhz = math.nan
-                    elif c.n_prompts >= _CN0_MIN_PROMPTS:
+                        c.rejoining = True
+                    elif c.n_prompts >= (c.prompts.size if c.rejoining else _CN0_MIN_PROMPTS):
+                        c.rejoining = False
                         c.cn0_dbhz = cn0_known_noise(c.prompts[-c.n_prompts:], nbar * npow,
                                                      nbar / fs)
                     cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
