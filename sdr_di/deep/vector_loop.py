@@ -40,14 +40,15 @@ Decisions
   clock's scale (exact for generated files, whose receiver clock defaults to BDT).
 * **Channel management**: a channel leaves the measurement vector (``N_k`` changes) while
   its C/N0 (known-noise estimator over the last ``cn0_window`` intervals) is below
-  ``cn0_min_dbhz`` or its pre-filter innovations are inconsistent (NIS above
-  ``nis_max``); a fast test on each interval's own 20 prompts (C/N0 below ``cn0_min_dbhz -
-  fast_loss_margin_db``) leaves that interval out at once, and after two failing intervals
-  in a row (a weak signal seldom fails twice: about 0.6 % of interval pairs at 27 dB-Hz)
-  empties its C/N0 window, so it rejoins only on fresh prompts rather than on a window still full of signal from before a
-  blockage (a whole window, 200 ms by default: shorter windows of noise alone pass the
-  C/N0 test too often). Its NCOs stay driven by the INS and its pre-filter is restarted every interval
-  while out, so it rejoins as soon as the signal is back, without an acquisition search.
+  ``cn0_min_dbhz`` or its pre-filter innovations are inconsistent (NIS above ``nis_max``).
+  A fast test on the last 40 prompts (C/N0 below ``cn0_min_dbhz - fast_loss_margin_db``;
+  a blockage or noise alone fails it within one or two intervals, a 28 dB-Hz signal about
+  1 % of the time) leaves the interval out at once; two failing intervals in a row empty
+  the channel's C/N0 window, so it rejoins only on a whole window of fresh prompts (200 ms
+  by default; shorter windows of noise alone pass the C/N0 test too often), not on a window
+  still full of signal from before a blockage. Its NCOs stay driven by the INS and its
+  pre-filter restarts every interval while out, so it rejoins as soon as the signal is
+  back, without an acquisition search.
 * **Process noise** from the IMU spec (random walks; bias random walk reaching the spec in
   ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`ClockModel`).
 """
@@ -88,6 +89,7 @@ __all__ = ["DeepConfig", "DeepReceiver", "DeepResult", "HandoverError"]
 _DEG_H = math.radians(1.0) / 3600.0
 _MG = 9.80665e-3
 _CLOCKS = {"tcxo": ClockModel(h0=2e-19, h_2=2e-20), "ocxo": ClockModel(h0=8e-20, h_2=4e-23)}
+_FAST_PROMPTS = 40     # prompts of the fast loss test (the last two intervals)
 _CN0_MIN_PROMPTS = 40  # 1 ms prompts before the loop's own C/N0 replaces the scalar one
 
 
@@ -668,7 +670,8 @@ class DeepReceiver:
                     c.prompts[-m:] = pp[-m:]
                     c.n_prompts = min(c.n_prompts + m, c.prompts.size)
                     nbar = float(ns[sl].mean())
-                    fast = cn0_known_noise(pp, nbar * npow, nbar / fs)
+                    fast = cn0_known_noise(c.prompts[-min(c.n_prompts, _FAST_PROMPTS):],
+                                           nbar * npow, nbar / fs)
                     c.fast_fail = 0 if fast >= cfg.cn0_min_dbhz - cfg.fast_loss_margin_db \
                         else c.fast_fail + 1
                     if c.fast_fail >= 2:
