@@ -401,6 +401,8 @@ class DeepReceiver:
         hand: dict = {}
 
         def on_epoch(sample, obs, ephs):
+            if not obs:            # nothing tracked at this epoch: no fix, keep going
+                return False
             eph_src.decoded = ephs
             engine.ephemerides = eph_src
             engine.iono = rx.klobuchar if rx.klobuchar is not None else nav_iono
