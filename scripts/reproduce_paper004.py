@@ -153,7 +153,8 @@ def main(argv=None) -> int:
     for f in ("rae-aukf", "ff-aukf"):
         if f in results:
             print(f"adaptation time {f}: {results[f][0].adaptation_s:.4f} s over "
-                  f"{results[f][1]['n'] * 10} filter epochs (paper {PAPER_ADAPT_S[f]} s)")
+                  f"{round(results[f][0].t.size * args.filter_rate / 5.0)} filter epochs "
+                  f"(paper {PAPER_ADAPT_S[f]} s)")
     if not args.no_plots:
         _plots(out, results)
     return 0
