@@ -81,13 +81,12 @@ from ..receiver.scalar import ScalarReceiver
 from ..receiver.threads import KernelThreads
 from ..receiver.tracking import ChannelState
 from ..signal.codes import NH20, b3i_code
+from ..sim.imu import ImuErrorModel
 from .nco import nco_commands, predict_ranges
 from .prefilter import PreFilterBank
 
 __all__ = ["DeepConfig", "DeepReceiver", "DeepResult", "HandoverError"]
 
-_DEG_H = math.radians(1.0) / 3600.0
-_MG = 9.80665e-3
 _CLOCKS = {"tcxo": ClockModel(h0=2e-19, h_2=2e-20), "ocxo": ClockModel(h0=8e-20, h_2=4e-23)}
 _FAST_PROMPTS = 40     # prompts of the fast loss test (the last two intervals)
 _CN0_MIN_PROMPTS = 40  # 1 ms prompts before the loop's own C/N0 replaces the scalar one
@@ -121,8 +120,8 @@ class DeepConfig:
         (module notes of :mod:`~sdr_di.deep.prefilter`): its rate measurement then comes from
         the phase slope inside the interval, with an honest (large) variance, instead of from
         a carrier track that may be slipping.
-    gyro_random_walk_deg_sqrth, accel_random_walk_mps_sqrth, gyro_bias_deg_h, accel_bias_mg
-        IMU spec for ``Q`` and ``P0`` (paper 004 Table 4).
+    imu : ImuErrorModel
+        IMU spec for ``Q`` and ``P0`` (random walks, biases; default paper 004 Table 4).
     bias_time_s : float
         Time for the bias random walk to reach the spec [s].
     clock : str
@@ -150,10 +149,7 @@ class DeepConfig:
     fast_loss_margin_db: float = 6.0
     carrier_cn0_min_dbhz: float = 30.0
     nis_max: float = 4.0
-    gyro_random_walk_deg_sqrth: float = 0.04
-    accel_random_walk_mps_sqrth: float = 0.05
-    gyro_bias_deg_h: float = 8.0
-    accel_bias_mg: float = 4.0
+    imu: ImuErrorModel = dataclasses.field(default_factory=ImuErrorModel)
     bias_time_s: float = 3600.0
     clock: str = "tcxo"
     prefilter: dict = dataclasses.field(default_factory=dict)
@@ -507,11 +503,9 @@ class DeepReceiver:
         clk_d = float(sol.clock_drift_mps)
 
         # ---- integration filter
-        gyro_rw = cfg.gyro_random_walk_deg_sqrth * math.radians(1.0) / 60.0
-        accel_rw = cfg.accel_random_walk_mps_sqrth / 60.0
-        gb = cfg.gyro_bias_deg_h * _DEG_H
-        ab = cfg.accel_bias_mg * _MG
-        Q0 = process_noise(T, gyro_random_walk_si=gyro_rw, accel_random_walk_si=accel_rw,
+        gb, ab = cfg.imu.gyro_bias_si, cfg.imu.accel_bias_si
+        Q0 = process_noise(T, gyro_random_walk_si=cfg.imu.gyro_random_walk_si,
+                           accel_random_walk_si=cfg.imu.accel_random_walk_si,
                            gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=cfg.bias_time_s,
                            clock=_CLOCKS[cfg.clock])
         lat0, h0 = float(llh_fix[0]), float(llh_fix[2])
@@ -567,7 +561,7 @@ class DeepReceiver:
         j = 0
         first = True
         next_progress = 0.0
-        adapt0 = _adaptation_s(kf)
+        adapt0 = kf.adaptation_time_s
         while True:
             i1 = i0 + n_per
             if i1 >= len(imu.t):
@@ -707,8 +701,7 @@ class DeepReceiver:
             use = np.asarray(use, bool)
             n_used = int(use.sum())
             if n_used:
-                meas.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[use, 0], pred.v_sat[use, 0],
-                               b1, clk_d)
+                meas.set_geometry(nav1.llh, pred.U[use, 0])
                 kf.update(np.r_[z_rho, z_rate], np.diag(np.r_[r_rho, r_rate]))
                 nis_acc[0] += kf.nis / (2 * n_used)
                 nis_acc[1] += 1
@@ -719,7 +712,7 @@ class DeepReceiver:
             ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
             clk_b = b1 - x[15]
             clk_d = clk_d - x[16]
-            meas_all.set_epoch(nav1.llh, nav1.v_n, pred.r_sat[:, 0], pred.v_sat[:, 0])
+            meas_all.set_geometry(nav1.llh, pred.U[:, 0])
             Hx = meas_all.matrix @ x
             P_k0 = P1 - Hx[:n_ch]
             Pc_k0 = Pc1 - Hx[:n_ch]
@@ -784,7 +777,7 @@ class DeepReceiver:
             pos_err=arr("pe", 3), prns=tuple(c.prn for c in chans),
             used=np.asarray(rows["used"], bool).reshape(-1, n_ch),
             cn0_dbhz=arr("cn0", n_ch), nis=arr("nis"), handover_s=k_grid0 / fs, filter_name=kf.name,
-            adaptation_s=_adaptation_s(kf) - adapt0, profile=prof)
+            adaptation_s=kf.adaptation_time_s - adapt0, profile=prof)
 
 
 def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int, k1: int):
@@ -826,8 +819,3 @@ def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int,
     c.next_start, c.epoch, c.phase = int(ends[-1]), e0 + m, end_phase - math.floor(end_phase)
     nh = NH20[ep % 20].astype(float) if c.is_d1 else np.ones(m)
     return starts, n, theta, phi, dphi, nh
-
-
-def _adaptation_s(kf) -> float:
-    """Seconds spent so far in the filter's adaptive rule (0 without one)."""
-    return float(getattr(kf, "adaptation_time_s", 0.0))

@@ -103,6 +103,13 @@ class RangeRateMeasurementModel(LinearMeasurementModel):
         """Geometry of this epoch: INS state and satellite positions/velocities (N_k, 3)."""
         self.rho_pred, self.rate_pred, U = predicted_observables(
             llh, v_n, sat_pos_e, sat_vel_e, clock_bias_m, clock_drift_mps)
+        self.set_geometry(llh, U)
+
+    def set_geometry(self, llh, U) -> None:
+        """``H`` of eq 10-12 from the INS position ``llh`` (rad, rad, m) and unit
+        line-of-sight vectors ``U`` (N_k, 3) the caller already has (the deep loop's range
+        predictions); leaves :attr:`rho_pred`/:attr:`rate_pred` untouched."""
+        U = np.atleast_2d(np.asarray(U, float))
         self.U = U
         N = U.shape[0]
         C1 = dr_e_dllh(llh)
