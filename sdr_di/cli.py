@@ -167,13 +167,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     from .deep.run_deep import run_deep
     from .deep.vector_loop import DeepConfig
-    from .errors import FilterError
-    from .filters import FILTER_NAMES
 
-    name = (args.filter or "ff-aukf").strip().lower()
-    if name not in FILTER_NAMES:
-        raise FilterError(f"unknown filter {name!r}; valid names: {', '.join(FILTER_NAMES)}")
-    kw = {"filter": name, "output_rate_hz": args.rate}
+    # the filter name is checked by the receiver before its start-up (make_filter)
+    kw = {"filter": (args.filter or "ff-aukf").strip().lower(), "output_rate_hz": args.rate}
     if args.filter_rate is not None:
         kw["filter_rate_hz"] = args.filter_rate
     if args.align is not None:
