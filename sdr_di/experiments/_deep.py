@@ -26,30 +26,24 @@ from ..errors import ExperimentError
 from ..filters import FILTER_NAMES
 from ..receiver.scalar import ScalarReceiver
 from ..scenario import DEFAULT_SCENARIO, Scenario, load_scenario, parse_scenario
+from .filter_figures import QUANTITIES
 
 __all__ = [
-    "QUANTITIES",
-    "STATS",
     "CountingScalarReceiver",
     "DeepRun",
     "Inputs",
     "base_scenario",
     "check_number",
     "filter_list",
-    "filter_names_in",
     "generated_inputs",
     "has_mean",
     "parse_list",
     "ranked_prns",
-    "rmse_bar_plot",
     "run_deep_variant",
     "segment_metrics",
     "with_outages",
 ]
 
-QUANTITIES = (("att_deg", "attitude [deg]"), ("vel_mps", "velocity [m/s]"),
-              ("pos_m", "position [m]"))
-STATS = ("rmse", "max")
 
 
 def has_mean(st: Any) -> bool:
@@ -237,36 +231,3 @@ def filter_list(exp: str, text: str) -> list[str]:
                               f"{', '.join(bad) or '(none given)'}; valid: all or "
                               f"{', '.join(FILTER_NAMES)}")
     return names
-
-
-def filter_names_in(stats: dict) -> list[str]:
-    """Filter names that prefix figure keys (``"ff-aukf.pos_m_rmse"``), in order."""
-    seen = []
-    for key in stats:
-        name, dot, _ = key.partition(".")
-        if dot and name in FILTER_NAMES and name not in seen:
-            seen.append(name)
-    return seen
-
-
-def rmse_bar_plot(results: list[dict], out_dir: Path, title: str) -> list[Path]:
-    """``rmse_by_filter.png``: mean RMSE per filter over the runs, std as error bars."""
-    import warnings
-
-    from . import plotting
-
-    if not results or plotting.matplotlib_missing():
-        return []
-    names = filter_names_in(results[0]["figures"])
-    if not names:
-        return []
-    panels = []
-    for q, label in QUANTITIES:
-        vals = np.array([[r["figures"].get(f"{n}.{q}_rmse", math.nan) for n in names]
-                         for r in results], float)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            panels.append((f"RMSE {label}", np.nanmean(vals, axis=0),
-                           np.nanstd(vals, axis=0) if len(results) > 1 else None))
-    return [plotting.bar_chart(Path(out_dir) / "rmse_by_filter.png", names, panels,
-                               title=f"{title} ({len(results)} runs)")]

@@ -53,21 +53,18 @@ import numpy as np
 from ..errors import ExperimentError
 from . import plotting
 from ._deep import (
-    QUANTITIES,
-    STATS,
     base_scenario,
     check_number,
     filter_list,
-    filter_names_in,
     generated_inputs,
     has_mean,
     parse_list,
     ranked_prns,
-    rmse_bar_plot,
     run_deep_variant,
     segment_metrics,
     with_outages,
 )
+from .filter_figures import QUANTITIES, STATS, filter_names_in, rmse_bar_plot
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run",
            "schedule", "tables"]

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +31,7 @@ from ..integration.loose import load_lc_scenario, make_inputs, run_loose
 from ..integration.noise import NoiseWindow
 from ..scenario import REPO_ROOT
 from . import plotting
+from .filter_figures import QUANTITIES, STATS, filter_names_in, rmse_bar_plot
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run", "tables"]
 
@@ -53,10 +53,6 @@ default_params: dict = {
     "r_window": "scenario",
     "plots": True,
 }
-
-QUANTITIES = (("att_deg", "attitude [deg]"), ("vel_mps", "velocity [m/s]"),
-              ("pos_m", "position [m]"))
-STATS = ("rmse", "max")
 
 
 def _filters(text: str) -> list[str]:
@@ -175,19 +171,10 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     return fig
 
 
-def _filter_names(stats: dict) -> list[str]:
-    seen = []
-    for key in stats:
-        name, dot, _ = key.partition(".")
-        if dot and name not in seen:
-            seen.append(name)
-    return seen
-
-
 def tables(stats: dict) -> dict[str, list[dict]]:
     """Table ``filters``: one row per filter, mean (and std over runs) of every figure."""
     rows = []
-    for name in _filter_names(stats):
+    for name in filter_names_in(stats):
         row: dict = {"filter": name}
         for key, st in stats.items():
             if key.startswith(name + ".") and isinstance(st, dict):
@@ -201,16 +188,4 @@ def tables(stats: dict) -> dict[str, list[dict]]:
 
 def plots(results: list[dict], out_dir: Path) -> list[Path]:
     """``rmse_by_filter.png``: mean RMSE per filter over the runs, std as error bars."""
-    if not results or plotting.matplotlib_missing():
-        return []
-    names = _filter_names(results[0]["figures"])
-    panels = []
-    for q, label in QUANTITIES:
-        vals = np.array([[r["figures"].get(f"{n}.{q}_rmse", math.nan) for n in names]
-                         for r in results], float)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            panels.append((f"RMSE {label}", np.nanmean(vals, axis=0),
-                           np.nanstd(vals, axis=0) if len(results) > 1 else None))
-    return [plotting.bar_chart(Path(out_dir) / "rmse_by_filter.png", names, panels,
-                               title=f"noise-mismatch: RMSE per filter ({len(results)} runs)")]
+    return rmse_bar_plot(results, out_dir, "noise-mismatch: RMSE per filter")

@@ -54,20 +54,17 @@ import numpy as np
 from ..errors import ExperimentError
 from . import plotting
 from ._deep import (
-    QUANTITIES,
-    STATS,
     base_scenario,
     check_number,
     filter_list,
-    filter_names_in,
     generated_inputs,
     has_mean,
     parse_list,
-    rmse_bar_plot,
     run_deep_variant,
     segment_metrics,
     with_outages,
 )
+from .filter_figures import QUANTITIES, STATS, filter_names_in, rmse_bar_plot
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "outage_windows", "plots",
            "rejoin_times", "run", "tables"]

@@ -1,0 +1,54 @@
+"""Per-filter figures shared by the experiments: names, quantities and the RMSE bar plot.
+
+Experiments that compare filters name their figures ``"<filter>.<quantity>_<stat>"``
+(e.g. ``"ff-aukf.pos_m_rmse"``) with the quantities and statistics below.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..filters import FILTER_NAMES
+
+__all__ = ["QUANTITIES", "STATS", "filter_names_in", "rmse_bar_plot"]
+
+#: (figure stem, axis label) of the error norms every filter comparison reports.
+QUANTITIES = (("att_deg", "attitude [deg]"), ("vel_mps", "velocity [m/s]"),
+              ("pos_m", "position [m]"))
+#: Statistics of each quantity.
+STATS = ("rmse", "max")
+
+
+def filter_names_in(stats: dict) -> list[str]:
+    """Filter names that prefix figure keys (``"ff-aukf.pos_m_rmse"``), in order."""
+    seen = []
+    for key in stats:
+        name, dot, _ = key.partition(".")
+        if dot and name in FILTER_NAMES and name not in seen:
+            seen.append(name)
+    return seen
+
+
+def rmse_bar_plot(results: list[dict], out_dir: Path, title: str) -> list[Path]:
+    """``rmse_by_filter.png``: mean RMSE per filter over the runs, std as error bars."""
+    from . import plotting
+
+    if not results or plotting.matplotlib_missing():
+        return []
+    names = filter_names_in(results[0]["figures"])
+    if not names:
+        return []
+    panels = []
+    for q, label in QUANTITIES:
+        vals = np.array([[r["figures"].get(f"{n}.{q}_rmse", math.nan) for n in names]
+                         for r in results], float)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            panels.append((f"RMSE {label}", np.nanmean(vals, axis=0),
+                           np.nanstd(vals, axis=0) if len(results) > 1 else None))
+    return [plotting.bar_chart(Path(out_dir) / "rmse_by_filter.png", names, panels,
+                               title=f"{title} ({len(results)} runs)")]
