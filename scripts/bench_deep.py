@@ -34,7 +34,7 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 _CHILD = """
 import json, resource, sys, time
@@ -55,13 +55,6 @@ print('RESULT', json.dumps({'wall': wall, 'profile': res.result.profile,
 """
 
 
-def _generate(duration: float, out: Path) -> Path:
-    cmd = [sys.executable, "-m", "sdr_di.cli", "generate", "--duration", str(duration), "--out",
-           str(out), "--no-progress"]
-    subprocess.run(cmd, check=True, capture_output=True)
-    return out / "default.bin"
-
-
 def _one(path: Path, out: Path, filt: str, rate: float) -> dict:
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(out), filt, str(rate)],
@@ -78,7 +71,13 @@ def run(args: argparse.Namespace) -> list[dict]:
     tmp = Path(tempfile.mkdtemp(prefix="sdr-di-bench-deep-"))
     rows = []
     try:
-        path = Path(args.if_file) if args.if_file else _generate(args.duration, tmp)
+        if args.if_file:
+            path = Path(args.if_file)
+        else:
+            from bench import _run_generate  # the generator benchmark child process
+
+            _run_generate(args.duration, tmp)
+            path = tmp / "bench.bin"
         print(f"machine: {os.cpu_count()} cores, load average "
               f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; file {path.name}; filter "
               f"{args.filter} at {args.filter_rate:g} Hz")
