@@ -72,7 +72,14 @@ from ..ins.mechanization import StrapdownINS
 from ..integration.measurements import RangeRateMeasurementModel
 from ..integration.metrics import nav_errors, summarize
 from ..receiver._numba_correlate_bits import correlate_epl_bits, mean_power
-from ..receiver.correlator import CARRIER_BLOCK, CODE_PAD, bit_windows, padded_replicas
+from ..receiver.correlator import (
+    CODE_PAD,
+    bit_windows,
+    carrier_rotation,
+    kernel_tasks,
+    padded_replicas,
+    reduce_code_phase,
+)
 from ..receiver.ifreader import IfSource
 from ..receiver.lock import cn0_known_noise
 from ..receiver.observables import ReceiverTime
@@ -467,7 +474,6 @@ class DeepReceiver:
         bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
                                      for c in chans]))
         chan_idx = np.arange(len(chans), dtype=np.int64)
-        carrier_m = np.arange(CARRIER_BLOCK, dtype=np.float64)
         kthreads = KernelThreads()
         threads_before = numba.get_num_threads()
 
@@ -628,17 +634,10 @@ class DeepReceiver:
             # kernel on the stored samples (bit-window replicas, one rotation row per epoch)
             n_rows = starts.size
             tab_idx = np.repeat(chan_idx, reps)
-            a_rot = np.multiply.outer(dphi, carrier_m)
-            a_rot -= np.floor(a_rot)
-            a_rot *= 2.0 * math.pi
-            rot_re = np.cos(a_rot)
-            rot_im = -np.sin(a_rot)
-            th = np.mod(theta, float(CODE_LENGTH_B3I))
-            th[th >= CODE_LENGTH_B3I] = 0.0
+            rot_re, rot_im = carrier_rotation(dphi)
+            th = reduce_code_phase(theta, CODE_LENGTH_B3I)
             threads = kthreads.pick()
-            nblk = max(1, (int(nsamp.max()) + CARRIER_BLOCK - 1) // CARRIER_BLOCK)
-            n_sub = 1 if threads <= 1 else int(min(max(1, math.ceil(4 * threads / n_rows)),
-                                                   nblk))
+            n_sub = kernel_tasks(n_rows, int(nsamp.max()), threads)
             out = np.empty((n_rows, 3, 2))
             correlate_epl_bits(x_buf, n_comp, bits, tab_idx, CODE_PAD, CODE_LENGTH_B3I,
                                starts - buf0, nsamp, th, np.repeat(dchip, reps), phi, dphi,

@@ -85,7 +85,6 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
 
-import numba
 import numpy as np
 import scipy.fft
 from scipy import special
@@ -93,7 +92,15 @@ from scipy import special
 from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I
 from ._numba_acquire import accumulate_power
 from ._numba_correlate_bits import correlate_epl_bits
-from .correlator import CARRIER_BLOCK, CODE_PAD, bit_windows, check_prn, padded_replicas
+from .correlator import (
+    CODE_PAD,
+    bit_windows,
+    carrier_rotation,
+    check_prn,
+    kernel_tasks,
+    padded_replicas,
+    reduce_code_phase,
+)
 
 __all__ = ["AcquisitionResult", "acquire", "acquire_source", "acquisition_upsampling",
            "detection_threshold"]
@@ -445,22 +452,17 @@ def _epl(smp, bits, code_len, th, rate, ph, fcs, rot_idx, n, fs, spacing, starts
     ``rate`` [chips/s]. Returns complex (3, n_rows)."""
     xv, n_comp, _ = smp
     n_rows = th.size
-    theta = np.mod(th, float(code_len))
-    theta[theta >= code_len] = 0.0
+    theta = reduce_code_phase(th, code_len)
     phi = ph - np.floor(ph)
     dphi_c = np.asarray(fcs, dtype=np.float64) / fs
-    arg = np.multiply.outer(dphi_c, np.arange(CARRIER_BLOCK, dtype=np.float64))
-    arg -= np.floor(arg)
-    arg *= 2.0 * np.pi
+    rot_re, rot_im = carrier_rotation(dphi_c)
     rot_idx = np.ascontiguousarray(rot_idx, dtype=np.int64)
     out = np.empty((n_rows, 3, 2))
-    threads = numba.get_num_threads()
-    n_sub = 1 if threads <= 1 else max(1, min(math.ceil(4 * threads / max(n_rows, 1)),
-                                              (n + CARRIER_BLOCK - 1) // CARRIER_BLOCK))
+    n_sub = kernel_tasks(n_rows, n)
     correlate_epl_bits(xv, n_comp, bits, np.zeros(n_rows, np.int64), CODE_PAD, code_len,
                        np.ascontiguousarray(starts, dtype=np.int64),
                        np.full(n_rows, n, np.int64), theta, np.full(n_rows, rate / fs), phi,
-                       dphi_c[rot_idx], np.cos(arg), -np.sin(arg), rot_idx, float(spacing),
+                       dphi_c[rot_idx], rot_re, rot_im, rot_idx, float(spacing),
                        n_sub, out)
     res = out[..., 0] + 1j * out[..., 1]
     return res.T

@@ -141,13 +141,34 @@ def _prepare_samples(samples: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=np.float32)
 
 
-def _tasks_per_channel(n_ch: int, n_max: int) -> int:
-    threads = numba.get_num_threads()
-    if threads <= 1 or n_ch == 0:
+def kernel_tasks(n_rows: int, n_max: int, threads: int | None = None) -> int:
+    """Tasks per row of a correlator kernel call: enough for ``threads`` (default numba's
+    current count) to share ``n_rows`` rows, at most one per 256-sample carrier block of the
+    longest row (``n_max`` samples); 1 for one thread."""
+    threads = numba.get_num_threads() if threads is None else int(threads)
+    if threads <= 1 or n_rows == 0:
         return 1
     nblk = max(1, (n_max + CARRIER_BLOCK - 1) // CARRIER_BLOCK)
-    want = max(1, math.ceil(4 * threads / n_ch))
+    want = max(1, math.ceil(4 * threads / n_rows))
     return int(min(want, nblk))
+
+
+def carrier_rotation(dphi) -> tuple[np.ndarray, np.ndarray]:
+    """Carrier rotation tables of the kernels: ``cos(2 pi m dphi)`` and ``-sin(2 pi m dphi)``
+    for ``m = 0 .. CARRIER_BLOCK - 1``, one row per carrier step ``dphi`` [cycles/sample]
+    (float64 (n, CARRIER_BLOCK) each; the phase is reduced to one cycle before the trig)."""
+    a = np.multiply.outer(np.asarray(dphi, dtype=np.float64),
+                          np.arange(CARRIER_BLOCK, dtype=np.float64))
+    a -= np.floor(a)
+    a *= 2.0 * math.pi
+    return np.cos(a), -np.sin(a)
+
+
+def reduce_code_phase(theta, code_len: int) -> np.ndarray:
+    """Code phases [chips] reduced to the kernels' ``[0, code_len)``."""
+    t = np.mod(np.asarray(theta, dtype=np.float64), float(code_len))
+    t[t >= code_len] = 0.0  # np.mod of a tiny negative can round up to L
+    return t
 
 
 def correlate_table(samples: np.ndarray, table: np.ndarray, code_len: int,
@@ -206,18 +227,12 @@ sampling_rate_hz, spacing_chips, start_sample
         raise ValueError("code rate must be positive and below "
                          f"{code_len / CARRIER_BLOCK:g} chips per sample")
     dphi = fc / fs
-    theta_r = np.mod(theta, float(code_len))
-    theta_r[theta_r >= code_len] = 0.0  # np.mod of a tiny negative can round up to L
+    theta_r = reduce_code_phase(theta, code_len)
     phi_r = phi - np.floor(phi)
-    m = np.arange(CARRIER_BLOCK, dtype=np.float64)
-    arg = np.outer(dphi, m)
-    arg -= np.floor(arg)
-    arg *= 2.0 * np.pi
-    rot_re = np.cos(arg)
-    rot_im = -np.sin(arg)
+    rot_re, rot_im = carrier_rotation(dphi)
     out = np.empty((n_ch, 3, 2))
     if n_ch:
-        n_sub = _tasks_per_channel(n_ch, int(nsamp.max()))
+        n_sub = kernel_tasks(n_ch, int(nsamp.max()))
         correlate_epl(x, table, pad, code_len, start, nsamp, theta_r, dchip, phi_r, dphi,
                       rot_re, rot_im, d, n_sub, out)
     res = out[..., 0] + 1j * out[..., 1]

@@ -69,7 +69,9 @@ from .correlator import (
     CARRIER_BLOCK,
     CODE_PAD,
     bit_windows,
+    carrier_rotation,
     check_prn,
+    kernel_tasks,
     padded_replicas,
 )
 from .ifreader import IfSource
@@ -108,11 +110,7 @@ class _Bank:
         if not new:
             return
         idx = [s for s, _ in new]
-        a = np.multiply.outer(np.array([d for _, d in new]), self._m)
-        a -= np.floor(a)
-        a *= 2.0 * math.pi
-        self.rot_re[idx] = np.cos(a)
-        self.rot_im[idx] = -np.sin(a)
+        self.rot_re[idx], self.rot_im[idx] = carrier_rotation([d for _, d in new])
         for s, d in new:
             self.rot_dphi[s] = d
 
@@ -134,8 +132,7 @@ class _Bank:
         nsamp = par[1].astype(np.int64)
         row_slot = np.repeat(np.array(slots, dtype=np.int64), reps)
         threads = self.threads.pick()
-        nblk = max(1, (int(nsamp.max()) + CARRIER_BLOCK - 1) // CARRIER_BLOCK)
-        n_sub = 1 if threads <= 1 else int(min(max(1, math.ceil(4 * threads / n_rows)), nblk))
+        n_sub = kernel_tasks(n_rows, int(nsamp.max()), threads)
         out = np.empty((n_rows, 3, 2))
         t0 = time.perf_counter()
         correlate_epl_bits(x, n_comp, self.tab, row_slot, CODE_PAD, CODE_LENGTH_B3I, start,
