@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 
 from ..errors import ExperimentError
-from ..filters import FILTER_NAMES
 from ..receiver.scalar import ScalarReceiver
 from ..scenario import DEFAULT_SCENARIO, Scenario, load_scenario, parse_scenario
 from .filter_figures import QUANTITIES
@@ -34,11 +33,11 @@ __all__ = [
     "Inputs",
     "base_scenario",
     "check_number",
-    "filter_list",
     "generated_inputs",
     "has_mean",
     "parse_list",
     "ranked_prns",
+    "record_run",
     "run_deep_variant",
     "segment_metrics",
     "with_outages",
@@ -201,6 +200,26 @@ def run_deep_variant(inputs: Inputs, filter_name: str, **config: Any) -> DeepRun
     return DeepRun(filter_name, res, None, after)
 
 
+def record_run(fig: dict, name: str, dr: DeepRun) -> Any:
+    """Figures every deep experiment records for one filter run, into ``fig``.
+
+    ``<name>.completed`` (1 when every error row is finite), and either ``<name>.error``
+    (the run failed: returns None) or ``<name>.handover_s`` and
+    ``<name>.acq_after_handover`` (returns the :class:`~sdr_di.deep.DeepResult`).
+    """
+    res = dr.result
+    if res is None:
+        fig[f"{name}.completed"] = 0
+        fig[f"{name}.error"] = dr.error
+        return None
+    finite = bool(res.t.size) and all(
+        np.all(np.isfinite(getattr(res, a))) for a in ("att_err", "vel_err", "pos_err"))
+    fig[f"{name}.completed"] = int(finite)
+    fig[f"{name}.handover_s"] = float(res.handover_s)
+    fig[f"{name}.acq_after_handover"] = dr.acq_after_handover
+    return res
+
+
 def segment_metrics(res: Any, t0: float | None, t1: float | None, prefix: str) -> dict:
     """``{prefix}{q}_{rmse,max}`` of a result's error norms over ``t0 <= t < t1``."""
     from ..integration.metrics import rmse_max
@@ -218,16 +237,3 @@ def segment_metrics(res: Any, t0: float | None, t1: float | None, prefix: str) -
         out[f"{prefix}{q}_rmse"] = r
         out[f"{prefix}{q}_max"] = m
     return out
-
-
-def filter_list(exp: str, text: str) -> list[str]:
-    """Filter names of a ``filters`` parameter (``all`` or a comma list)."""
-    if str(text).strip().lower() == "all":
-        return list(FILTER_NAMES)
-    names = [n.strip().lower() for n in str(text).split(",") if n.strip()]
-    bad = [n for n in names if n not in FILTER_NAMES]
-    if bad or not names:
-        raise ExperimentError(f"{exp}: filters={text!r}: unknown filter(s) "
-                              f"{', '.join(bad) or '(none given)'}; valid: all or "
-                              f"{', '.join(FILTER_NAMES)}")
-    return names

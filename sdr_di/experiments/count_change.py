@@ -55,16 +55,22 @@ from . import plotting
 from ._deep import (
     base_scenario,
     check_number,
-    filter_list,
     generated_inputs,
     has_mean,
     parse_list,
     ranked_prns,
+    record_run,
     run_deep_variant,
     segment_metrics,
     with_outages,
 )
-from .filter_figures import QUANTITIES, STATS, filter_names_in, rmse_bar_plot
+from .filter_figures import (
+    QUANTITIES,
+    STATS,
+    filter_list,
+    filter_names_in,
+    rmse_bar_plot,
+)
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run",
            "schedule", "tables"]
@@ -90,10 +96,6 @@ default_params: dict = {
 }
 
 
-def _filters(text: str) -> list[str]:
-    return filter_list(NAME, text)
-
-
 def _duration(params: dict, n_seg: int) -> float:
     if params["duration_s"] is not None:
         return float(params["duration_s"])
@@ -102,7 +104,7 @@ def _duration(params: dict, n_seg: int) -> float:
 
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
-    _filters(params["filters"])
+    filter_list(NAME, params["filters"])
     counts = parse_list(f"{NAME}: counts", params["counts"], int)
     if min(counts) < 1:
         raise ExperimentError(f"{NAME}: counts={params['counts']!r}: every count must be >= 1")
@@ -210,24 +212,16 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
            "output_rate_hz": float(params["output_rate_hz"])}
     with generated_inputs(sc) as inp:
         fig["sampling_rate_hz"] = float(inp.source.sampling_rate_hz)
-        for name in _filters(params["filters"]):
-            dr = run_deep_variant(inp, name, **cfg)
-            res = dr.result
+        for name in filter_list(NAME, params["filters"]):
+            res = record_run(fig, name, run_deep_variant(inp, name, **cfg))
             if res is None:
-                fig[f"{name}.completed"] = 0
                 fig[f"{name}.through_all"] = 0
-                fig[f"{name}.error"] = dr.error
                 for q, _ in QUANTITIES:
                     for s in STATS:
                         fig[f"{name}.{q}_{s}"] = math.nan
                 continue
-            finite = bool(res.t.size) and all(
-                np.all(np.isfinite(getattr(res, a))) for a in ("att_err", "vel_err", "pos_err"))
-            fig[f"{name}.completed"] = int(finite)
-            fig[f"{name}.handover_s"] = float(res.handover_s)
-            fig[f"{name}.acq_after_handover"] = dr.acq_after_handover
             fig.update(segment_metrics(res, t_start, None, f"{name}."))
-            through = finite and res.handover_s < t_start
+            through = bool(fig[f"{name}.completed"]) and res.handover_s < t_start
             for i, (t0, t1, _) in enumerate(segs):
                 m = segment_metrics(res, t0, t1, f"{name}.seg{i}.")
                 fig.update(m)

@@ -12,15 +12,29 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import ExperimentError
 from ..filters import FILTER_NAMES
 
-__all__ = ["QUANTITIES", "STATS", "filter_names_in", "rmse_bar_plot"]
+__all__ = ["QUANTITIES", "STATS", "filter_list", "filter_names_in", "rmse_bar_plot"]
 
 #: (figure stem, axis label) of the error norms every filter comparison reports.
 QUANTITIES = (("att_deg", "attitude [deg]"), ("vel_mps", "velocity [m/s]"),
               ("pos_m", "position [m]"))
 #: Statistics of each quantity.
 STATS = ("rmse", "max")
+
+
+def filter_list(exp: str, text: str) -> list[str]:
+    """Filter names of a ``filters`` parameter (``all`` or a comma list)."""
+    if str(text).strip().lower() == "all":
+        return list(FILTER_NAMES)
+    names = [n.strip().lower() for n in str(text).split(",") if n.strip()]
+    bad = [n for n in names if n not in FILTER_NAMES]
+    if bad or not names:
+        raise ExperimentError(f"{exp}: filters={text!r}: unknown filter(s) "
+                              f"{', '.join(bad) or '(none given)'}; valid: all or "
+                              f"{', '.join(FILTER_NAMES)}")
+    return names
 
 
 def filter_names_in(stats: dict) -> list[str]:

@@ -26,12 +26,17 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ExperimentError, SdrDiError
-from ..filters import FILTER_NAMES
 from ..integration.loose import load_lc_scenario, make_inputs, run_loose
 from ..integration.noise import NoiseWindow
 from ..scenario import REPO_ROOT
 from . import plotting
-from .filter_figures import QUANTITIES, STATS, filter_names_in, rmse_bar_plot
+from .filter_figures import (
+    QUANTITIES,
+    STATS,
+    filter_list,
+    filter_names_in,
+    rmse_bar_plot,
+)
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run", "tables"]
 
@@ -55,18 +60,6 @@ default_params: dict = {
 }
 
 
-def _filters(text: str) -> list[str]:
-    if text.strip().lower() == "all":
-        return list(FILTER_NAMES)
-    names = [n.strip().lower() for n in str(text).split(",") if n.strip()]
-    bad = [n for n in names if n not in FILTER_NAMES]
-    if bad or not names:
-        raise ExperimentError(f"noise-mismatch: filters={text!r}: unknown filter(s) "
-                              f"{', '.join(bad) or '(none given)'}; valid: all or "
-                              f"{', '.join(FILTER_NAMES)}")
-    return names
-
-
 def _window(text: str) -> tuple[NoiseWindow, ...] | None:
     t = str(text).strip().lower()
     if t == "scenario":
@@ -87,7 +80,7 @@ def check_params(params: dict) -> None:
     if params["case"] not in SCENARIOS:
         raise ExperimentError(f"noise-mismatch: case={params['case']!r}: expected 'q' "
                               "(wrong Q, paper 000) or 'r' (wrong R, paper 003)")
-    _filters(params["filters"])
+    filter_list(NAME, params["filters"])
     _window(params["r_window"])
     for key in ("duration_s", "q_scale", "r_scale"):
         v = params[key]
@@ -128,7 +121,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     fig: dict = {"case": params["case"], "q_scale": st.q_scale, "r_scale": st.r_scale,
                  "duration_s": float(sc.duration_s)}
     series: dict = {}
-    for name in _filters(params["filters"]):
+    for name in filter_list(NAME, params["filters"]):
         try:
             res = run_loose(truth, imu, model, st.replace(filter=name), seed=int(seed))
         except SdrDiError as exc:

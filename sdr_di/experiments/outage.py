@@ -56,15 +56,21 @@ from . import plotting
 from ._deep import (
     base_scenario,
     check_number,
-    filter_list,
     generated_inputs,
     has_mean,
     parse_list,
+    record_run,
     run_deep_variant,
     segment_metrics,
     with_outages,
 )
-from .filter_figures import QUANTITIES, STATS, filter_names_in, rmse_bar_plot
+from .filter_figures import (
+    QUANTITIES,
+    STATS,
+    filter_list,
+    filter_names_in,
+    rmse_bar_plot,
+)
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "outage_windows", "plots",
            "rejoin_times", "run", "tables"]
@@ -167,19 +173,11 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     with generated_inputs(sc) as inp:
         fig["sampling_rate_hz"] = float(inp.source.sampling_rate_hz)
         for name in filter_list(NAME, params["filters"]):
-            dr = run_deep_variant(inp, name, **cfg)
-            res = dr.result
+            res = record_run(fig, name, run_deep_variant(inp, name, **cfg))
             if res is None:
-                fig[f"{name}.completed"] = 0
-                fig[f"{name}.error"] = dr.error
                 for k in range(len(wins)):
                     fig[f"{name}.o{k}.all_rejoined"] = 0
                 continue
-            finite = bool(res.t.size) and all(
-                np.all(np.isfinite(getattr(res, a))) for a in ("att_err", "vel_err", "pos_err"))
-            fig[f"{name}.completed"] = int(finite)
-            fig[f"{name}.handover_s"] = float(res.handover_s)
-            fig[f"{name}.acq_after_handover"] = dr.acq_after_handover
             fig.update(segment_metrics(res, None, None, f"{name}."))
             fig.update(_outage_figures(name, res, wins, duration, limit))
             _write_csv(Path(out_dir) / f"errors_{name}.csv", res)

@@ -52,13 +52,13 @@ from ._deep import (
     CountingScalarReceiver,
     base_scenario,
     check_number,
-    filter_list,
     generated_inputs,
     has_mean,
     parse_list,
     run_deep_variant,
     with_outages,
 )
+from .filter_figures import filter_list
 
 __all__ = [
     "DESCRIPTION",
