@@ -1,8 +1,9 @@
 """Per-channel pre-filters of the federated deep integration (paper 004 Fig. 1, refs [6], [13]).
 
-Each tracked channel has a small Kalman filter fed by the early/prompt/late sums of every
-1 ms code epoch (NH code wiped off on D1 satellites). Its state is the tracking error of the
-INS-commanded NCOs, *signal minus replica*::
+Each tracked channel has a small Kalman filter fed by the early/prompt/late sums of coherent
+blocks of 1 ms code epochs (NH code wiped off on D1 satellites; the vector loop ends the
+blocks at data-bit edges, so an epoch below is one such block of duration ``T``). Its state
+is the tracking error of the INS-commanded NCOs, *signal minus replica*::
 
     x = [dtau (chips), dphi (rad), df (Hz)]     at the start of an epoch
 
@@ -57,7 +58,18 @@ import numpy as np
 from ..constants import CHIP_RATE_B3I, F_B3I
 from ._numba_prefilter import prefilter_epochs
 
-__all__ = ["PreFilterBank", "discriminator_variances"]
+__all__ = ["PreFilterBank", "chi2_sf_even", "discriminator_variances"]
+
+
+def chi2_sf_even(x: float, k: int) -> float:
+    """Survival function of the chi-square distribution with ``2 k`` degrees of freedom at
+    ``x`` (closed form for even degrees: ``exp(-x/2) sum_{j<k} (x/2)^j / j!``)."""
+    h = 0.5 * float(x)
+    term, total = 1.0, 1.0
+    for j in range(1, int(k)):
+        term *= h / j
+        total += term
+    return float(math.exp(-h) * total) if h < 700.0 else 0.0
 
 
 def discriminator_variances(cn0_hz: float, t_epoch: np.ndarray, spacing: float
@@ -98,7 +110,11 @@ class PreFilterBank:
     P : ndarray (n, 3, 3)
         Covariances.
     nis : ndarray (n,)
-        Normalized innovation squared of the last interval, per epoch and measurement.
+        Normalized innovation squared of the last interval, per measurement (two per
+        block).
+    nis_p : ndarray (n,)
+        Probability of a NIS at least that large for a consistent filter (chi-square with
+        two degrees of freedom per block): small values flag a false lock or a slip.
     """
 
     def __init__(self, n: int, spacing: float = 0.5, carrier_hz: float = F_B3I, *,
@@ -118,6 +134,7 @@ class PreFilterBank:
         self.x = np.zeros((self.n, 3))
         self.P = np.zeros((self.n, 3, 3))
         self.nis = np.full(self.n, math.nan)
+        self.nis_p = np.full(self.n, math.nan)
         for i in range(self.n):
             self.reset(i)
 
@@ -148,11 +165,25 @@ class PreFilterBank:
                 P[:, k] = 0.0
                 P[k, k] = sig * sig
 
-    def process(self, i: int, early, prompt, late, t_epoch, cn0_hz: float) -> None:
-        """Run channel ``i`` over its epochs of the interval (NH already wiped off)."""
+    def process(self, i: int, early, prompt, late, t_epoch, cn0_hz: float,
+                block_start=None) -> None:
+        """Run channel ``i`` over its epochs of the interval (NH already wiped off).
+
+        ``block_start`` (bool per epoch, optional): epochs that start a coherent block; the
+        correlator sums of each block (from one start to the next, the first epoch always
+        starting one) are added before the discriminators, one filter update per block.
+        """
         t = np.ascontiguousarray(t_epoch, dtype=np.float64)
         if t.size == 0:
             return
+        if block_start is not None:
+            b = np.asarray(block_start, bool).copy()
+            b[0] = True
+            idx = np.flatnonzero(b)
+            if idx.size < t.size:
+                early, prompt, late = (np.add.reduceat(np.asarray(a), idx)
+                                       for a in (early, prompt, late))
+                t = np.add.reduceat(t, idx)
         r_tau, r_phi = discriminator_variances(cn0_hz, t, self.spacing)
         xi = self.x[i].copy()
         Pi = self.P[i].copy()
@@ -163,6 +194,7 @@ class PreFilterBank:
         self.x[i] = xi
         self.P[i] = Pi
         self.nis[i] = nis / (2.0 * t.size)
+        self.nis_p[i] = chi2_sf_even(nis, t.size)
 
     def outputs(self, i: int) -> tuple[float, float, float, float]:
         """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])`` of channel ``i``."""

@@ -38,17 +38,28 @@ Decisions
 * **Time**: IMU sample ``i`` (BDT epoch in its header) is IF sample
   ``round((t_i + sow_imu0 - sow_if0) fs)``: the IMU is taken as time-stamped in the receiver
   clock's scale (exact for generated files, whose receiver clock defaults to BDT).
-* **Channel management**: a channel leaves the measurement vector (``N_k`` changes) while
-  its C/N0 (known-noise estimator over the last ``cn0_window`` intervals) is below
-  ``cn0_min_dbhz`` or its pre-filter innovations are inconsistent (NIS above ``nis_max``).
-  A fast test on the last 40 prompts (C/N0 below ``cn0_min_dbhz - fast_loss_margin_db``;
-  a blockage or noise alone fails it within one or two intervals, a 28 dB-Hz signal about
-  1 % of the time) leaves the interval out at once; two failing intervals in a row empty
-  the channel's C/N0 window, so it rejoins only on a whole window of fresh prompts (200 ms
-  by default; shorter windows of noise alone pass the C/N0 test too often), not on a window
-  still full of signal from before a blockage. Its NCOs stay driven by the INS and its
-  pre-filter restarts every interval while out, so it rejoins as soon as the signal is
-  back, without an acquisition search.
+* **Coherent pre-filter blocks**: the pre-filters are fed sums of the 1 ms epochs over
+  blocks that end at data-bit edges (known from the satellite-clock millisecond: D1 20 ms,
+  NH wiped off; D2 2 ms) and at interval ends, at most ``coherent_ms``. A 20 ms block at
+  25 dB-Hz has an SNR of 8 dB, where the arctangent and the envelope discriminators are
+  near linear; a 1 ms epoch has -5 dB, where their gain collapses and the carrier estimate
+  drifts off (tested in ``test_prefilter_coherent_blocks_track_a_weak_signal``). The price
+  is the phase ambiguity: consecutive 20 ms blocks alias the frequency at 25 Hz, so a
+  restarted pre-filter takes its frequency prior from the integration filter (below), not
+  from a wide default.
+* **Channel management**: C/N0 comes from bit-synchronous prompt sums
+  (:class:`~sdr_di.deep.bit_power.BitPower`, known-noise estimator, ``cn0_window_ms`` =
+  200 ms). A channel is in the measurement vector while that C/N0 is at least
+  ``cn0_min_dbhz`` (20 dB-Hz), its last 60 ms of bit sums read at least
+  ``cn0_min_dbhz - fast_loss_margin_db`` (17 dB-Hz: noise alone passes this test with
+  probability 0.06, a 23 dB-Hz signal fails it on 2 % of the intervals) and its pre-filter's
+  NIS passes a chi-square test at ``nis_p_min`` (0.1 %). When the last 120 ms read below
+  17 dB-Hz too the channel is lost: its C/N0 window is emptied, so it rejoins only on a
+  whole window of fresh bit sums, not on one still full of signal from before a blockage.
+  Its NCOs stay driven by the INS, and its pre-filter restarts every interval while lost
+  (frequency prior: the integration filter's rate uncertainty on that line of sight, at
+  least 0.5 Hz), so it rejoins as soon as the signal is back, without an acquisition
+  search. These thresholds were set on the ``weak-signal`` experiment (docs/experiments.md).
 * **Process noise** from the IMU spec (random walks; bias random walk reaching the spec in
   ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`ClockModel`).
 """
@@ -81,7 +92,6 @@ from ..receiver.correlator import (
     reduce_code_phase,
 )
 from ..receiver.ifreader import IfSource
-from ..receiver.lock import cn0_known_noise
 from ..receiver.observables import ReceiverTime
 from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
@@ -89,14 +99,17 @@ from ..receiver.threads import KernelThreads
 from ..receiver.tracking import ChannelState
 from ..signal.codes import NH20, b3i_code
 from ..sim.imu import ImuErrorModel
+from .bit_power import BitPower
 from .nco import nco_commands, predict_ranges
 from .prefilter import PreFilterBank
 
 __all__ = ["DeepConfig", "DeepReceiver", "DeepResult", "HandoverError"]
 
 _CLOCKS = {"tcxo": ClockModel(h0=2e-19, h_2=2e-20), "ocxo": ClockModel(h0=8e-20, h_2=4e-23)}
-_FAST_PROMPTS = 40     # prompts of the fast loss test (the last two intervals)
-_CN0_MIN_PROMPTS = 40  # 1 ms prompts before the loop's own C/N0 replaces the scalar one
+_FAST_MS = 60        # bit sums of the fast test (interval left out) [ms]
+_LOSS_MS = 120       # bit sums of the loss test [ms]
+_CN0_MIN_MS = 40     # bit sums before the loop's own C/N0 replaces the scalar loop's [ms]
+_SIGMA_F_MIN = 0.5   # floor of a restarted pre-filter's frequency sigma [Hz]
 
 
 class HandoverError(SdrDiError):
@@ -120,13 +133,14 @@ class DeepConfig:
     handover_wait_s : float
         Seconds after the first fix to wait for every tracked channel before handing over
         with at least 4.
-    cn0_min_dbhz, cn0_window, fast_loss_margin_db, nis_max
-        Channel management (module notes).
-    carrier_cn0_min_dbhz : float
-        Below this C/N0 a channel's pre-filter frequency variance is reset every interval too
-        (module notes of :mod:`~sdr_di.deep.prefilter`): its rate measurement then comes from
-        the phase slope inside the interval, with an honest (large) variance, instead of from
-        a carrier track that may be slipping.
+    cn0_min_dbhz, cn0_window_ms, fast_loss_margin_db, nis_p_min
+        Channel management (module notes): C/N0 gate [dB-Hz], C/N0 window [ms], the loss
+        tests' threshold below the gate [dB], and the pre-filter NIS test's false-alarm
+        probability.
+    coherent_ms : int
+        Longest coherent pre-filter block [ms] (module notes); blocks never cross a data
+        bit, so D1 channels use at most 20 ms and D2 channels 2 ms. 1 = one update per
+        code epoch.
     imu : ImuErrorModel
         IMU spec for ``Q`` and ``P0`` (random walks, biases; default paper 004 Table 4).
     bias_time_s : float
@@ -151,11 +165,10 @@ class DeepConfig:
     output_rate_hz: float = 5.0
     align: str = "truth"
     handover_wait_s: float = 6.0
-    cn0_min_dbhz: float = 25.0
-    cn0_window: int = 10
-    fast_loss_margin_db: float = 6.0
-    carrier_cn0_min_dbhz: float = 30.0
-    nis_max: float = 4.0
+    cn0_min_dbhz: float = 20.0
+    cn0_window_ms: int = 200
+    fast_loss_margin_db: float = 3.0
+    nis_p_min: float = 1e-3
     imu: ImuErrorModel = dataclasses.field(default_factory=ImuErrorModel)
     bias_time_s: float = 3600.0
     clock: str = "tcxo"
@@ -163,6 +176,7 @@ class DeepConfig:
     filter_options: dict = dataclasses.field(default_factory=dict)
     p0_att_deg: tuple = (0.05, 0.05, 0.1)
     chunk_ms: int = 200
+    coherent_ms: int = 20
 
     def __post_init__(self) -> None:
         if self.clock not in _CLOCKS:
@@ -257,13 +271,13 @@ class _Chan:
     next_start: int          # first sample of the next code epoch
     epoch: int               # its number (ms since S0)
     phase: float             # carrier NCO phase at next_start [cycles]
-    prompts: np.ndarray      # recent 1 ms prompts (C/N0)
-    n_prompts: int = 0
+    power: BitPower          # recent bit sums of the prompts (C/N0, loss test)
+    bit_ms: int = 20         # data bit [ms]: D1 20, D2 2
     cn0_dbhz: float = math.nan
     used: bool = True
     f_scalar: float = 0.0    # scalar loop Doppler at the hand-over [Hz]
     rejoining: bool = False  # lost: waits for a whole window of fresh prompts
-    fast_fail: int = 0       # consecutive intervals failing the fast C/N0 test
+    fast_fail: int = 0       # last tests: 0 pass, 1 fast test failed, 2 loss test too
 
 
 def _imu_offset_s(source: IfSource, imu) -> float:
@@ -462,10 +476,11 @@ class DeepReceiver:
             o = c.observation_at(s)
             eph = eph_src.select(prn, sol.week, sol.sow)
             e = round((o.t_tx_sow - S0) * 1000.0)
+            bit_ms = 20 if c.is_d1 else 2
             chans.append(_Chan(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s, epoch=e,
-                               phase=float(c.phi), prompts=np.zeros(cfg.cn0_window * 20,
-                                                                    np.complex128),
-                               cn0_dbhz=float(c.cn0_dbhz)))
+                               phase=float(c.phi),
+                               power=BitPower(max(cfg.cn0_window_ms // bit_ms, 2)),
+                               bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz)))
         n_ch = len(chans)
         ephs = [c.eph for c in chans]
         pre = PreFilterBank(n_ch, self.scalar.config.spacing_chips, source.carrier_hz,
@@ -617,6 +632,7 @@ class DeepReceiver:
             phi = np.concatenate([p[3] for p in parts])
             dphi = np.concatenate([p[4] for p in parts])
             nh = np.concatenate([p[5] for p in parts])
+            ep_all = np.concatenate([p[6] for p in parts])
             tc = time.perf_counter()
             prof["nco"] += tc - tb
             # -- samples
@@ -660,30 +676,32 @@ class DeepReceiver:
                 a += cnt
                 if cnt:
                     pp = P[sl]
-                    m = min(cnt, c.prompts.size)
-                    c.prompts = np.roll(c.prompts, -m)
-                    c.prompts[-m:] = pp[-m:]
-                    c.n_prompts = min(c.n_prompts + m, c.prompts.size)
-                    nbar = float(ns[sl].mean())
-                    fast = cn0_known_noise(c.prompts[-min(c.n_prompts, _FAST_PROMPTS):],
-                                           nbar * npow, nbar / fs)
-                    c.fast_fail = 0 if fast >= cfg.cn0_min_dbhz - cfg.fast_loss_margin_db \
-                        else c.fast_fail + 1
-                    if c.fast_fail >= 2:
-                        # signal gone for two intervals: lost, back only on a whole window
-                        # of fresh prompts (noise alone reads above 25 dB-Hz on a few
-                        # percent of 40-prompt windows, on none of 200)
-                        c.n_prompts = 0
-                        c.cn0_dbhz = math.nan
-                        c.rejoining = True
-                    elif c.fast_fail == 0 and c.n_prompts >= (c.prompts.size if c.rejoining else _CN0_MIN_PROMPTS):
-                        c.rejoining = False
-                        c.cn0_dbhz = cn0_known_noise(c.prompts[-c.n_prompts:], nbar * npow,
-                                                     nbar / fs)
+                    mon = c.power
+                    mon.add(pp, ns[sl], ep_all[sl] % c.bit_ms == 0)
+                    if mon.new:
+                        # tests on the last bit sums: _FAST_MS to leave the interval out,
+                        # _LOSS_MS to declare the channel lost (module notes)
+                        thr = cfg.cn0_min_dbhz - cfg.fast_loss_margin_db
+                        fast = mon.cn0_dbhz(npow, fs, last=_FAST_MS // c.bit_ms)
+                        c.fast_fail = 0 if fast >= thr else 1
+                        if c.fast_fail and not mon.cn0_dbhz(npow, fs,
+                                                            last=_LOSS_MS // c.bit_ms) >= thr:
+                            c.fast_fail = 2
+                        if c.fast_fail >= 2:
+                            # signal gone: lost, back only on a whole window of fresh bit
+                            # sums, not on one still full of signal from before a blockage
+                            mon.clear()
+                            c.cn0_dbhz = math.nan
+                            c.rejoining = True
+                        elif c.fast_fail == 0 and mon.count >= (
+                                mon.p.size if c.rejoining else _CN0_MIN_MS // c.bit_ms):
+                            c.rejoining = False
+                            c.cn0_dbhz = mon.cn0_dbhz(npow, fs)
                     cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
-                    pre.process(i, E[sl], pp, L[sl], ns[sl] / fs, cn0_lin)
+                    pre.process(i, E[sl], pp, L[sl], ns[sl] / fs, cn0_lin,
+                                block_start=ep_all[sl] % min(c.bit_ms, cfg.coherent_ms) == 0)
                 good = (math.isfinite(c.cn0_dbhz) and c.cn0_dbhz >= cfg.cn0_min_dbhz
-                        and cnt > 0 and c.fast_fail == 0 and pre.nis[i] <= cfg.nis_max)
+                        and cnt > 0 and c.fast_fail == 0 and not pre.nis_p[i] < cfg.nis_p_min)
                 c.used = good
                 use.append(good)
                 if good:
@@ -715,15 +733,17 @@ class DeepReceiver:
             Hx = meas_all.matrix @ x
             P_k0 = P1 - Hx[:n_ch]
             Pc_k0 = Pc1 - Hx[:n_ch]
+            Hr = meas_all.matrix[n_ch:]
+            sig_f = np.sqrt(np.einsum("ij,jk,ik->i", Hr, kf.P, Hr)) / LAMBDA_B3I
             for c in chans:
                 i = c.idx
                 pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
-                if c.used:
-                    pre.decorrelate(i, frequency=not c.cn0_dbhz >= cfg.carrier_cn0_min_dbhz)
-                elif c.fast_fail == 1 and not c.rejoining:
-                    pre.decorrelate(i, frequency=True)   # one weak interval: keep tracking
+                if c.fast_fail >= 2 or pre.nis_p[i] < cfg.nis_p_min:
+                    # lost, or inconsistent: restart from the NCO (INS) with the integration
+                    # filter's rate uncertainty as the frequency prior
+                    pre.reset(i, sigma_phi=1.0, sigma_f=max(float(sig_f[i]), _SIGMA_F_MIN))
                 else:
-                    pre.reset(i, sigma_phi=1.0)
+                    pre.decorrelate(i)
             kf.x = np.zeros(17)
             th = time.perf_counter()
             prof["ins"] += th - tg
@@ -791,13 +811,14 @@ def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int,
     the predicted carrier-phase change; the phase stays continuous. Advances the channel's
     ``next_start``, ``epoch`` and ``phase``.
 
-    Returns ``(starts, n, theta, phi, dphi, nh_sign)`` arrays (one row per epoch).
+    Returns ``(starts, n, theta, phi, dphi, nh_sign, epoch)`` arrays (one row per epoch;
+    ``epoch`` = ms since S0 on the satellite clock).
     """
     L = CODE_LENGTH_B3I
     s0, e0 = c.next_start, c.epoch
     if s0 >= k1:
         z = np.zeros(0)
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), z, z, z, z
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), z, z, z, z, np.zeros(0, np.int64)
     # epoch ends: ceil(k0 + ((e + 1) L - c0) / dc) until one reaches k1
     m_max = int((k1 - s0) * dc / L) + 3
     ends = np.ceil(k0 + ((e0 + 1 + np.arange(m_max)) * L - c0) / dc).astype(np.int64)
@@ -817,4 +838,4 @@ def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int,
     end_phase = c.phase + float(adv[-1])
     c.next_start, c.epoch, c.phase = int(ends[-1]), e0 + m, end_phase - math.floor(end_phase)
     nh = NH20[ep % 20].astype(float) if c.is_d1 else np.ones(m)
-    return starts, n, theta, phi, dphi, nh
+    return starts, n, theta, phi, dphi, nh, ep
