@@ -341,6 +341,28 @@ def test_select_nearest_and_tie(esbc):
     assert esbc.select(20, a.week + 1, a.toe + 1801.0 - 604800.0) is b
 
 
+def test_select_broadcast_is_the_record_on_the_air(esbc):
+    """C27 of 2020-06-25: the 06:00 record (toe 367200) went on the air at 06:00:18 (its
+    RINEX transmission time). From 06:30 the nearest toe is 07:00's, but the satellite still
+    sends the 06:00 record until 07:00:18."""
+    recs = {r.toe: r for r in esbc.records[27]}
+    r6, r7 = recs[367200.0], recs[370800.0]
+    w = r6.week
+    assert esbc.tx_times[(27, w, 367200.0)] == w * 604800 + 367218.0
+    assert esbc.select(27, w, 367200.0 + 2412.0) is r7                  # nearest toe
+    assert esbc.select(27, w, 367200.0 + 2412.0, broadcast=True) is r6  # on the air
+    assert esbc.select(27, w, 370800.0 + 10.0, broadcast=True) is r6
+    assert esbc.select(27, w, 370800.0 + 30.0, broadcast=True) is r7
+    assert esbc.select(27, w, 367200.0 + 5.0, broadcast=True).toe == 363600.0
+    # before any record was sent: the nearest toe
+    first = esbc.records[27][0]
+    assert esbc.select(27, first.week, first.toe - 100.0, broadcast=True) is first
+    # merged files keep the earliest transmission time of a record
+    m = merge_nav([esbc, load_nav(MOJN)])
+    key = (27, w, 367200.0)
+    assert m.tx_times[key] == min(esbc.tx_times[key], load_nav(MOJN).tx_times.get(key, 1e300))
+
+
 def test_select_default_windows(esbc):
     meo = esbc.records[20][-1]
     assert esbc.select(20, meo.week, meo.toe + DEFAULT_MAX_AGE_S) is meo
@@ -362,3 +384,19 @@ def test_select_skips_unhealthy(esbc):
 def test_ura_index():
     assert [ura_index(x) for x in (0.0, 2.4, 2.5, 24.0, 6144.0, 1e5)] == [0, 0, 1, 6, 14, 15]
     assert not math.isnan(ura_index(2.0))
+
+
+def test_assisted_ephemerides_decoded_first_then_the_broadcast_record(esbc):
+    from sdr_di.receiver.assistance import AssistedEphemerides
+
+    recs = {r.toe: r for r in esbc.records[27]}
+    r6, r7 = recs[367200.0], recs[370800.0]
+    src = AssistedEphemerides(esbc)
+    assert src.select(27, r6.week, 367200.0 + 2412.0) is r6   # what C27 sends at 06:40:12
+    src.decoded = {27: r7}
+    assert src.select(27, r6.week, 367200.0 + 2412.0) is r7   # a decoded record wins
+    src.decoded = {27: dataclasses.replace(r7, SatH1=1)}      # unless unhealthy
+    assert src.select(27, r6.week, 367200.0 + 2412.0) is r6
+    assert not src.has(1, r6.week, 367200.0) and src.has(27, r6.week, 367200.0)
+    with pytest.raises(NoEphemerisError):
+        AssistedEphemerides(None).select(27, r6.week, 367200.0)

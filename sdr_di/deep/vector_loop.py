@@ -75,7 +75,7 @@ import numba
 import numpy as np
 
 from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
-from ..errors import ImuDataError, NoEphemerisError, SdrDiError, UnknownPrnError
+from ..errors import ImuDataError, SdrDiError
 from ..filters import make_filter
 from ..frames import ecef_to_llh, llh_to_ecef
 from ..ins.error_model import ClockModel, InsErrorModel, NavState, process_noise
@@ -83,6 +83,7 @@ from ..ins.mechanization import StrapdownINS
 from ..integration.measurements import RangeRateMeasurementModel
 from ..integration.metrics import nav_errors, summarize
 from ..receiver._numba_correlate_bits import correlate_epl_bits, mean_power
+from ..receiver.assistance import AssistedEphemerides
 from ..receiver.correlator import (
     CODE_PAD,
     bit_windows,
@@ -237,29 +238,6 @@ class DeepResult:
         return summarize(self.t, self.att_err, self.vel_err, self.pos_err, t0, t1)
 
 
-class _Assisted:
-    """Ephemeris source: decoded records first, then the assistance navigation file."""
-
-    def __init__(self, decoded: dict, nav) -> None:
-        self.decoded = decoded
-        self.nav = nav
-
-    def select(self, prn: int, week: int, sow: float):
-        e = self.decoded.get(prn)
-        if e is not None and e.healthy and e.finite():
-            return e
-        if self.nav is None:
-            raise NoEphemerisError(f"no ephemeris for C{prn:02d}")
-        return self.nav.select(prn, week, sow)
-
-    def has(self, prn: int, week: int, sow: float) -> bool:
-        try:
-            self.select(prn, week, sow)
-        except (NoEphemerisError, UnknownPrnError):
-            return False
-        return True
-
-
 @dataclasses.dataclass
 class _Chan:
     """Vector-loop state of one handed-over channel."""
@@ -409,7 +387,7 @@ class DeepReceiver:
         if source.start_week is not None and source.start_sow is not None:
             rt = ReceiverTime.from_sample_zero(fs, source.start_week, source.start_sow)
         engine = PvtEngine(fs, {}, None, rx_time=rt)
-        eph_src = _Assisted({}, nav)
+        eph_src = AssistedEphemerides(nav)
         nav_iono = None
         if nav is not None:
             from ..sim.generate import broadcast_iono

@@ -64,7 +64,6 @@ __all__ = [
     "DESCRIPTION",
     "MODES",
     "NAME",
-    "AssistedEphemerides",
     "check_params",
     "default_params",
     "levels",
@@ -163,33 +162,10 @@ def _truth_ecef(truth) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(truth.t, float), r
 
 
-class AssistedEphemerides:
-    """Ephemeris source of the scalar PVT: decoded records first, then the assistance
-    navigation file, the same rule as the deep receiver's start-up, so both modes get the
-    same data and differ only in tracking.
-
-    Parameters
-    ----------
-    nav : NavData
-        The RINEX navigation data (:func:`~sdr_di.orbits.rinex_nav.load_nav`).
-    """
-
-    def __init__(self, nav) -> None:
-        self.decoded: dict = {}
-        self.nav = nav
-
-    def select(self, prn: int, week: int, sow: float):
-        """The decoded record of ``prn`` if healthy and finite, else the file's record."""
-        e = self.decoded.get(prn)
-        if e is not None and e.healthy and e.finite():
-            return e
-        return self.nav.select(prn, week, sow)
-
-
 def scalar_run(inp, t_eval: float) -> dict:
     """Scalar receiver + PVT over the whole file; per-epoch kept channels and errors.
 
-    The PVT uses :class:`AssistedEphemerides` and the IF file's time tag (as the deep
+    The PVT uses :class:`~sdr_di.receiver.assistance.AssistedEphemerides` and the IF file's time tag (as the deep
     receiver's start-up does), and the decoded Klobuchar set, else the file's.
 
     Returns
@@ -198,6 +174,7 @@ def scalar_run(inp, t_eval: float) -> dict:
         ``t`` (n,), ``kept`` (n, n_ch) bool, ``valid`` (n,) bool, ``pos_err`` (n,) [m] (NaN
         without a fix), ``prns``, epochs from ``t_eval`` on.
     """
+    from ..receiver.assistance import AssistedEphemerides
     from ..receiver.observables import ReceiverTime
     from ..receiver.pvt import PvtEngine
     from ..sim.generate import broadcast_iono

@@ -62,6 +62,18 @@ default windows, :data:`DEFAULT_MAX_AGE_S` = 7200 s for MEO/IGSO and
 GEO, whose broadcast fit degrades faster away from toe). A tie (time exactly half-way between
 two toes) goes to the earlier toe, the record a receiver would already have received.
 
+Broadcast selection (``select(..., broadcast=True)``): the record a satellite is *sending* at
+the requested time, i.e. the healthy record most recently put on the air: the latest
+transmission time (RINEX line 8, field 1; the earliest over merged files) at or before the
+time, records without one counted from their toe. BDS puts a new record on the air shortly
+after its toe (on the hour: C27's 06:00 record of 2020-06-25 from 06:00:18), so at 06:40 the
+nearest toe is 07:00 but the satellite still sends the 06:00 record. Consecutive records
+differ by decimetres along the orbit, so a receiver whose assistance record differs from the
+broadcast one sees a per-satellite pseudorange bias of that size (measured: -0.28 m on
+C27, 0.45 m of height bias in the deep receiver); the generator and the receivers'
+assistance use this selection. Before the first transmission of any record it falls back to
+the nearest toe.
+
 Measured on 2020-06-25 (ESBC+MOJN records vs IAC SP3, 3D, antenna offset not removed): the
 error does not grow up to 2 h from toe and then grows fast::
 
@@ -172,6 +184,9 @@ class NavData:
         Duplicate groups whose parameters differ (the kept record is the rule's choice).
     iono_gps : Klobuchar or None
         GPS Klobuchar coefficients of the same header (``GPSA``/``GPSB``), None when absent.
+    tx_times : dict[(int, int, float), float]
+        Transmission time of each record [s since the BDT epoch], keyed by (PRN, week, toe);
+        the earliest when merged (module notes, broadcast selection).
     """
 
     records: dict[int, list[Ephemeris]]
@@ -183,14 +198,19 @@ class NavData:
     n_duplicates: int = 0
     n_conflicts: int = 0
     iono_gps: Klobuchar | None = None
+    tx_times: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.sources:
             self.sources = (self.path,)
         self._index: dict[int, tuple[list[float], list[Ephemeris]]] = {}
+        self._on_air: dict[int, tuple[list[float], list[Ephemeris]]] = {}
         for prn, recs in self.records.items():
             healthy = [r for r in recs if r.healthy]
             self._index[prn] = ([_toe_abs(r) for r in healthy], healthy)
+            sent = sorted(((self.tx_times.get((prn, r.week, r.toe), _toe_abs(r)), _toe_abs(r)), r)
+                          for r in healthy)
+            self._on_air[prn] = ([k[0] for k, _ in sent], [r for _, r in sent])
 
     # ---- queries ----------------------------------------------------------------
     @property
@@ -204,8 +224,9 @@ class NavData:
         return sum(len(v) for v in self.records.values())
 
     def select(self, prn: int, week: int, sow: float,
-               max_age_s: float | None = None) -> Ephemeris:
-        """Healthy record of ``prn`` with the toe nearest to BDT (``week``, ``sow``).
+               max_age_s: float | None = None, broadcast: bool = False) -> Ephemeris:
+        """Healthy record of ``prn`` with the toe nearest to BDT (``week``, ``sow``), or
+        with ``broadcast`` the one the satellite is sending then (module notes).
 
         Parameters
         ----------
@@ -219,6 +240,9 @@ class NavData:
         max_age_s : float, optional
             Largest accepted |t - toe| [s]. Default :data:`DEFAULT_MAX_AGE_S` (MEO/IGSO) or
             :data:`DEFAULT_MAX_AGE_GEO_S` (GEO).
+        broadcast : bool, optional
+            Select the record on the air at the time (latest transmission time at or
+            before it) instead of the nearest toe. Default False.
 
         Returns
         -------
@@ -243,19 +267,28 @@ class NavData:
             what = f"{n_all} record(s), none healthy" if n_all else "no record"
             raise NoEphemerisError(
                 f"no ephemeris for C{prn:02d} at {when}: {what} in {self._where()}")
-        i = bisect.bisect_left(toes, t)
-        best = None
-        for j in (i - 1, i):  # earlier candidate first: it wins ties
-            if 0 <= j < len(toes) and (best is None or abs(t - toes[j]) < abs(t - toes[best])):
-                best = j
-        age = abs(t - toes[best])
+        rec = None
+        if broadcast:
+            sent, on_air = self._on_air[prn]
+            k = bisect.bisect_right(sent, t) - 1
+            if k >= 0:
+                rec = on_air[k]
+        if rec is None:
+            i = bisect.bisect_left(toes, t)
+            best = None
+            for j in (i - 1, i):  # earlier candidate first: it wins ties
+                if 0 <= j < len(toes) and (best is None
+                                           or abs(t - toes[j]) < abs(t - toes[best])):
+                    best = j
+            rec = recs[best]
+        age = abs(t - _toe_abs(rec))
         if age > max_age_s:
-            near = recs[best]
+            near = rec
             raise NoEphemerisError(
                 f"no healthy ephemeris for C{prn:02d} within {max_age_s:.0f} s of {when} in "
                 f"{self._where()} (nearest toe: week {near.week} sow {near.toe:.0f}, "
                 f"{age:.0f} s away)")
-        return recs[best]
+        return rec
 
     def _where(self) -> str:
         if len(self.sources) == 1:
@@ -488,9 +521,12 @@ def _record_to_ephemeris(start: int, lines: list[str], path: Path) -> tuple[Ephe
     return eph, v["t_tx"]
 
 
-def _parse_body(lines: list[str], first: int, path: Path) -> list[Ephemeris]:
-    """All BDS records of the body, in file order."""
+def _parse_body(lines: list[str], first: int, path: Path
+                ) -> tuple[list[Ephemeris], dict[tuple[int, int, float], float]]:
+    """All BDS records of the body, in file order, and their transmission times [s since
+    the BDT epoch] keyed by (PRN, week, toe) (the earliest of duplicates)."""
     out: list[Ephemeris] = []
+    tx: dict[tuple[int, int, float], float] = {}
     i = first
     n = len(lines)
     while i < n:
@@ -507,12 +543,27 @@ def _parse_body(lines: list[str], first: int, path: Path) -> list[Ephemeris]:
                 f"navigation file {path}: RINEX 4 record marker '>' at line {i + 1} in a "
                 f"RINEX 3 file")
         if c == "C":
-            eph, _ = _record_to_ephemeris(i, lines, path)
+            eph, t_tx = _record_to_ephemeris(i, lines, path)
             out.append(eph)
+            key = (eph.prn, eph.week, eph.toe)
+            t_abs = _tx_abs(eph, t_tx)
+            tx[key] = min(tx.get(key, t_abs), t_abs)
             i += _BDS_LINES + 1
         else:
             i += 1
-    return out
+    return out, tx
+
+
+def _tx_abs(eph: Ephemeris, t_tx: float) -> float:
+    """Transmission time [s of the record's week] as seconds since the BDT epoch, taken in
+    the week that puts it nearest the toe (a record sent before a week rollover)."""
+    t = eph.week * SECONDS_PER_WEEK + float(t_tx)
+    toe = _toe_abs(eph)
+    if t - toe > SECONDS_PER_WEEK / 2:
+        t -= SECONDS_PER_WEEK
+    elif toe - t > SECONDS_PER_WEEK / 2:
+        t += SECONDS_PER_WEEK
+    return t
 
 
 def _dedup(recs: Iterable[Ephemeris]) -> tuple[dict[int, list[Ephemeris]], int, int]:
@@ -563,13 +614,13 @@ def load_nav(path: str | Path, crosscheck: bool = False) -> NavData:
     lines = text.splitlines()
     version, body, iono, iono_gps = _parse_header(lines, path)
     _crosscheck_header(text, iono, path)
-    recs = _parse_body(lines, body, path)
+    recs, tx = _parse_body(lines, body, path)
     if not recs:
         raise EphemerisError(f"navigation file {path}: no BDS records (RINEX {version:.2f})")
     records, n_dup, n_conf = _dedup(recs)
     nav = NavData(records=records, iono=iono, path=path, sources=(path,), version=version,
                   n_records_read=len(recs), n_duplicates=n_dup, n_conflicts=n_conf,
-                  iono_gps=iono_gps)
+                  iono_gps=iono_gps, tx_times=tx)
     if crosscheck:
         crosscheck_with_georinex(nav)
     return nav
@@ -589,11 +640,16 @@ def merge_nav(navs: Sequence[NavData]) -> NavData:
     iono = next((n.iono for n in navs if n.iono is not None), None)
     iono_gps = next((n.iono_gps for n in navs if n.iono_gps is not None), None)
     sources = tuple(p for n in navs for p in n.sources)
+    tx: dict = {}
+    for n in navs:
+        for key, t in n.tx_times.items():
+            tx[key] = min(tx.get(key, t), t)
     return NavData(records=records, iono=iono, path=navs[0].path, sources=sources,
                    version=navs[0].version,
                    n_records_read=sum(n.n_records_read for n in navs),
                    n_duplicates=sum(n.n_duplicates for n in navs) + n_dup,
-                   n_conflicts=sum(n.n_conflicts for n in navs) + n_conf, iono_gps=iono_gps)
+                   n_conflicts=sum(n.n_conflicts for n in navs) + n_conf, iono_gps=iono_gps,
+                   tx_times=tx)
 
 
 def read_klobuchar(path: str | Path) -> Klobuchar | None:

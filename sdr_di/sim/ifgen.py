@@ -110,7 +110,7 @@ def select_satellites(sc: Scenario, nav, path: ReceiverPath,
     prns = sc.satellites.prns if sc.satellites.prns is not None else tuple(nav.prns)
     for prn in prns:
         try:
-            eph = nav.select(prn, sc.week, sc.sow)
+            eph = nav.select(prn, sc.week, sc.sow, broadcast=True)
         except NoEphemerisError:
             if sc.satellites.prns is not None:
                 raise
