@@ -314,3 +314,47 @@ def test_q_scaling_settles_near_one_with_right_Q_and_grows_when_too_small(name):
 def test_q_scaling_keeps_adapting_when_N_changes():
     _, alpha, scale = _run_qscaling("q-scaling-ukf", 0, 1.0, change_every=3)
     assert 0.8 < np.nanmean(alpha[300:]) < 1.25 and 0.3 < np.median(scale[300:]) < 3.0
+
+
+def _run_zero_position_q(seed, epochs=400, **options):
+    """The deep-like problem with the receiver's process model structure: no process noise
+    on position and clock bias (they integrate velocity and drift), white noise on the
+    velocity and drift. Returns the filter and the position error RMS [m] after epoch 100."""
+    rng = np.random.default_rng(seed)
+    F, _ = _cv_clock(DT)
+    Q = np.diag([0.0] * 3 + [0.05 ** 2 * DT] * 3 + [0.0, 0.02 ** 2 * DT])
+    P0 = np.diag([25.0] * 3 + [1.0] * 3 + [25.0, 1.0])
+    x = rng.multivariate_normal(np.zeros(8), P0)
+    kf = make_filter("ff-aukf", LinearProcessModel(F), None, np.zeros(8), P0, Q, dt=DT,
+                     **options)
+    H = _geometry(rng, 7)
+    R = np.r_[np.full(7, SIG_RHO ** 2), np.full(7, SIG_RATE ** 2)]
+    err = []
+    for k in range(epochs):
+        x = F @ x + np.sqrt(np.diagonal(Q)) * rng.normal(size=8)
+        z = H @ x + np.sqrt(R) * rng.normal(size=14)
+        kf.predict()
+        kf.update(z, R, LinearMeasurementModel(H))
+        if k >= 100:
+            err.append(kf.x[:3] - x[:3])
+    return kf, float(np.sqrt(np.mean(np.sum(np.square(err), axis=1))))
+
+
+def test_ff_aukf_q_states_nominal_keeps_unmodelled_states_out_of_q():
+    """Eq 27's innovation-based Q (no P^+ - Phi P^+ Phi^T term) puts noise on states whose
+    nominal Q is zero (position integrates velocity): the filter then follows the noisy
+    pseudoranges. ``q_states='nominal'`` adapts only states with a positive nominal Q: their
+    zero entries stay zero and the position error is markedly lower (docs/filters.md)."""
+    rms_all, rms_nom = [], []
+    for seed in range(3):
+        kf_a, e_a = _run_zero_position_q(seed)
+        kf_n, e_n = _run_zero_position_q(seed, q_states="nominal")
+        assert np.all(np.diagonal(kf_a.Q)[[0, 1, 2, 6]] > 0)
+        assert np.all(np.diagonal(kf_n.Q)[[0, 1, 2, 6]] == 0)
+        assert np.all(np.diagonal(kf_n.Q)[[3, 4, 5, 7]] >= kf_n.rule.q_floor[[3, 4, 5, 7]])
+        rms_all.append(e_a)
+        rms_nom.append(e_n)
+    assert np.mean(rms_nom) < 0.7 * np.mean(rms_all), (rms_nom, rms_all)
+    with pytest.raises(Exception, match="q_states"):
+        make_filter("ff-aukf", LinearProcessModel(np.eye(2)), None, np.zeros(2), np.eye(2),
+                    np.eye(2), q_states="some")
