@@ -23,6 +23,9 @@ Usage::
    and, unless ``--no-plots``, ``fig6_attitude.png``, ``fig7_velocity.png``,
    ``fig8_position.png`` (error components over time per filter, like paper 004 Figs. 6-8).
 
+A filter may carry options: ``--filters ekf ff-aukf ff-aukf:q_states=nominal`` runs
+``ff-aukf`` twice, the second time with ``make_filter(..., q_states="nominal")``.
+
 Our errors are over the vector-loop span only (from the hand-over, ~12 s into the file: the
 scalar start-up needs a decoded D1 subframe for time); the paper's cover its whole run.
 """
@@ -99,7 +102,9 @@ def main(argv=None) -> int:
     results = {}
     for f in filters:
         src = open_source(bin_)
-        rx = DeepReceiver(DeepConfig(filter=f, filter_rate_hz=args.filter_rate))
+        name, options = _variant(f)
+        rx = DeepReceiver(DeepConfig(filter=name, filter_rate_hz=args.filter_rate,
+                                     filter_options=options))
         t0 = time.perf_counter()
         res = rx.run(src, imu, prns=prns, nav=nav, truth=truth)
         wall = time.perf_counter() - t0
@@ -113,7 +118,7 @@ def main(argv=None) -> int:
                   f"{k} {100 * prof[k] / loop:.0f}%" for k in ("correlate", "prefilter",
                                                               "filter", "ins", "nco", "read"))
               + ")", flush=True)
-        np.savetxt(out / f"errors_{f}.csv",
+        np.savetxt(out / f"errors_{f.replace(':', '_').replace('=', '-')}.csv",
                    np.column_stack([res.t, res.att_err, res.vel_err, res.pos_err, res.n_used]),
                    delimiter=",", fmt="%.8g",
                    header="t_s,att_e_deg,att_n_deg,att_u_deg,vel_e,vel_n,vel_u,pos_e_m,"
@@ -158,6 +163,24 @@ def main(argv=None) -> int:
     if not args.no_plots:
         _plots(out, results)
     return 0
+
+
+def _variant(text: str) -> tuple[str, dict]:
+    """``"ff-aukf:q_states=nominal,window=50"`` -> ``("ff-aukf", {"q_states": "nominal",
+    "window": 50})`` (filter options of :func:`sdr_di.filters.make_filter`)."""
+    name, _, rest = text.partition(":")
+    options = {}
+    for item in filter(None, rest.split(",")):
+        key, _, val = item.partition("=")
+        for kind in (int, float):
+            try:
+                options[key] = kind(val)
+                break
+            except ValueError:
+                continue
+        else:
+            options[key] = {"true": True, "false": False}.get(val.lower(), val)
+    return name, options
 
 
 def _plots(out: Path, results: dict) -> None:

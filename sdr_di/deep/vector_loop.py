@@ -53,9 +53,10 @@ Decisions
   ``cn0_min_dbhz`` (20 dB-Hz), its last 60 ms of bit sums read at least
   ``cn0_min_dbhz - fast_loss_margin_db`` (17 dB-Hz: noise alone passes this test with
   probability 0.06, a 23 dB-Hz signal fails it on 2 % of the intervals) and its pre-filter's
-  NIS passes a chi-square test at ``nis_p_min`` (0.1 %). When the last 120 ms read below
-  17 dB-Hz too the channel is lost: its C/N0 window is emptied, so it rejoins only on a
-  whole window of fresh bit sums, not on one still full of signal from before a blockage.
+  NIS passes a chi-square test at ``nis_p_min`` (1e-4: one false exclusion per channel
+  every 3 min at 50 Hz). When the last 120 ms read below 17 dB-Hz too the channel is lost:
+  its C/N0 window is emptied, so it rejoins only on a whole window of fresh bit sums, not
+  on one still full of signal from before a blockage.
   Its NCOs stay driven by the INS, and its pre-filter restarts every interval while lost
   (frequency prior: the integration filter's rate uncertainty on that line of sight, at
   least 0.5 Hz), so it rejoins as soon as the signal is back, without an acquisition
@@ -169,7 +170,7 @@ class DeepConfig:
     cn0_min_dbhz: float = 20.0
     cn0_window_ms: int = 200
     fast_loss_margin_db: float = 3.0
-    nis_p_min: float = 1e-3
+    nis_p_min: float = 1e-4
     imu: ImuErrorModel = dataclasses.field(default_factory=ImuErrorModel)
     bias_time_s: float = 3600.0
     clock: str = "tcxo"
