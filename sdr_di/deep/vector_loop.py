@@ -49,14 +49,15 @@ Decisions
   from a wide default.
 * **Channel management**: C/N0 comes from bit-synchronous prompt sums
   (:class:`~sdr_di.deep.bit_power.BitPower`, known-noise estimator, ``cn0_window_ms`` =
-  200 ms). A channel is in the measurement vector while that C/N0 is at least
-  ``cn0_min_dbhz`` (20 dB-Hz), its last 60 ms of bit sums read at least
-  ``cn0_min_dbhz - fast_loss_margin_db`` (17 dB-Hz: noise alone passes this test with
-  probability 0.06, a 23 dB-Hz signal fails it on 2 % of the intervals) and its pre-filter's
-  NIS passes a chi-square test at ``nis_p_min`` (1e-4: one false exclusion per channel
-  every 3 min at 50 Hz). When the last 120 ms read below 17 dB-Hz too the channel is lost:
-  its C/N0 window is emptied, so it rejoins only on a whole window of fresh bit sums, not
-  on one still full of signal from before a blockage.
+  200 ms). A channel joins the measurement vector when that C/N0 is at least
+  ``cn0_min_dbhz`` (20 dB-Hz) and stays while it is no more than ``cn0_hysteresis_db``
+  (2 dB) below that, while its last 60 ms of bit sums read at least ``cn0_min_dbhz - fast_margin_db``
+  (17 dB-Hz: noise alone passes this test with probability 0.06, a 23 dB-Hz signal fails it
+  on 2 % of the intervals, and such an interval is left out) and while its pre-filter's NIS
+  passes a chi-square test at ``nis_p_min`` (1e-4: one false exclusion per channel every
+  3 min at 50 Hz). When the last 120 ms also read below ``cn0_min_dbhz - loss_margin_db``
+  (14 dB-Hz) the channel is lost: its C/N0 window is emptied, so it rejoins only on a
+  whole window of fresh bit sums, not on one still full of signal from before a blockage.
   Its NCOs stay driven by the INS, and its pre-filter restarts every interval while lost
   (frequency prior: the integration filter's rate uncertainty on that line of sight, at
   least 0.5 Hz), so it rejoins as soon as the signal is back, without an acquisition
@@ -135,10 +136,10 @@ class DeepConfig:
     handover_wait_s : float
         Seconds after the first fix to wait for every tracked channel before handing over
         with at least 4.
-    cn0_min_dbhz, cn0_window_ms, fast_loss_margin_db, nis_p_min
-        Channel management (module notes): C/N0 gate [dB-Hz], C/N0 window [ms], the loss
-        tests' threshold below the gate [dB], and the pre-filter NIS test's false-alarm
-        probability.
+    cn0_min_dbhz, cn0_hysteresis_db, cn0_window_ms, fast_margin_db, loss_margin_db, nis_p_min
+        Channel management (module notes): C/N0 gate [dB-Hz] and its hysteresis [dB], C/N0
+        window [ms], the thresholds of the 60 ms and 120 ms tests below the gate [dB], and
+        the pre-filter NIS test's false-alarm probability.
     coherent_ms : int
         Longest coherent pre-filter block [ms] (module notes); blocks never cross a data
         bit, so D1 channels use at most 20 ms and D2 channels 2 ms. 1 = one update per
@@ -169,7 +170,9 @@ class DeepConfig:
     handover_wait_s: float = 6.0
     cn0_min_dbhz: float = 20.0
     cn0_window_ms: int = 200
-    fast_loss_margin_db: float = 3.0
+    fast_margin_db: float = 3.0
+    loss_margin_db: float = 6.0
+    cn0_hysteresis_db: float = 2.0
     nis_p_min: float = 1e-4
     imu: ImuErrorModel = dataclasses.field(default_factory=ImuErrorModel)
     bias_time_s: float = 3600.0
@@ -660,11 +663,12 @@ class DeepReceiver:
                     if mon.new:
                         # tests on the last bit sums: _FAST_MS to leave the interval out,
                         # _LOSS_MS to declare the channel lost (module notes)
-                        thr = cfg.cn0_min_dbhz - cfg.fast_loss_margin_db
                         fast = mon.cn0_dbhz(npow, fs, last=_FAST_MS // c.bit_ms)
-                        c.fast_fail = 0 if fast >= thr else 1
-                        if c.fast_fail and not mon.cn0_dbhz(npow, fs,
-                                                            last=_LOSS_MS // c.bit_ms) >= thr:
+                        c.fast_fail = 0 if fast >= cfg.cn0_min_dbhz - cfg.fast_margin_db \
+                            else 1
+                        if c.fast_fail and not mon.cn0_dbhz(
+                                npow, fs, last=_LOSS_MS // c.bit_ms) >= \
+                                cfg.cn0_min_dbhz - cfg.loss_margin_db:
                             c.fast_fail = 2
                         if c.fast_fail >= 2:
                             # signal gone: lost, back only on a whole window of fresh bit
@@ -679,7 +683,8 @@ class DeepReceiver:
                     cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
                     pre.process(i, E[sl], pp, L[sl], ns[sl] / fs, cn0_lin,
                                 block_start=ep_all[sl] % min(c.bit_ms, cfg.coherent_ms) == 0)
-                good = (math.isfinite(c.cn0_dbhz) and c.cn0_dbhz >= cfg.cn0_min_dbhz
+                gate = cfg.cn0_min_dbhz - (cfg.cn0_hysteresis_db if c.used else 0.0)
+                good = (math.isfinite(c.cn0_dbhz) and c.cn0_dbhz >= gate
                         and cnt > 0 and c.fast_fail == 0 and not pre.nis_p[i] < cfg.nis_p_min)
                 c.used = good
                 use.append(good)
