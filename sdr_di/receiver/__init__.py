@@ -7,7 +7,7 @@ Modules
     :mod:`sdr_di.io.sample_formats`, from a sidecar or explicit options.
 :mod:`~sdr_di.receiver.correlator`
     Multi-channel early/prompt/late correlators with externally driven code and carrier NCOs
-    (numba kernel in :mod:`~sdr_di.receiver._numba_correlate`).
+    (numba kernel in :mod:`~sdr_di.receiver._numba_correlate_bits`).
 :mod:`~sdr_di.receiver.acquisition`
     Parallel code-phase search (FFT) over a Doppler grid, CFAR threshold from a false-alarm
     probability, fine Doppler / code refinement and C/N0 estimate.
@@ -17,5 +17,5 @@ from .acquisition import AcquisitionResult, acquire, acquire_source, detection_t
 from .correlator import CorrelationResult, Correlator, correlate
 from .ifreader import IfFileWarning, IfSource
 
-__all__ = ["IfSource", "IfFileWarning", "Correlator", "CorrelationResult", "correlate",
-           "acquire", "acquire_source", "detection_threshold", "AcquisitionResult"]
+__all__ = ["AcquisitionResult", "CorrelationResult", "Correlator", "IfFileWarning", "IfSource",
+           "acquire", "acquire_source", "correlate", "detection_threshold"]

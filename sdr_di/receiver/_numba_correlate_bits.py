@@ -1,41 +1,72 @@
-"""Numba kernel of the receiver's E/P/L correlator on stored samples with bit-packed replicas.
+"""Numba kernel of the receiver's multi-channel early/prompt/late correlator.
 
-Same conventions and results as :func:`~sdr_di.receiver._numba_correlate.correlate_epl`
-(module notes there: code phase ``theta_k = theta0 + k dchip`` recomputed from the interval
-start at every sample, table index ``int(theta + M + delta)``, carrier wipe-off per block of
-``B`` samples from an exact block phasor and a per-channel rotation table, float64 products
-and sums, the block split where the code wraps), with these differences, which make it about
-2x faster on the development machine (AMD EPYC, AVX-512; 7 channels at 25 MHz, one thread,
-thread CPU time on the shared machine: 1.35-1.5 ns per sample and channel against ~3.1 ns
-for ``correlate_epl`` on ``complex64``; ``scripts/bench.py correlate`` prints both):
+The one correlator kernel of the package: the scalar receiver's channel bank, acquisition
+refinement, the deep (vector) loop and the public API of :mod:`~sdr_di.receiver.correlator`
+(:func:`~sdr_di.receiver.correlator.correlate_table`, ``correlate``, ``Correlator``) all call
+:func:`correlate_epl_bits`. Plain arrays in and out; the NCO values are given per row.
 
-* **Input**: the samples as stored, 1-D ``int8``/``int16``/``float32`` with ``n_comp = 2``
-  (interleaved I, Q) or ``n_comp = 1`` (real), read through per-block slices (contiguous
-  loads the wipe-off loop vectorizes; the stored integers convert exactly to float64). No
-  ``complex64`` conversion of the whole chunk is needed. ``complex64`` data can be passed as
-  its ``float32`` view with ``n_comp = 2``.
-* **Replicas as bit windows** instead of a float table: ``bits[c, j]`` holds, in bit ``b``,
+For row ``r`` and sample ``k = 0 .. n_r - 1`` of its interval (sample ``start_r + k``):
+
+* code phase ``theta_k = theta0_r + k * dchip_r`` [chips], ``theta0_r`` reduced to
+  ``[0, L)`` by the caller, ``dchip_r = code rate / fs``; the replica chip is
+  ``code[floor(theta_k + delta) mod L]`` for ``delta = +d`` (early), ``0`` (prompt),
+  ``-d`` (late);
+* carrier phase ``phi_k = phi0_r + k * dphi_r`` [cycles], ``dphi_r = f_carrier / fs``; the
+  wipe-off multiplies by ``exp(-j 2 pi phi_k)``.
+
+The interval is processed in blocks of ``B`` samples (``B = rot_re.shape[1]``, 256), each in
+two passes:
+
+1. **Rotation** into two float64 buffers (real, imaginary): the samples times the rotation
+   table entries ``exp(-j 2 pi m dphi)``, ``m < B`` (one row per carrier step, computed by
+   the caller). No table look-ups; this pass vectorizes. The block phasor
+   ``exp(-j 2 pi (phi0 + k0 dphi))`` (``cos``/``sin`` of the exact phase at the block's first
+   sample ``k0``) multiplies the block's six E/P/L sums after pass 2: the same products
+   associated differently (~1e-16 relative), float64 accuracy (~1e-15) of the carrier.
+2. **E/P/L sums** over the block. No phase is accumulated from sample to sample: the code
+   phase is recomputed as ``theta0 + k * dchip`` (float64), minus an integer multiple ``w L``
+   of the code length fixed per block segment. The block is split where the code wraps (at
+   most once per block, since ``B dchip < L`` is checked by the caller): the first sample of
+   the second segment is the first ``k`` with ``theta0 + k dchip >= (w + 1) L``, found from
+   ``ceil(((w + 1) L - theta_k0) / dchip)`` and corrected by evaluating that comparison. The
+   chip boundaries are placed to ~1e-12 chip (one ulp of a float64 below ``2 L``); a sample
+   within that distance of a boundary may take either chip, and the periodic padding of the
+   table keeps every index valid whichever segment such a sample falls in.
+
+* **Input**: the samples as stored, 1-D ``int8``/``int16``/``float32``/``float64`` with
+  ``n_comp = 2`` (interleaved I, Q) or ``n_comp = 1`` (real), read through per-block slices
+  (contiguous loads the wipe-off loop vectorizes; integers and float32 convert exactly to
+  float64). ``complex64`` / ``complex128`` data are passed as their ``float32`` / ``float64``
+  view with ``n_comp = 2`` (no copy).
+* **Replicas as bit windows** (:func:`pack_bit_windows`, through
+  :func:`~sdr_di.receiver.correlator.bit_windows`): ``bits[c, j]`` holds, in bit ``b``,
   whether entry ``j + b`` of the channel's padded table (``codes[c, M + i] = code[i mod L]``)
   is ``-1``. For a run of samples whose E/P/L indices stay within 128 entries of the run's
   lowest index ``c0`` (runs of at most ``(124 - 2 d) / dchip`` samples: 256 at 25 MHz), the
   two words ``bits[c, c0]`` and ``bits[c, c0 + 64]`` hold every chip the run needs, and the
   replica value of index ``j`` is a shift and a select on them: no per-sample memory gather,
   and the loop vectorizes. The window can never read outside the table whatever the phase
-  (``& 63`` and the select keep every shift in range).
+  (``& 63`` and the select keep every shift in range). The index of the early replica is
+  ``int(theta + (M + d - c0))``, i.e. ``M + floor(theta + d) - c0`` on a non-negative
+  argument (``theta >= 0``, ``M > d + 1``) without a ``floor`` call.
 * **Shared tables**: each row names its replica row (``tab_idx``) and rotation-table row
   (``rot_idx``), so the epochs of one channel share one of each (no repeated copies).
-* **Block phasor after the sums**: the first pass multiplies the samples by the rotation-table
-  entries ``exp(-j 2 pi m dphi)`` only; the block phasor ``exp(-j 2 pi (phi0 + k0 dphi))``
-  multiplies the block's six E/P/L sums (the same products, associated differently: ~1e-16
-  relative).
 
-Measured alternatives that were not faster: a half-chip bit table (one index per sample
-instead of three), single-word windows (runs of ~60 chips, no word select), float64 replica
-tables indexed per sample as in ``correlate_epl`` (1.6-1.9 ns for the sums alone).
+The E/P/L products and sums are float64 throughout. The kernel is compiled with the
+``reassoc`` and ``contract`` fast-math flags only (no ``nnan``/``ninf``/``arcp``), which lets
+LLVM vectorize the loops and fuse multiply-adds (reordered float64 additions within a block:
+relative effect ~1e-15, far below the 1e-9 the tests check). The work is split into
+``n_rows * n_sub`` tasks (row x contiguous range of whole blocks) run with ``prange``; each
+task writes its partial sums, which are added in a fixed order, so results depend on the
+thread count only through the float64 association of whole-block sums (~1e-16 relative), not
+on scheduling.
 
-The index of the early replica is ``int(theta + (M + d - c0))`` instead of
-``int(theta + M + d) - c0``: the two may differ only for a sample within one float64 ulp of a
-chip boundary (~1e-12 chip), where either chip is as correct.
+Speed (development machine, AMD EPYC with AVX-512; 7 channels at 25 MHz, one thread, thread
+CPU time on the shared machine): 1.35-1.5 ns per sample and channel, about 2x faster than the
+earlier kernel that indexed a float32 replica table per sample and wiped ``complex64`` samples
+(~3.1 ns; removed). Measured alternatives that were not faster: a half-chip bit table (one
+index per sample instead of three), single-word windows (runs of ~60 chips, no word select),
+float64 replica tables indexed per sample (1.6-1.9 ns for the sums alone).
 """
 
 from __future__ import annotations
@@ -84,7 +115,7 @@ def _run_sums(lo, hi, br, bi, k, th0, dc, off, ae, ap, al):
 
 @njit(cache=True, parallel=True, fastmath={"reassoc", "contract"}, boundscheck=False)
 def correlate_epl_bits(
-    xs,  # int8/int16/float32 (n * n_comp,): stored samples, I/Q interleaved when n_comp == 2
+    xs,  # int8/int16/float32/float64 (n * n_comp,): stored samples, I/Q interleaved when n_comp == 2
     n_comp,  # int: 2 (complex, interleaved I, Q) or 1 (real)
     bits,  # uint64 (n_tab, >= L + 2 M + 64): bit windows of the padded tables (module notes)
     tab_idx,  # int64 (n_rows,): row of `bits` (the PRN) of each row
@@ -209,6 +240,34 @@ def correlate_epl_bits(
             for j in range(3):
                 out[c, j, 0] += part[t, 2 * j]
                 out[c, j, 1] += part[t, 2 * j + 1]
+
+
+@njit(cache=True, boundscheck=False)
+def pack_bit_windows(neg, out):
+    """Pack sign flags into bit windows: bit ``b`` of ``out[c, j]`` is ``neg[c, j + b]``.
+
+    Parameters
+    ----------
+    neg : numpy.ndarray
+        bool (n_ch, W): table entry negative (``-1`` chip).
+    out : numpy.ndarray
+        uint64 (n_ch, W + 64), written; entries past ``W - 1`` count as 0 (positive).
+
+    Notes
+    -----
+    One pass per row from the end: ``out[j] = neg[j] | (out[j + 1] << 1)`` (bit 63 of
+    ``out[j + 1]``, entry ``j + 64``, is shifted out), O(W) per row.
+    """
+    n_ch, width = neg.shape
+    one = np.uint64(1)
+    zero = np.uint64(0)
+    for c in range(n_ch):
+        for j in range(width, out.shape[1]):
+            out[c, j] = zero
+        w = zero
+        for j in range(width - 1, -1, -1):
+            w = (w << one) | (one if neg[c, j] else zero)
+            out[c, j] = w
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"}, boundscheck=False)
