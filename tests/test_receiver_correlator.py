@@ -192,3 +192,61 @@ def test_receiver_kernel_on_stored_samples_matches_numpy_reference(fs, complex_i
         np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * scale)
     assert mean_power(xs, n_comp) == pytest.approx(np.mean(np.abs(x.astype(complex)) ** 2),
                                                     rel=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["complex128", "float64", "int16", "int8", "strided_complex64"])
+def test_public_api_sample_types_match_numpy_reference(kind):
+    """Every sample type of :func:`correlate` reaches the bit-window kernel correctly: float64
+    and complex128 (float64 view), stored integers (read directly), a strided complex64 view
+    (made contiguous)."""
+    rng = np.random.default_rng(21)
+    complex_input = kind.startswith(("complex", "strided"))
+    x, codes, theta0, rate, phi0, fc, n, fs, start = _random_case(rng, 3, complex_input)
+    n = np.minimum(n, 12_000)  # intervals stay inside the block
+    if kind == "complex128":
+        x = x.astype(np.complex128) + 1e-3j  # a value not representable in complex64
+    elif kind == "float64":
+        x = x.astype(np.float64) + 1e-9
+    elif kind in ("int16", "int8"):
+        x = np.clip(np.rint(x * 20), -127, 127).astype(kind)
+    else:
+        x = np.repeat(x, 2)[::2]
+        assert not x.flags.c_contiguous
+    res = correlate(x, codes, theta0, rate, phi0, fc, n, fs, start_sample=start)
+    ref = reference_epl(x, codes, theta0, rate, phi0, fc, n, fs, 0.5, start)
+    got = np.stack([res.early, res.prompt, res.late], axis=1)
+    scale = np.sqrt(n.max()) * (20 if kind.startswith("int") else 1)
+    np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * scale)
+
+
+def test_bit_windows_match_their_definition():
+    rng = np.random.default_rng(4)
+    tab = padded_replicas(rng.choice(np.array([-1, 1], np.int8), size=(2, 150)))
+    bits = bit_windows(tab)
+    assert bits.shape == (2, tab.shape[1] + 64) and bits.dtype == np.uint64
+    neg = np.zeros((2, tab.shape[1] + 128), bool)
+    neg[:, :tab.shape[1]] = tab < 0
+    for j in (0, 1, 63, 100, tab.shape[1] - 1, tab.shape[1] + 63):
+        want = sum(int(neg[0, j + b]) << b for b in range(64))
+        assert int(bits[0, j]) == want
+        assert int(bits[1, j]) == sum(int(neg[1, j + b]) << b for b in range(64))
+    np.testing.assert_array_equal(bit_windows(tab[1]), bits[1:])
+
+
+def test_correlator_keeps_bit_windows_per_prn_list():
+    rng = np.random.default_rng(6)
+    table = {p: rng.choice(np.array([-1, 1], np.int8), size=L) for p in (3, 5)}
+    bank = Correlator(25e6, code_source=lambda p: table[p])
+    x = (rng.normal(size=20_000) + 1j * rng.normal(size=20_000)).astype(np.complex64)
+    args = (x, [3, 5], [10.0, 20.5], 10.23e6, 0.0, [100.0, -200.0], 20_000)
+    r1 = bank.correlate(*args)
+    bits = bank._bits
+    r2 = bank.correlate(*args)
+    assert bank._bits is bits  # same PRN list: not packed again
+    np.testing.assert_array_equal(r1.prompt, r2.prompt)
+    r3 = bank.correlate(x, [5, 3], [20.5, 10.0], 10.23e6, 0.0, [-200.0, 100.0], 20_000)
+    assert bank._bits is not bits
+    np.testing.assert_allclose(r3.prompt[::-1], r1.prompt, rtol=1e-12)
+    ref = correlate(x, np.stack([table[3], table[5]]), [10.0, 20.5], 10.23e6, 0.0,
+                    [100.0, -200.0], 20_000, 25e6)
+    np.testing.assert_array_equal(r1.prompt, ref.prompt)
