@@ -13,11 +13,13 @@ throughput in sample-channels per second (of wall time) and the real-time factor
 processed per wall second for all the channels). Numba compilation is excluded (warm-up call
 first). Kernels:
 
-* ``table``: :func:`~sdr_di.receiver.correlator.correlate_table` (float replica table,
-  ``complex64``/``float32`` samples; the public correlator API, used by the deep receiver);
-* ``receiver``: the scalar receiver's kernel
-  (:mod:`~sdr_di.receiver._numba_correlate_bits`: stored 4-bit-in-int8 samples, bit-window
-  replicas, one kernel call for all channels, NCO values given directly).
+* ``table``: :func:`~sdr_di.receiver.correlator.correlate_table`, the public correlator API
+  (float replica table, ``complex64``/``float32`` samples, input checks, bit windows packed
+  at each call, result object);
+* ``receiver``: the same kernel
+  (:func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_bits`) called as the scalar
+  receiver and the deep loop call it: stored 4-bit-in-int8 samples, bit windows packed
+  once, one kernel call for all channels, NCO values given directly.
 
 ``run(args)`` is the entry point for a later ``scripts/bench.py correlate`` dispatcher; ``args``
 needs the attributes ``channels``, ``fs``, ``ms``, ``seconds``, ``threads`` and ``real``.
@@ -34,11 +36,13 @@ import numpy as np
 
 from sdr_di.receiver._numba_correlate_bits import correlate_epl_bits
 from sdr_di.receiver.correlator import (
-    CARRIER_BLOCK,
     CODE_PAD,
     bit_windows,
+    carrier_rotation,
     correlate_table,
+    kernel_tasks,
     padded_replicas,
+    reduce_code_phase,
 )
 
 
@@ -67,22 +71,20 @@ def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int
     dchip = 10.23e6 * (1 + rng.uniform(-3e-6, 3e-6, n_ch)) / fs
     phi = rng.uniform(0, 1, n_ch)
     dphi = rng.uniform(-5e3, 5e3, n_ch) / fs
-    arg = np.multiply.outer(dphi, np.arange(CARRIER_BLOCK, dtype=np.float64))
-    arg = 2 * np.pi * (arg - np.floor(arg))
-    rot_re, rot_im = np.cos(arg), -np.sin(arg)
+    rot_re, rot_im = carrier_rotation(dphi)
     idx = np.arange(n_ch, dtype=np.int64)
     nsamp = np.full(n_ch, n_int, np.int64)
     out = np.empty((n_ch, 3, 2))
-    threads = numba.get_num_threads()
-    n_sub = 1 if threads <= 1 else max(1, -(-4 * threads // n_ch))
+    n_sub = kernel_tasks(n_ch, n_int)
     t0 = time.perf_counter()
     for j in range(n_intervals):
         off = (j * n_int) % (n_x - n_int + 1)
         correlate_epl_bits(xs, n_comp, bits, idx, CODE_PAD, 10230,
                            np.full(n_ch, off, np.int64), nsamp, theta, dchip, phi, dphi,
                            rot_re, rot_im, idx, 0.5, n_sub, out)
-        theta = np.mod(theta + n_int * dchip, 10230.0)
-        phi = np.mod(phi + n_int * dphi, 1.0)
+        theta = reduce_code_phase(theta + n_int * dchip, 10230)
+        phi = phi + n_int * dphi
+        phi -= np.floor(phi)
     return time.perf_counter() - t0
 
 
