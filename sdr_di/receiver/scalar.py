@@ -43,11 +43,12 @@ for a 10 s one (memory bounded by the chunk size). Shares of the wall time: corr
 CPU, mostly the FFT search of 7 PRNs x 21 Doppler bins x 40 ms), channels' Python work
 8-11 %, reading 5-8 % (more when the file is not in the page cache), PVT/output 4-7 %, imports
 and set-up 6-8 %. Side by side on the same file at the same load, the code before the
-bit-window kernel (``correlate_epl`` on ``complex64`` chunks, ~3.1 ns per sample and channel,
-2-thread calls explored 2 in every 64) took 27.4 s wall / 49.8 s CPU at load 1.5 (new: 15.0 s
-/ 21.4 s) and 58-72 s / 40-49 s at load 3.5 (new: 27 s / 18-20 s). On a 20 MHz real ``int16``
-file at 5 MHz IF (``scripts/check_scalar.py --fs 20e6 --if 5e6 --format real_int16 --bits
-12``) the receiver ran 5.1x real time (before: 1.7x), same accuracy.
+bit-window kernel (the former float-table kernel on ``complex64`` chunks, since deleted,
+~3.1 ns per sample and channel, 2-thread calls explored 2 in every 64) took 27.4 s wall /
+49.8 s CPU at load 1.5 (new: 15.0 s / 21.4 s) and 58-72 s / 40-49 s at load 3.5 (new: 27 s
+/ 18-20 s). On a 20 MHz real ``int16`` file at 5 MHz IF
+(``scripts/check_scalar.py --fs 20e6 --if 5e6 --format real_int16 --bits 12``) the receiver
+ran 5.1x real time (before: 1.7x), same accuracy.
 ``ScalarReceiver.profile`` gives the breakdown of every run.
 """
 
