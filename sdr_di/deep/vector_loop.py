@@ -51,13 +51,14 @@ Decisions
   (:class:`~sdr_di.deep.bit_power.BitPower`, known-noise estimator, ``cn0_window_ms`` =
   200 ms). A channel joins the measurement vector when that C/N0 is at least
   ``cn0_min_dbhz`` (20 dB-Hz) and stays while it is no more than ``cn0_hysteresis_db``
-  (2 dB) below that, while its last 60 ms of bit sums read at least ``cn0_min_dbhz - fast_margin_db``
-  (17 dB-Hz: noise alone passes this test with probability 0.06, a 23 dB-Hz signal fails it
-  on 2 % of the intervals, and such an interval is left out) and while its pre-filter's NIS
-  passes a chi-square test at ``nis_p_min`` (1e-4: one false exclusion per channel every
-  3 min at 50 Hz). When the last 120 ms also read below ``cn0_min_dbhz - loss_margin_db``
-  (14 dB-Hz) the channel is lost: its C/N0 window is emptied, so it rejoins only on a
-  whole window of fresh bit sums, not on one still full of signal from before a blockage.
+  (2 dB) below that, while its last 60 ms of bit sums read at least
+  ``cn0_min_dbhz - fast_margin_db`` (17 dB-Hz: noise alone passes this test with
+  probability 0.06, a 23 dB-Hz signal fails it on 2 % of the intervals, and such an
+  interval is left out) and while its pre-filter's NIS passes a chi-square test at
+  ``nis_p_min`` (1e-4: one false exclusion per channel every 3 min at 50 Hz). When the last
+  120 ms also read below ``cn0_min_dbhz - loss_margin_db`` (14 dB-Hz) the channel is lost:
+  its C/N0 window is emptied, so it rejoins only on a whole window of fresh bit sums, not
+  on one still full of signal from before a blockage.
   Its NCOs stay driven by the INS, and its pre-filter restarts every interval while lost
   (frequency prior: the integration filter's rate uncertainty on that line of sight, at
   least 0.5 Hz), so it rejoins as soon as the signal is back, without an acquisition
