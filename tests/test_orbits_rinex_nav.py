@@ -357,6 +357,10 @@ def test_select_broadcast_is_the_record_on_the_air(esbc):
     # before any record was sent: the nearest toe
     first = esbc.records[27][0]
     assert esbc.select(27, first.week, first.toe - 100.0, broadcast=True) is first
+    # C32: the file has no record between 01:00 and 08:00; at 06:30 the one on the air in
+    # the file (01:00) is outside the 2 h window, so the nearest toe (08:00) is used
+    c32 = esbc.select(32, w, 367200.0 + 1800.0, broadcast=True)
+    assert c32 is esbc.select(32, w, 367200.0 + 1800.0) and c32.toe == 374400.0
     # merged files keep the earliest transmission time of a record
     m = merge_nav([esbc, load_nav(MOJN)])
     key = (27, w, 367200.0)

@@ -719,7 +719,7 @@ class DeepReceiver:
             P_k0 = P1 - Hx[:n_ch]
             Pc_k0 = Pc1 - Hx[:n_ch]
             Hr = meas_all.matrix[n_ch:]
-            sig_f = np.sqrt(np.einsum("ij,jk,ik->i", Hr, kf.P, Hr)) / LAMBDA_B3I
+            sig_f = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hr, kf.P, Hr), 0.0)) / LAMBDA_B3I
             for c in chans:
                 i = c.idx
                 pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)

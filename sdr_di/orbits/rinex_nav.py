@@ -71,8 +71,9 @@ nearest toe is 07:00 but the satellite still sends the 06:00 record. Consecutive
 differ by decimetres along the orbit, so a receiver whose assistance record differs from the
 broadcast one sees a per-satellite pseudorange bias of that size (measured: -0.28 m on
 C27, 0.45 m of height bias in the deep receiver); the generator and the receivers'
-assistance use this selection. Before the first transmission of any record it falls back to
-the nearest toe.
+assistance use this selection. Where the file has no record on the air within the validity
+window (before the first transmission, or a station that missed uploads: C32 in the shipped
+ESBC file has none between its 01:00 and 08:00 records) it falls back to the nearest toe.
 
 Measured on 2020-06-25 (ESBC+MOJN records vs IAC SP3, 3D, antenna offset not removed): the
 error does not grow up to 2 h from toe and then grows fast::
@@ -242,7 +243,8 @@ class NavData:
             :data:`DEFAULT_MAX_AGE_GEO_S` (GEO).
         broadcast : bool, optional
             Select the record on the air at the time (latest transmission time at or
-            before it) instead of the nearest toe. Default False.
+            before it) instead of the nearest toe; the nearest toe when that record is
+            missing or outside ``max_age_s``. Default False.
 
         Returns
         -------
@@ -271,7 +273,7 @@ class NavData:
         if broadcast:
             sent, on_air = self._on_air[prn]
             k = bisect.bisect_right(sent, t) - 1
-            if k >= 0:
+            if k >= 0 and abs(t - _toe_abs(on_air[k])) <= max_age_s:
                 rec = on_air[k]
         if rec is None:
             i = bisect.bisect_left(toes, t)
