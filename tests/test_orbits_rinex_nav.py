@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import gzip
+import itertools
 import logging
 import math
 import warnings
@@ -333,7 +334,7 @@ def test_select_time_outside_window(esbc):
 
 def test_select_nearest_and_tie(esbc):
     recs = esbc.records[20]
-    a, b = next((x, y) for x, y in zip(recs, recs[1:]) if y.toe - x.toe == 3600.0)
+    a, b = next((x, y) for x, y in itertools.pairwise(recs) if y.toe - x.toe == 3600.0)
     assert esbc.select(20, a.week, a.toe + 1799.0) is a
     assert esbc.select(20, a.week, a.toe + 1801.0) is b
     assert esbc.select(20, a.week, a.toe + 1800.0) is a  # tie -> earlier toe
