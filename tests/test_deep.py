@@ -143,6 +143,21 @@ def test_prefilter_kernel_equals_matrix_reference():
     assert np.allclose(P, Pr_, rtol=1e-10, atol=1e-14)
 
 
+def _synthetic_epl(rng, k, T, d, tau0, phi0, f_err, amp):
+    """Early/prompt/late sums of code epochs ``k`` (``T`` s each) with a code offset
+    ``tau0 + beta f_err t`` [chips], carrier phase ``phi0 + 2 pi f_err t`` at the epoch
+    middles, signal amplitude ``amp`` per epoch (data signs included) and unit complex noise
+    per component; triangle correlation, spacing ``d`` chips."""
+    beta = CHIP_RATE_B3I / F_B3I
+    tau = tau0 + beta * f_err * k * T
+    ph = np.exp(1j * (phi0 + 2 * math.pi * f_err * (k + 0.5) * T)) * amp
+    out = []
+    for off in (d, 0.0, -d):
+        out.append(ph * np.maximum(1 - np.abs(tau - off), 0.0)
+                   + rng.normal(size=k.size) + 1j * rng.normal(size=k.size))
+    return tuple(out)
+
+
 def test_prefilter_estimates_code_and_frequency_errors_through_bit_flips():
     """Synthetic 1 ms correlations at 40 dB-Hz with random data-bit signs: the estimates of a
     known code offset and frequency error fall within 4 sigma of the truth."""
@@ -158,17 +173,9 @@ def test_prefilter_estimates_code_and_frequency_errors_through_bit_flips():
     n_ep = 400
     for blk in range(0, n_ep, 20):
         k = np.arange(blk, blk + 20)
-        tau = tau0 + beta * f_err * k * T
-        phi = phi0 + 2 * math.pi * f_err * (k + 0.5) * T
         sign = np.repeat(rng.choice([-1.0, 1.0]), 20)
-        def corr(off, tau=tau):
-            return np.maximum(1 - np.abs(tau - off), 0.0)
-
-        def noise():
-            return rng.normal(size=20) + 1j * rng.normal(size=20)
-        ph = np.exp(1j * phi) * sign * A
-        bank.process(0, ph * corr(d) + noise(), ph * corr(0.0) + noise(),
-                     ph * corr(-d) + noise(), np.full(20, T), cn0)
+        E, P, L = _synthetic_epl(rng, k, T, d, tau0, phi0, f_err, sign * A)
+        bank.process(0, E, P, L, np.full(20, T), cn0)
     dtau, df, vt, vf = bank.outputs(0)
     tau_end = tau0 + beta * f_err * n_ep * T
     assert abs(dtau - tau_end) < 4 * math.sqrt(vt) and math.sqrt(vt) < 0.02
@@ -215,13 +222,20 @@ def test_bit_power_sums_whole_bits_across_calls_and_estimates_cn0():
     assert bp.count == 0 and math.isnan(bp.cn0_dbhz(1.0, 1e6))
 
 
-def test_chi2_sf_even_matches_scipy():
+def test_prefilter_nis_p_is_the_chi_square_tail_of_its_nis():
+    """``nis_p`` is the chi-square survival function of the interval's NIS with two degrees
+    of freedom per block (the probability the vector loop's consistency test uses)."""
     from scipy.stats import chi2
 
-    from sdr_di.deep.prefilter import chi2_sf_even
-
-    for x, k in ((0.5, 1), (3.0, 1), (10.0, 2), (40.0, 20), (100.0, 3), (2000.0, 2)):
-        assert chi2_sf_even(x, k) == pytest.approx(chi2.sf(x, 2 * k), rel=1e-9, abs=1e-300)
+    rng = np.random.default_rng(5)
+    bank = PreFilterBank(1, 0.5)
+    k = np.arange(40)
+    E, P, L = _synthetic_epl(rng, k, 1e-3, 0.5, 0.05, 0.4, 1.0, math.sqrt(2 * 1e3 * 1e-3))
+    bank.process(0, E, P, L, np.full(40, 1e-3), 1e3, block_start=k % 20 == 0)
+    m = 2                                                   # two 20 ms blocks
+    nis = bank.nis[0] * 2 * m
+    assert bank.nis_p[0] == pytest.approx(chi2.sf(nis, 2 * m), rel=1e-9)
+    assert 0.0 < bank.nis_p[0] <= 1.0
 
 
 def _weak_prefilter_run(rng, cn0_dbhz, blocks, *, n_ep=3000, off=7, f_err=1.5):
@@ -230,7 +244,7 @@ def _weak_prefilter_run(rng, cn0_dbhz, blocks, *, n_ep=3000, off=7, f_err=1.5):
     1 fed the same blocks pre-summed. Returns the bank and channel 0's frequency errors [Hz]
     over the last 2 s."""
     cn0 = 10 ** (cn0_dbhz / 10)
-    T, d, beta = 1e-3, 0.5, CHIP_RATE_B3I / F_B3I
+    T, d = 1e-3, 0.5
     tau0, phi0 = 0.05, 0.4
     A = math.sqrt(2 * cn0 * T)
     bank = PreFilterBank(2, d, s_f=0.5)
@@ -240,16 +254,7 @@ def _weak_prefilter_run(rng, cn0_dbhz, blocks, *, n_ep=3000, off=7, f_err=1.5):
     err = []
     for blk in range(0, n_ep, 20):
         k = np.arange(blk, blk + 20)
-        tau = tau0 + beta * f_err * k * T
-        phi = phi0 + 2 * math.pi * f_err * (k + 0.5) * T
-        ph = np.exp(1j * phi) * sign[(k + off) // 20] * A
-
-        def corr(o, tau=tau):
-            return np.maximum(1 - np.abs(tau - o), 0.0)
-
-        def noise():
-            return rng.normal(size=20) + 1j * rng.normal(size=20)
-        E, P, L = ph * corr(d) + noise(), ph * corr(0.0) + noise(), ph * corr(-d) + noise()
+        E, P, L = _synthetic_epl(rng, k, T, d, tau0, phi0, f_err, sign[(k + off) // 20] * A)
         start = (k + off) % 20 == 0
         bank.process(0, E, P, L, np.full(20, T), cn0, block_start=start if blocks else None)
         if blocks:

@@ -16,8 +16,8 @@ for ``M`` sums of ``n`` samples each, the known-noise estimate ``mean(|P|^2) - n
 windows, and a 23 dB-Hz signal fails on 2 % against 16 %.
 
 The sums are of different lengths where a bit is cut by the start of the loop; the estimator
-weights them (``a^2 = sum(|P_b|^2 - n_b N) / sum(n_b^2)``, ``C/N0 = a^2 f_s / N``, complex
-samples). A bit that spans two integration intervals is accumulated across them: the NCO
+(:func:`~sdr_di.receiver.lock.cn0_known_noise` with per-sum noise powers and lengths)
+weights them: ``a^2 = sum(|P_b|^2 - n_b N) / sum(n_b^2)``, ``C/N0 = a^2 f_s / N``. A bit that spans two integration intervals is accumulated across them: the NCO
 phase is continuous and the feedback moves its frequency by a small fraction of a hertz.
 """
 
@@ -26,6 +26,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from ..receiver.lock import cn0_known_noise
 
 __all__ = ["BitPower"]
 
@@ -122,9 +124,5 @@ class BitPower:
         k = self.count if last is None else min(int(last), self.count)
         if k <= 0 or not noise_power > 0.0:
             return math.nan
-        p, n = self.p[-k:], self.n[-k:]
-        a2 = float(np.sum(p.real ** 2 + p.imag ** 2) - noise_power * n.sum()) / float(
-            np.sum(n * n))
-        if not a2 > 0.0:
-            return math.nan
-        return 10.0 * math.log10(a2 * fs / noise_power)
+        n = self.n[-k:]
+        return cn0_known_noise(self.p[-k:], noise_power * n, n / fs)

@@ -72,13 +72,28 @@ def prompt_signal_power(prompts: np.ndarray, noise_power: float) -> float:
     return float(np.mean(p.real * p.real + p.imag * p.imag)) - float(noise_power)
 
 
-def cn0_known_noise(prompts: np.ndarray, noise_power: float, t_coh_s: float) -> float:
+def cn0_known_noise(prompts: np.ndarray, noise_power, t_coh_s) -> float:
     """C/N0 [dB-Hz] of complex prompts of ``t_coh_s`` seconds with known noise power per
-    prompt (NaN when the signal power is not positive)."""
-    pd = prompt_signal_power(prompts, noise_power)
-    if not (pd > 0.0 and noise_power > 0.0):
+    prompt (NaN when the signal power is not positive).
+
+    ``noise_power`` and ``t_coh_s`` may also be per-prompt arrays, for prompts summed over
+    different lengths (``N_b = n_b E|x|^2``, ``T_b = n_b / f_s``): the estimate is then
+    ``sum(|P_b|^2 - N_b) / sum(N_b T_b)``, the least-squares signal amplitude of the sums
+    (equal to the scalar form for equal lengths).
+    """
+    if np.ndim(noise_power) == 0 and np.ndim(t_coh_s) == 0:
+        pd = prompt_signal_power(prompts, noise_power)
+        if not (pd > 0.0 and noise_power > 0.0):
+            return math.nan
+        return 10.0 * math.log10(pd / (noise_power * t_coh_s))
+    p = np.asarray(prompts)
+    nb = np.broadcast_to(np.asarray(noise_power, float), p.shape)
+    tb = np.broadcast_to(np.asarray(t_coh_s, float), p.shape)
+    pd = float(np.sum(p.real * p.real + p.imag * p.imag - nb))
+    den = float(np.sum(nb * tb))
+    if not (pd > 0.0 and den > 0.0):
         return math.nan
-    return 10.0 * math.log10(pd / (noise_power * t_coh_s))
+    return 10.0 * math.log10(pd / den)
 
 
 def cn0_m2m4(prompts: np.ndarray, t_coh_s: float) -> float:
