@@ -37,6 +37,16 @@ class SampleFormatError(SdrDiError):
     """Unknown or inconsistent IF sample format."""
 
 
+class SidecarError(SampleFormatError):
+    """Unreadable IF metadata sidecar: not a JSON object, wrong schema, a key missing or of the
+    wrong type."""
+
+
+class FileSetError(SidecarError):
+    """A file of a generated set (IF, IMU, truth) is missing or is not the file its sidecar was
+    written with (size or digest differ: a mixed set)."""
+
+
 class ImuDataError(SdrDiError):
     """IMU data with NaN, gaps or non-monotonic time."""
 
@@ -83,3 +93,8 @@ class ExperimentError(SdrDiError):
 class CampaignError(SdrDiError):
     """Bad campaign configuration (``runs < 1``, bad worker count, unreachable scheduler) or a
     campaign in which no run completed."""
+
+
+class AcquisitionError(SdrDiError, ValueError):
+    """An acquisition that cannot run: a file shorter than one code period, or search
+    parameters out of range (coherent or non-coherent length, Doppler range, pfa)."""

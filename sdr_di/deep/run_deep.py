@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ImuDataError, SampleFormatError
+from ..errors import ImuDataError
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..receiver.ifreader import IfSource
 from .vector_loop import DeepConfig, DeepReceiver, DeepResult
@@ -49,22 +49,28 @@ class DeepRunSummary:
     wall_s: float
 
 
-def companion_files(source: IfSource) -> dict:
-    """``{"imu", "truth", "ephemeris"}`` paths named by the IF file's sidecar (None if absent)."""
+def companion_files(source: IfSource, skip: tuple[str, ...] = ()) -> dict:
+    """``{"imu", "truth", "ephemeris"}`` paths named by the IF file's sidecar (None if absent).
+
+    The sidecar is the one the source was opened from (else ``X.json`` beside ``X.bin``); the
+    IMU and truth files are checked against the sizes and digests it records
+    (:func:`~sdr_di.io.sidecar.check_member`: a mixed set raises ``FileSetError``), except
+    those named in ``skip`` (replaced by the caller's own files).
+    """
+    from ..io.sidecar import check_member, member_path, read_sidecar
+
     out = {"imu": None, "truth": None, "ephemeris": None}
-    sidecar = source.path.with_suffix(".json")
-    if not sidecar.exists():
-        return out
-    try:
-        meta = json.loads(sidecar.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise SampleFormatError(f"sidecar {sidecar}: unreadable ({exc})") from None
-    for key, name in (("imu", "imu_file"), ("truth", "truth_file"),
-                      ("ephemeris", "ephemeris_file")):
-        v = meta.get(name)
-        if v:
-            p = Path(v)
-            out[key] = p if p.is_absolute() else sidecar.parent / p
+    sidecar = getattr(source, "sidecar_path", None)
+    meta = source.meta if sidecar is not None else None
+    if meta is None:
+        sidecar = source.path.with_suffix(".json")
+        if not sidecar.exists():
+            return out
+        meta = read_sidecar(sidecar)
+    for key in ("imu", "truth"):
+        if key not in skip:
+            out[key] = check_member(sidecar, meta, f"{key}_file")
+    out["ephemeris"] = member_path(sidecar, meta, "ephemeris_file")
     return out
 
 
@@ -113,7 +119,9 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
     from ..orbits.rinex_nav import load_nav
 
     cfg = config or DeepConfig()
-    comp = companion_files(source)
+    comp = companion_files(source, skip=tuple(k for k, p in (("imu", imu_path),
+                                                              ("truth", truth_path))
+                                              if p is not None))
     imu_path = Path(imu_path) if imu_path is not None else comp["imu"]
     if imu_path is None:
         raise ImuDataError(f"{source.path}: deep mode needs an IMU file (--imu); the sidecar "

@@ -3,6 +3,16 @@
 Every output is written to ``<final>.part`` in the same directory and renamed with
 :func:`os.replace` only when complete; on any error the ``.part`` file is removed and an
 :class:`~sdr_di.errors.OutputError` names the file and the cause.
+
+Files that belong together (an IF file with its IMU, truth and sidecar) are written with an
+:class:`OutputSet`: every member goes to its ``.part`` name first, and only when all are
+complete are they renamed, in the order they were opened (companions first, the file that
+describes them last). A failure or an interrupt before that point removes the new ``.part``
+files and leaves whatever an earlier run left under the final names untouched. A kill between
+two renames leaves a set whose members do not match their sidecar: the sidecar records each
+member's size and digest (:mod:`sdr_di.io.sidecar`) so that readers refuse such a set.
+Renames are not followed by ``fsync``: the guarantee holds against a killed or failed
+process, not against a power cut.
 """
 
 from __future__ import annotations
@@ -73,3 +83,91 @@ def atomic_open(final: str | Path, mode: str = "wb") -> Iterator[BinaryIO]:
                 raise OutputError(f"{final}: cannot rename ({exc.strerror or exc})") from None
         else:
             part.unlink(missing_ok=True)
+
+
+class OutputSet:
+    """Files written under ``.part`` names and renamed together once all are complete.
+
+    Use as a context manager: leaving the block with an exception (``KeyboardInterrupt``
+    included) deletes every ``.part`` file of the set; :meth:`commit` renames them to their
+    final names in the order they were opened, so the last one opened (the sidecar) appears
+    last.
+
+    Examples
+    --------
+    >>> with OutputSet() as files:                                   # doctest: +SKIP
+    ...     with files.open(out / "x.bin") as fh:
+    ...         fh.write(data)
+    ...     with files.open(out / "x.json", "w") as fh:
+    ...         fh.write(text)
+    ...     files.commit()
+    """
+
+    def __init__(self) -> None:
+        self._members: list[tuple[Path, Path]] = []
+        self._committed = False
+
+    def __enter__(self) -> OutputSet:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is not None or not self._committed:
+            self.discard()
+
+    @staticmethod
+    def part_name(final: str | Path) -> Path:
+        """The temporary name of ``final`` while it is written."""
+        final = Path(final)
+        return final.with_name(final.name + ".part")
+
+    @contextlib.contextmanager
+    def open(self, final: str | Path, mode: str = "wb") -> Iterator[BinaryIO]:
+        """Open the member ``final`` for writing under its ``.part`` name.
+
+        Raises
+        ------
+        OutputError
+            Any OSError while opening or writing (the ``.part`` file is removed).
+        """
+        final = Path(final)
+        if any(f == final for f, _ in self._members):
+            raise ValueError(f"{final}: already a member of this output set")
+        part = self.part_name(final)
+        try:
+            fh = open(part, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""}))
+        except OSError as exc:
+            raise OutputError(f"{final}: cannot write ({exc.strerror or exc})") from None
+        self._members.append((final, part))
+        try:
+            with fh:
+                yield fh
+        except OSError as exc:
+            raise OutputError(f"{final}: write failed ({exc.strerror or exc})") from None
+
+    def commit(self) -> list[Path]:
+        """Rename every member to its final name, in the order opened; returns the names.
+
+        Raises
+        ------
+        OutputError
+            A rename failed; the members not yet renamed are deleted.
+        """
+        done = []
+        for final, part in self._members:
+            try:
+                os.replace(part, final)
+            except OSError as exc:
+                self._members = self._members[len(done):]
+                self.discard()
+                raise OutputError(f"{final}: cannot rename ({exc.strerror or exc})") from None
+            done.append(final)
+        self._committed = True
+        return done
+
+    def discard(self) -> None:
+        """Delete the ``.part`` files not yet renamed (final names are never touched)."""
+        for _, part in self._members:
+            try:
+                part.unlink(missing_ok=True)
+            except OSError:
+                pass

@@ -43,7 +43,7 @@ from ..errors import ImuDataError
 from ..frames import euler_to_C_b_n
 from ..sim.imu import ImuData
 from ..sim.trajectory import Truth
-from .atomic import atomic_open
+from .atomic import OutputSet, atomic_open
 
 IMU_COLUMNS = ("t", "gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
 TRUTH_COLUMNS = (
@@ -76,10 +76,11 @@ def _check_shapes(kind: str, t, **arrays) -> int:
 
 
 def _write(path: Path, kind: str, header: list[str], columns: tuple[str, ...],
-           data: np.ndarray) -> None:
+           data: np.ndarray, output_set: OutputSet | None) -> None:
     if data.ndim != 2 or data.shape[1] != len(columns):  # pragma: no cover - checked before
         raise ValueError(f"{kind}: {data.shape[1]} columns to write, expected {len(columns)}")
-    with atomic_open(path, "w") as fh:
+    opener = atomic_open if output_set is None else output_set.open
+    with opener(path, "w") as fh:
         fh.write(f"# sdr-di {kind} v1\n")
         for line in header:
             fh.write(f"# {line}\n")
@@ -88,7 +89,7 @@ def _write(path: Path, kind: str, header: list[str], columns: tuple[str, ...],
 
 
 def write_imu(path: str | Path, imu: ImuData, week: int | None = None,
-              sow: float | None = None) -> Path:
+              sow: float | None = None, *, output_set: OutputSet | None = None) -> Path:
     """Write an IMU record (atomically).
 
     Parameters
@@ -99,6 +100,8 @@ def write_imu(path: str | Path, imu: ImuData, week: int | None = None,
         The record; its ``week``/``sow`` are used unless given here.
     week, sow : int, float, optional
         BDT week and seconds of week of ``t = 0``.
+    output_set : OutputSet, optional
+        Write the file as a member of this set (renamed by its ``commit``).
 
     Returns
     -------
@@ -129,13 +132,14 @@ def write_imu(path: str | Path, imu: ImuData, week: int | None = None,
     header.append("columns: t [s since scenario start], gyro_x gyro_y gyro_z [rad/s], "
                   "accel_x accel_y accel_z [m/s^2]")
     data = np.column_stack([imu.t, imu.w_ib_b, imu.f_b])
-    _write(path, "imu", header, IMU_COLUMNS, data)
+    _write(path, "imu", header, IMU_COLUMNS, data, output_set)
     return path
 
 
 def write_truth(path: str | Path, truth: Truth, week: int | None = None,
-                sow: float | None = None) -> Path:
-    """Write a trajectory truth record (atomically); columns in the module docstring.
+                sow: float | None = None, *, output_set: OutputSet | None = None) -> Path:
+    """Write a trajectory truth record (atomically, or as a member of ``output_set``);
+    columns in the module docstring.
 
     Raises
     ------
@@ -159,7 +163,7 @@ def write_truth(path: str | Path, truth: Truth, week: int | None = None,
         truth.t, np.degrees(truth.llh[:, :2]), truth.llh[:, 2], truth.v_n, np.degrees(truth.att),
         truth.f_b, truth.w_ib_b, truth.r_e, truth.v_e, truth.a_e,
     ])
-    _write(path, "truth", header, TRUTH_COLUMNS, data)
+    _write(path, "truth", header, TRUTH_COLUMNS, data, output_set)
     return path
 
 

@@ -19,48 +19,225 @@ The sidecar of ``run.bin`` is ``run.json``. Keys (schema ``sdr-di-if/1``):
                        "azimuth_deg", "doppler_hz", "code_phase_chips"}`` at t = 0
 ``imu_file``, ``truth_file``, ``ephemeris_file``   companion files
 ``generator``          ``{"name": "sdr-di", "version"}``
+``files``              ``{NAME: {"size": bytes, "sha256_first_last_mib": hex}}`` for the IF,
+                       IMU and truth files of the set, NAME as written in ``if_file``...
+                       (see below; absent in sidecars written by hand or by sdr-di before it
+                       recorded them: such members are only checked for existence)
+
+A generated set is written as one :class:`~sdr_di.io.atomic.OutputSet`: the IF, IMU and truth
+files under ``.part`` names, then the sidecar, then the renames with the sidecar last. The
+sidecar's ``files`` record the size of each member and the SHA-256 of its first and last MiB
+(:func:`file_fingerprint`; the whole file when it is shorter than 2 MiB), so that a reader can
+tell in one small read whether a member is the file the sidecar was written with:
+:func:`check_member` raises :class:`~sdr_di.errors.FileSetError` for a member that is missing,
+of another size or of another digest (a re-generation killed between renames, or files copied
+from two runs). The digest is not a full-file checksum: it catches a mixed set, not a bit flip
+in the middle of a large file.
+
+:func:`read_sidecar` checks the types of every key a reader uses and raises
+:class:`~sdr_di.errors.SidecarError` (a :class:`~sdr_di.errors.SampleFormatError`) naming the
+sidecar and the key.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
 from pathlib import Path
 from typing import Any
 
-from ..errors import SampleFormatError
-from .atomic import atomic_open
+from ..errors import FileSetError, SidecarError
+from .atomic import OutputSet, atomic_open
 
 SCHEMA = "sdr-di-if/1"
 
+#: Bytes hashed at each end of a member file by :func:`file_fingerprint`.
+FINGERPRINT_BYTES = 1 << 20
+#: Name of the digest in a ``files`` record.
+DIGEST_KEY = "sha256_first_last_mib"
+#: Sidecar keys naming members of the set (relative to the sidecar's folder).
+MEMBER_KEYS = ("if_file", "imu_file", "truth_file")
 
-def write_sidecar(path: str | Path, meta: dict[str, Any]) -> Path:
-    """Write the sidecar atomically; returns its path."""
+
+def write_sidecar(path: str | Path, meta: dict[str, Any], *,
+                  output_set: OutputSet | None = None) -> Path:
+    """Write the sidecar; returns its (final) path.
+
+    Parameters
+    ----------
+    path : path
+        Final name of the sidecar.
+    meta : dict
+        Its contents (``schema`` is added).
+    output_set : OutputSet, optional
+        Write it as the next member of this set (renamed by the set's ``commit``) instead of
+        atomically on its own.
+    """
     path = Path(path)
     meta = {"schema": SCHEMA, **meta}
-    with atomic_open(path, "w") as fh:
+    opener = atomic_open if output_set is None else output_set.open
+    with opener(path, "w") as fh:
         json.dump(meta, fh, indent=2, sort_keys=False)
         fh.write("\n")
     return path
 
 
-def read_sidecar(path: str | Path) -> dict[str, Any]:
-    """Read and check a sidecar.
+def file_fingerprint(path: str | Path) -> dict[str, Any]:
+    """Size and SHA-256 of the first and last MiB of a file (module notes).
+
+    Returns
+    -------
+    dict
+        ``{"size": bytes, "sha256_first_last_mib": hex digest}``; the digest also covers the
+        size, so two files of different sizes never share it.
 
     Raises
     ------
-    SampleFormatError
-        Missing file, not JSON, wrong schema or missing required key.
+    OSError
+        The file cannot be read.
+    """
+    path = Path(path)
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        size = fh.seek(0, 2)
+        h.update(str(size).encode("ascii") + b"\n")
+        fh.seek(0)
+        if size <= 2 * FINGERPRINT_BYTES:
+            h.update(fh.read())
+        else:
+            h.update(fh.read(FINGERPRINT_BYTES))
+            fh.seek(size - FINGERPRINT_BYTES)
+            h.update(fh.read(FINGERPRINT_BYTES))
+    return {"size": size, DIGEST_KEY: h.hexdigest()}
+
+
+def member_path(sidecar: str | Path, meta: dict[str, Any], key: str) -> Path | None:
+    """Path of the member named by ``meta[key]`` (relative to the sidecar), None if absent."""
+    name = meta.get(key)
+    if not name:
+        return None
+    p = Path(name)
+    return p if p.is_absolute() else Path(sidecar).parent / p
+
+
+def check_member(sidecar: str | Path, meta: dict[str, Any], key: str) -> Path | None:
+    """Resolve the member ``meta[key]`` and check it is the file the sidecar was written with.
+
+    Parameters
+    ----------
+    sidecar : path
+        The sidecar file (members are relative to its folder).
+    meta : dict
+        Its contents (:func:`read_sidecar`).
+    key : str
+        ``"if_file"``, ``"imu_file"`` or ``"truth_file"``.
+
+    Returns
+    -------
+    Path or None
+        The member's path; None when the sidecar names no such file.
+
+    Raises
+    ------
+    FileSetError
+        The member is missing, or its size or digest differs from the sidecar's ``files``
+        record. A member the sidecar has no record of (a hand-written or older sidecar) is
+        only checked for existence.
+    """
+    path = member_path(sidecar, meta, key)
+    if path is None:
+        return None
+    if not path.is_file():
+        raise FileSetError(f"sidecar {sidecar}: {key} {path} not found")
+    rec = (meta.get("files") or {}).get(meta[key])
+    if rec is None:
+        return path
+    try:
+        got = file_fingerprint(path)
+    except OSError as exc:
+        raise FileSetError(f"sidecar {sidecar}: {key} {path}: cannot read "
+                           f"({exc.strerror or exc})") from None
+    if got["size"] != rec["size"] or got[DIGEST_KEY] != rec[DIGEST_KEY]:
+        what = (f"{got['size']} bytes, the sidecar records {rec['size']}"
+                if got["size"] != rec["size"] else "same size, different content")
+        raise FileSetError(
+            f"sidecar {sidecar}: {path.name} is not the file this sidecar was written with "
+            f"({what}): the set is mixed (an interrupted re-generation?); generate it again")
+    return path
+
+
+def _is_num(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+#: Type checks of the keys readers use: (key, required, test, what the value must be).
+_CHECKS: tuple[tuple[str, bool, Any, str], ...] = (
+    ("if_file", True, lambda v: isinstance(v, str) and v.strip() != "", "a file name"),
+    ("sampling_rate_hz", True, lambda v: _is_num(v) and v > 0, "a number > 0"),
+    ("if_hz", True, _is_num, "a finite number"),
+    ("sample_format", True, lambda v: isinstance(v, str), "a format name"),
+    ("n_samples", True, lambda v: _is_int(v) and v > 0, "an integer > 0"),
+    ("start", True, lambda v: isinstance(v, dict), "an object {week, sow, ...}"),
+    ("carrier_hz", False, lambda v: _is_num(v) and v > 0, "a number > 0"),
+    ("quantization_bits", False, lambda v: _is_int(v) and 1 <= v <= 32, "an integer 1..32"),
+    ("spectrum_inverted", False, lambda v: isinstance(v, bool), "true or false"),
+    ("imu_file", False, lambda v: isinstance(v, str), "a file name"),
+    ("truth_file", False, lambda v: isinstance(v, str), "a file name"),
+    ("ephemeris_file", False, lambda v: isinstance(v, str), "a file name"),
+    ("files", False, lambda v: isinstance(v, dict) and all(
+        isinstance(r, dict) and _is_int(r.get("size")) and isinstance(r.get(DIGEST_KEY), str)
+        for r in v.values()), f"an object {{name: {{size, {DIGEST_KEY}}}}}"),
+)
+
+
+def read_sidecar(path: str | Path) -> dict[str, Any]:
+    """Read and check a sidecar.
+
+    Returns
+    -------
+    dict
+        The sidecar contents; ``start["week"]``/``start["sow"]`` are None when absent.
+
+    Raises
+    ------
+    SidecarError
+        Missing or unreadable file, not a JSON object, wrong schema, missing required key or
+        a key of the wrong type or out of range (one line naming the key).
     """
     path = Path(path)
     try:
         meta = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SidecarError(f"sidecar {path}: not found") from None
     except OSError as exc:
-        raise SampleFormatError(f"sidecar {path}: cannot read ({exc.strerror or exc})") from None
-    except json.JSONDecodeError as exc:
-        raise SampleFormatError(f"sidecar {path}: not JSON ({exc})") from None
+        raise SidecarError(f"sidecar {path}: cannot read ({exc.strerror or exc})") from None
+    except (UnicodeDecodeError, ValueError) as exc:  # JSONDecodeError is a ValueError
+        raise SidecarError(f"sidecar {path}: not JSON ({exc})") from None
+    except RecursionError:
+        raise SidecarError(f"sidecar {path}: not JSON (nested too deeply)") from None
+    if not isinstance(meta, dict):
+        raise SidecarError(f"sidecar {path}: not a JSON object (top level is "
+                           f"{type(meta).__name__})")
     if meta.get("schema") != SCHEMA:
-        raise SampleFormatError(f"sidecar {path}: schema {meta.get('schema')!r}, expected {SCHEMA!r}")
-    for key in ("if_file", "sampling_rate_hz", "if_hz", "sample_format", "n_samples", "start"):
+        raise SidecarError(f"sidecar {path}: schema {meta.get('schema')!r}, expected {SCHEMA!r}")
+    for key, required, ok, what in _CHECKS:
         if key not in meta:
-            raise SampleFormatError(f"sidecar {path}: missing key {key!r}")
+            if required:
+                raise SidecarError(f"sidecar {path}: missing key {key!r}")
+            continue
+        if not (meta[key] is None and not required) and not ok(meta[key]):
+            raise SidecarError(f"sidecar {path}: {key} must be {what}, got {meta[key]!r:.60}")
+    start = meta["start"]
+    week, sow = start.get("week"), start.get("sow")
+    if week is not None and not (_is_int(week) and 0 <= week <= 9999):
+        raise SidecarError(f"sidecar {path}: start.week must be a BDT week 0..9999, got "
+                           f"{week!r:.60}")
+    if sow is not None and not (_is_num(sow) and 0 <= sow < 604800):
+        raise SidecarError(f"sidecar {path}: start.sow must be BDT seconds of week in "
+                           f"[0, 604800), got {sow!r:.60}")
     return meta

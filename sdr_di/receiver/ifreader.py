@@ -83,7 +83,7 @@ import numpy as np
 from ..constants import F_B3I, SECONDS_PER_WEEK
 from ..errors import SampleFormatError
 from ..io.sample_formats import SampleFormat, get_format, unpack_iq_int4
-from ..io.sidecar import read_sidecar
+from ..io.sidecar import check_member, member_path, read_sidecar
 
 __all__ = ["IfFileWarning", "IfSource", "check_format_statistics"]
 
@@ -231,17 +231,18 @@ class IfSource:
         """
         path = Path(path)
         meta = read_sidecar(path)
-        if_path = Path(meta["if_file"])
-        if not if_path.is_absolute():
-            if_path = path.parent / if_path
+        if_path = member_path(path, meta, "if_file")
         if not if_path.exists():
             raise SampleFormatError(f"sidecar {path}: IF file {if_path} not found")
+        check_member(path, meta, "if_file")  # size and digest recorded by the generator
         start = meta.get("start") or {}
-        return cls(if_path, meta["sampling_rate_hz"], meta["if_hz"], meta["sample_format"],
-                   spectrum_inverted=bool(meta.get("spectrum_inverted", False)),
-                   start_week=start.get("week"), start_sow=start.get("sow"),
-                   n_samples=meta["n_samples"], check_format=check_format,
-                   carrier_hz=float(meta.get("carrier_hz", F_B3I)), meta=meta)
+        src = cls(if_path, meta["sampling_rate_hz"], meta["if_hz"], meta["sample_format"],
+                  spectrum_inverted=bool(meta.get("spectrum_inverted", False)),
+                  start_week=start.get("week"), start_sow=start.get("sow"),
+                  n_samples=meta["n_samples"], check_format=check_format,
+                  carrier_hz=float(meta.get("carrier_hz", F_B3I)), meta=meta)
+        src.sidecar_path = path  # its companions (IMU, truth) are relative to it
+        return src
 
     # -- properties ---------------------------------------------------------------------------
     @property

@@ -7,8 +7,12 @@ Outputs in ``out_dir`` (``NAME`` = scenario name unless given):
 ``NAME_imu.csv``    200 Hz IMU data (:mod:`sdr_di.io.imu_files`)
 ``NAME_truth.csv``  200 Hz truth (position, velocity, attitude, specific force, rates)
 
-Each file is written under ``<file>.part`` and renamed when complete; on any error nothing
-new carries a final name.
+The four files are one :class:`~sdr_di.io.atomic.OutputSet`: each is written under
+``<file>.part``; only when all four are complete are they renamed, the sidecar last. On any
+error or interrupt the ``.part`` files are removed and the files of an earlier set under the
+same names are left as they were. The sidecar records the size and digest of the other three
+(:func:`~sdr_di.io.sidecar.file_fingerprint`), so a set mixed by a kill between the renames
+is refused by every reader (:func:`~sdr_di.io.sidecar.check_member`).
 """
 
 from __future__ import annotations
@@ -21,9 +25,9 @@ import numpy as np
 
 from .. import __version__
 from ..errors import OutputError, ScenarioError
-from ..io.atomic import atomic_open, ensure_output_dir
+from ..io.atomic import OutputSet, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
-from ..io.sidecar import write_sidecar
+from ..io.sidecar import file_fingerprint, write_sidecar
 from ..orbits.ephemeris import Klobuchar
 from ..orbits.rinex_nav import load_nav
 from ..scenario.schema import Scenario
@@ -119,20 +123,20 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
 
         bar = tqdm(total=round(duration, 3), unit="s", desc=f"generate {name}",
                    bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s [{elapsed}<{remaining}]")
-    try:
-        with atomic_open(paths["if"]) as fh:
-            for chunk in gen.chunks():
-                fh.write(memoryview(np.ascontiguousarray(chunk)).cast("B"))
-                if bar is not None:
-                    bar.update(chunk.shape[0] / gen.fs)
-    finally:
-        if bar is not None:
-            bar.close()
-    try:
+    with OutputSet() as files:  # any error or interrupt: the .part files go, old files stay
+        try:
+            with files.open(paths["if"]) as fh:
+                for chunk in gen.chunks():
+                    fh.write(memoryview(np.ascontiguousarray(chunk)).cast("B"))
+                    if bar is not None:
+                        bar.update(chunk.shape[0] / gen.fs)
+        finally:
+            if bar is not None:
+                bar.close()
         week, sow = sc.week, sc.sow
         bdt = bdt_to_datetime(week, sow)
-        write_imu(paths["imu"], imu, week=week, sow=sow)
-        write_truth(paths["truth"], truth, week=week, sow=sow)
+        write_imu(paths["imu"], imu, week=week, sow=sow, output_set=files)
+        write_truth(paths["truth"], truth, week=week, sow=sow, output_set=files)
         utc = bdt - _dt.timedelta(seconds=bdt_minus_utc(bdt))
         meta = {
             "if_file": paths["if"].name,
@@ -163,10 +167,15 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "ephemeris_file": str(sc.satellites.ephemeris),
             "generator": {"name": "sdr-di", "version": __version__},
         }
-        write_sidecar(paths["metadata"], meta)
-    except BaseException:
-        for key in ("if", "imu", "truth"):
-            paths[key].unlink(missing_ok=True)
-        raise
+        meta["files"] = {paths[k].name: _fingerprint(paths[k], files)
+                         for k in ("if", "imu", "truth")}
+        write_sidecar(paths["metadata"], meta, output_set=files)  # opened last: renamed last
+        files.commit()
     return paths
 
+
+def _fingerprint(final: Path, files: OutputSet) -> dict:
+    try:
+        return file_fingerprint(files.part_name(final))
+    except OSError as exc:
+        raise OutputError(f"{final}: cannot read back ({exc.strerror or exc})") from None
