@@ -13,6 +13,13 @@ the resident memory is bounded by the requested block whatever the file length (
 whole-file map would keep every touched page resident while it lives). Values are the stored
 integers (no scaling): a 4-bit ``iq_int8`` file gives I and Q in -7..7.
 
+Byte-coded layouts (``iq_int4``, SignalSim ``iq_int4_sm``, PocketSDR ``pocket_raw*``) are
+unpacked per block through one 256-entry table per (format, RF channel), built from the
+registry's :func:`~sdr_di.io.sample_formats.byte_layout`: a vectorised gather, no per-sample
+Python. Their values are the peers' odd levels (``+-1, +-3`` for 2 bits, ``+-1..+-15`` for
+SignalSim's 4 bits). The multi-channel PocketSDR layouts are read one RF channel at a time
+(``rf_channel``, 1-based); only that channel's byte of each sample is decoded.
+
 Spectrum inversion (``spectrum_inverted=True``)
     * complex formats: the samples are conjugated, so the returned stream is non-inverted and
       ``if_hz`` is the IF of that corrected stream (a satellite with Doppler ``fd`` appears at
@@ -67,10 +74,13 @@ naming the file)
   identical byte statistics), big-endian 16-bit data, offset-binary (unsigned) samples,
   8-bit data whose noise spans more than about +-100 LSB declared as 16-bit, wrong sampling
   rate or IF (acquisition finds nothing, or finds satellites at wrong Doppler/code rates).
+  The peers' layouts (``iq_int4_sm``, ``pocket_raw*``) are not judged beyond the float32
+  test: every byte value is a valid sample there.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import warnings
@@ -82,7 +92,7 @@ import numpy as np
 
 from ..constants import F_B3I, SECONDS_PER_WEEK
 from ..errors import SampleFormatError
-from ..io.sample_formats import SampleFormat, get_format, unpack_iq_int4
+from ..io.sample_formats import SampleFormat, byte_layout, get_format
 from ..io.sidecar import check_member, member_path, read_sidecar
 
 __all__ = ["IfFileWarning", "IfSource", "check_format_statistics"]
@@ -92,11 +102,26 @@ class IfFileWarning(UserWarning):
     """Suspicious but readable IF file (partial trailing sample, longer than declared)."""
 
 
-# 256-entry table built with the registry's unpack: packed iq_int4 byte -> complex64.
-_I4, _Q4 = unpack_iq_int4(np.arange(256, dtype=np.uint8))
-_IQ_INT4_LUT = (_I4.astype(np.float32) + 1j * _Q4.astype(np.float32)).astype(np.complex64)
-# the same as int8 (I, Q) pairs, for read_stored
-_IQ_INT4_PAIRS = np.ascontiguousarray(np.stack([_I4, _Q4], axis=1).astype(np.int8))
+
+@functools.cache
+def _byte_tables(name: str, rf_channel: int) -> tuple[int, np.ndarray, np.ndarray] | None:
+    """Reader tables of a byte-coded format (the registry's :func:`byte_layout`).
+
+    Returns the byte index of the channel inside a sample, a 256-entry table to the
+    :meth:`IfSource.read` values (complex64 or float32) and a contiguous ``(256, n_comp)``
+    int8 table for :meth:`IfSource.read_stored`; None for plain containers.
+    """
+    layout = byte_layout(get_format(name), rf_channel)
+    if layout is None:
+        return None
+    byte, table = layout
+    pairs = np.ascontiguousarray(table.astype(np.int8))
+    if table.shape[1] == 2:
+        values = (table[:, 0].astype(np.float32)
+                  + 1j * table[:, 1].astype(np.float32)).astype(np.complex64)
+    else:
+        values = table[:, 0].astype(np.float32)
+    return byte, values, pairs
 
 _CHECK_WINDOW_BYTES = 65536
 _CHECK_MIN_PAIRS = 4096
@@ -130,6 +155,10 @@ class IfSource:
         RF carrier the IF corresponds to [Hz], for code-Doppler scaling. Default B3I.
     meta : dict, optional
         The sidecar contents, kept as :attr:`meta`.
+    rf_channel : int, optional
+        RF channel to read, 1-based (PocketSDR ``-RFCH`` numbering), for formats that
+        interleave several (``pocket_raw*``); required for them, and must be 1 or None for
+        single-channel formats.
 
     Raises
     ------
@@ -141,12 +170,24 @@ class IfSource:
                  sample_format: str, spectrum_inverted: bool = False,
                  start_week: int | None = None, start_sow: float | None = None, *,
                  n_samples: int | None = None, check_format: bool = True,
-                 carrier_hz: float = F_B3I, meta: dict[str, Any] | None = None):
+                 carrier_hz: float = F_B3I, meta: dict[str, Any] | None = None,
+                 rf_channel: int | None = None):
         self.path = Path(path)
         try:
             self.format: SampleFormat = get_format(sample_format)
         except SampleFormatError as exc:
             raise SampleFormatError(f"IF file {self.path}: {exc}") from None
+        n_ch = self.format.n_rf_channels
+        if rf_channel is None and n_ch > 1:
+            raise SampleFormatError(f"IF file {self.path}: {self.format.name} interleaves {n_ch} "
+                                    f"RF channels; choose one with --rfch (1-{n_ch})")
+        ch = 1 if rf_channel is None else rf_channel
+        if (isinstance(ch, bool) or not isinstance(ch, (int, np.integer))
+                or not 1 <= ch <= n_ch):
+            raise SampleFormatError(f"IF file {self.path}: RF channel {rf_channel!r} outside "
+                                    f"1..{n_ch} of {self.format.name}")
+        self.rf_channel = int(ch)
+        self._tables = _byte_tables(self.format.name, self.rf_channel)
         fs = float(sampling_rate_hz)
         if not (math.isfinite(fs) and fs > 0.0):
             raise SampleFormatError(f"IF file {self.path}: sampling rate {sampling_rate_hz!r} Hz "
@@ -285,6 +326,20 @@ class IfSource:
                 f"inverted={self.spectrum_inverted})")
 
     # -- reading -----------------------------------------------------------------------------
+    def _convert(self, raw: np.ndarray) -> np.ndarray:
+        """Raw bytes of whole samples -> complex64 / float32 values (a fresh array)."""
+        fmt = self.format
+        if self._tables is not None:
+            byte, values, _ = self._tables
+            bps = fmt.bytes_per_sample
+            return values[raw[byte::bps] if bps > 1 else raw]
+        if fmt.name == "gr_complex":
+            return raw.view(np.dtype("<f4")).astype(np.float32).view(np.complex64)
+        vals = raw.view(fmt.dtype).astype(np.float32)
+        if fmt.is_complex:
+            return vals.view(np.complex64)
+        return vals
+
     def read(self, start_sample: int, n: int) -> np.ndarray:
         """Read ``n`` samples starting at sample ``start_sample``.
 
@@ -318,7 +373,7 @@ class IfSource:
         raw = np.memmap(self.path, dtype=np.uint8, mode="r", offset=start_sample * bps,
                         shape=(n * bps,))
         try:
-            out = _convert(raw, self.format)
+            out = self._convert(raw)
         finally:
             mm = getattr(raw, "_mmap", None)
             del raw
@@ -348,8 +403,8 @@ class IfSource:
         Returns
         -------
         values : numpy.ndarray
-            1-D, ``n * n_comp`` values: ``int8`` (``iq_int8``, ``real_int8``, ``iq_int4``
-            unpacked), ``int16`` (``iq_int16``, ``real_int16``) or ``float32``
+            1-D, ``n * n_comp`` values: ``int8`` (``iq_int8``, ``real_int8``, the byte-coded
+            layouts unpacked), ``int16`` (``iq_int16``, ``real_int16``) or ``float32``
             (``gr_complex``, and every format when the spectrum is inverted: then the
             :meth:`read` values, corrected); I and Q interleaved for I/Q formats. A fresh
             array.
@@ -372,14 +427,18 @@ class IfSource:
         fmt = self.format
         if n == 0:
             dt = np.float32 if fmt.name == "gr_complex" else \
-                np.int8 if fmt.name == "iq_int4" else fmt.dtype
+                np.int8 if self._tables is not None else fmt.dtype
             return np.empty(0, dt), n_comp
         # one read() into a fresh array: cheaper than mapping the range and copying it
         # (no page faults on a new mapping per chunk)
         bps = fmt.bytes_per_sample
-        if fmt.name == "iq_int4":
-            raw = np.fromfile(self.path, dtype=np.uint8, count=n, offset=start_sample * bps)
-            out = _IQ_INT4_PAIRS[raw].reshape(-1)
+        if self._tables is not None:
+            byte, _, pairs = self._tables
+            raw = np.fromfile(self.path, dtype=np.uint8, count=n * bps,
+                              offset=start_sample * bps)
+            if bps > 1:
+                raw = raw[byte::bps]
+            out = pairs[raw].reshape(-1)
         else:
             dt = np.dtype("<f4") if fmt.name == "gr_complex" else fmt.dtype
             out = np.fromfile(self.path, dtype=dt, count=n * bps // dt.itemsize,
@@ -422,16 +481,6 @@ class IfSource:
             k += m
 
 
-def _convert(raw: np.ndarray, fmt: SampleFormat) -> np.ndarray:
-    """Raw bytes of whole samples -> complex64 / float32 values."""
-    if fmt.name == "iq_int4":
-        return _IQ_INT4_LUT[raw]
-    if fmt.name == "gr_complex":
-        return raw.view(np.dtype("<f4")).astype(np.float32).view(np.complex64)
-    vals = raw.view(fmt.dtype).astype(np.float32)
-    if fmt.is_complex:
-        return vals.view(np.complex64)
-    return vals
 
 
 # -- layout heuristic ------------------------------------------------------------------------
