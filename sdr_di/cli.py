@@ -105,7 +105,12 @@ def _add_run(sub) -> None:
                    help="foreign file: intermediate frequency [Hz] (default 0)")
     p.add_argument("--format", dest="sample_format", default=None,
                    help="foreign file: sample format (iq_int8/ibyte, real_int8, iq_int16, "
-                   "real_int16, iq_int4, gr_complex)")
+                   "real_int16, iq_int4, gr_complex, and peers' formats: docs/formats.md). "
+                   "A file with a PocketSDR/SignalSim tag (X.bin.tag) needs no options; "
+                   "these override the tag's values")
+    p.add_argument("--rfch", type=int, default=None, metavar="N",
+                   help="RF channel (1-based) of a multi-channel PocketSDR RAW file (default: "
+                   "the channel whose tagged LO is nearest B3I)")
     p.add_argument("--inverted", action="store_true",
                    help="foreign file: spectrum inverted")
     p.add_argument("--start-week", type=int, default=None, help="foreign file: BDT week hint")
@@ -148,7 +153,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
     source = open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
                          sample_format=args.sample_format, spectrum_inverted=args.inverted,
-                         start_week=args.start_week, start_sow=args.start_sow)
+                         start_week=args.start_week, start_sow=args.start_sow, rfch=args.rfch)
     out = args.out or args.if_file.with_name(args.if_file.stem + "_run")
     if args.mode == "deep":
         return _run_deep(args, source, out, prns)

@@ -36,33 +36,51 @@ class NoSatelliteError(SdrDiError):
 def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
                 if_hz: float | None = None, sample_format: str | None = None,
                 spectrum_inverted: bool = False, start_week: int | None = None,
-                start_sow: float | None = None) -> IfSource:
-    """Open an IF file: from its sidecar (``X.json`` beside ``X.bin``, or the JSON itself)
-    unless explicit options are given (foreign files).
+                start_sow: float | None = None, rfch: int | None = None) -> IfSource:
+    """Open an IF file: from its sidecar (``X.json`` beside ``X.bin``, or the JSON itself);
+    else from a peer's tag (``X.bin.tag``, PocketSDR/SignalSim, :mod:`sdr_di.io.tag_sidecar`),
+    the explicit options overriding the tag's values; else from the explicit options alone
+    (foreign files). Explicit options given, a JSON sidecar is not read.
+
+    ``rfch`` picks the RF channel (1-based) of a multi-channel layout (PocketSDR ``RAW*``).
 
     Raises
     ------
     SampleFormatError
-        Missing sidecar and options, bad options, truncated or inconsistent file.
+        Missing sidecar, tag and options, bad options or tag, truncated or inconsistent
+        file.
     """
     from ..errors import SampleFormatError
+    from ..io.tag_sidecar import read_tag, tag_path, tag_source
 
     path = Path(path)
+    if path.suffix == ".tag":  # the tag itself was named: read the file it describes
+        path = path.with_suffix("")
     explicit = sampling_rate_hz is not None or sample_format is not None
-    if not explicit:
-        sidecar = path if path.suffix == ".json" else path.with_suffix(".json")
-        if not sidecar.exists():
-            raise SampleFormatError(
-                f"{path}: no sidecar {sidecar.name}; give --fs, --if and --format for a "
-                "foreign IF file")
+    sidecar = path if path.suffix == ".json" else path.with_suffix(".json")
+    tag = tag_path(path)
+    if not explicit and sidecar.exists():
+        if rfch not in (None, 1):
+            raise SampleFormatError(f"{path}: --rfch {rfch}: an sdr-di file has one RF channel")
         return IfSource.from_sidecar(sidecar)
+    if path.suffix != ".json" and tag.exists():
+        ts = tag_source(read_tag(tag), rfch, sample_format=sample_format,
+                        sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
+                        spectrum_inverted=spectrum_inverted)
+        return IfSource(path, ts.sampling_rate_hz, ts.if_hz, ts.sample_format,
+                        spectrum_inverted=ts.spectrum_inverted, start_week=start_week,
+                        start_sow=start_sow, rf_channel=ts.rf_channel)
+    if not explicit:
+        raise SampleFormatError(
+            f"{path}: no sidecar {sidecar.name} and no tag {tag.name}; give --fs, --if and "
+            "--format for a foreign IF file")
     if sampling_rate_hz is None or sample_format is None:
         raise SampleFormatError(f"{path}: a foreign IF file needs both --fs and --format")
     if not path.exists():
         raise SampleFormatError(f"IF file {path} not found")
     return IfSource(path, sampling_rate_hz, if_hz or 0.0, sample_format,
                     spectrum_inverted=spectrum_inverted, start_week=start_week,
-                    start_sow=start_sow)
+                    start_sow=start_sow, rf_channel=rfch)
 
 
 @dataclasses.dataclass
