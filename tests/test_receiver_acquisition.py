@@ -240,6 +240,6 @@ def test_acquire_resolves_the_500_hz_doppler_ambiguity(monkeypatch):
     good = acquisition._refine_doppler
     for off in (500.0, -500.0):
         monkeypatch.setattr(acquisition, "_refine_doppler",
-                            lambda *a, off=off: good(*a) + off)
+                            lambda *a, off=off: (good(*a)[0] + off, True))
         r = acquire(x, fs, prns=[8], noncoherent=40)[0]
         assert r.detected and abs(r.doppler_hz - 1234.0) < 25.0, (off, r)

@@ -51,6 +51,27 @@ when a D1 signal also loses the average 1.8 dB of NH transitions inside 1 ms blo
 not aligned with its code epochs; ``noncoherent=40`` (threshold 89.1) gives 0.87 in that worst
 average case and ~1 otherwise (the tests use 40 at 35 dB-Hz).
 
+Real inputs
+-----------
+Before the search the block is cleaned (``clean=True``,
+:func:`~sdr_di.receiver.narrowband.remove_dc_and_lines`): the mean is subtracted and
+narrowband lines are blanked in the block's spectrum. A DC offset or a CW line is coherent
+energy that the code's 1 kHz line spectrum picks up for every PRN; without the cleaning a
+DC offset of 3 LSB on 4-bit noise passes the threshold for most PRNs. With it, the statistic
+keeps its Gamma(K, 1) distribution on DC offsets and clipped (1-2 bit) inputs: the test
+suite checks the per-cell exceedance of the Gamma(K) quantile at p = 1e-2 over one search's
+cells. A constant input has no power left after the mean removal: nothing is detected and
+the result says so. Detections of three or more PRNs at one Doppler (refined Dopplers within
+10 Hz, or one grid bin) get a note: a line that escaped the blanking, or an artefact, is far
+more likely than satellites sharing a Doppler that closely.
+
+Short files (:func:`acquire_source`): a file that ends before ``K`` blocks are read is
+searched with the whole blocks it holds, down to one code period; the results carry the
+``K`` used. The Doppler refinement needs at least 4 whole code periods after the code phase;
+without them the Doppler is the interpolated grid value and ``doppler_refined`` is False.
+:func:`detection_cn0_dbhz` gives the C/N0 at which a search of a given ``K`` and ``M``
+detects with probability 0.9.
+
 Refinement (detected PRNs)
 --------------------------
 1. Doppler and delay by parabolic interpolation of ``S`` over the neighbouring bins/delays.
@@ -90,6 +111,7 @@ import scipy.fft
 from scipy import special
 
 from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I
+from ..errors import AcquisitionError
 from ._numba_acquire import accumulate_power
 from ._numba_correlate_bits import correlate_epl_bits
 from .correlator import (
@@ -101,10 +123,15 @@ from .correlator import (
     padded_replicas,
     reduce_code_phase,
 )
+from .narrowband import remove_dc_and_lines
 
 __all__ = ["AcquisitionResult", "acquire", "acquire_source", "acquisition_upsampling",
-           "detection_threshold"]
+           "check_search", "detection_cn0_dbhz", "detection_threshold"]
 
+#: Refined Dopplers closer than this are "the same Doppler" for the artefact note [Hz].
+_SHARED_DOPPLER_HZ = 10.0
+#: Whole code periods the Doppler refinement needs (squared-prompt FFT).
+_MIN_REFINE_EPOCHS = 4
 _REPLICA_CACHE: OrderedDict[tuple, np.ndarray] = OrderedDict()
 _REPLICA_CACHE_MAX = 256
 
@@ -141,6 +168,19 @@ class AcquisitionResult:
         ``S / sigma2`` (n_doppler, n_delays), when asked with ``keep_grid``.
     doppler_bins_hz : numpy.ndarray or None
         Doppler of the grid rows [Hz], when ``keep_grid``.
+    coherent_ms, noncoherent : int
+        M and K of the search that gave this result.
+    doppler_refined : bool
+        The Doppler was refined from the squared prompts (needs at least 4 whole code
+        periods after the code phase; otherwise it is the interpolated grid value, within
+        about a quarter of the bin spacing).
+    notes : tuple of str
+        Remarks for the user: ``doppler not refined (...)``, ``same Doppler as N other
+        PRNs`` (several detections at one Doppler: a line or an artefact more likely than
+        satellites), ``no signal power in the input``.
+    lines_hz : numpy.ndarray or None
+        Narrowband lines blanked in the input before the search [Hz] (module notes of
+        :mod:`~sdr_di.receiver.narrowband`), the same for every PRN of one call.
     """
 
     prn: int
@@ -156,6 +196,11 @@ class AcquisitionResult:
     noise_power: float
     grid: np.ndarray | None = None
     doppler_bins_hz: np.ndarray | None = None
+    coherent_ms: int = 1
+    noncoherent: int = 0
+    doppler_refined: bool = False
+    notes: tuple[str, ...] = ()
+    lines_hz: np.ndarray | None = None
 
     def __repr__(self) -> str:
         return (f"AcquisitionResult(prn={self.prn}, detected={self.detected}, "
@@ -180,6 +225,38 @@ def detection_threshold(pfa: float, n_cells: int, noncoherent: int) -> float:
         raise ValueError(f"pfa must be in (0, 1), got {pfa}")
     p_cell = -math.expm1(math.log1p(-pfa) / n_cells)
     return float(special.gammainccinv(noncoherent, p_cell))
+
+
+def detection_cn0_dbhz(threshold: float, noncoherent: int, coherent_ms: int = 1,
+                       pd: float = 0.9) -> float:
+    """C/N0 [dB-Hz] at which a search detects with probability ``pd`` (no losses).
+
+    With a signal of coherent SNR ``snr = C/N0 M 1 ms`` per block, ``2 S / sigma2`` is
+    non-central chi-square with ``2K`` degrees of freedom and non-centrality ``2 K snr``;
+    the C/N0 that puts ``pd`` of it above ``2 threshold`` is solved for. Real searches lose
+    about 1-3 dB more (Doppler-bin and code-lag straddle; NH or data transitions inside
+    blocks that are not aligned with the code epochs).
+
+    Parameters
+    ----------
+    threshold : float
+        Threshold on ``S / sigma2`` (:func:`detection_threshold`).
+    noncoherent : int
+        K.
+    coherent_ms : int
+        M [ms].
+    pd : float
+        Detection probability, in (0, 1).
+    """
+    from scipy import optimize, stats
+
+    k = int(noncoherent)
+
+    def miss(snr_db: float) -> float:
+        return float(stats.ncx2.sf(2.0 * threshold, 2 * k, 2 * k * 10.0 ** (snr_db / 10.0))) - pd
+
+    snr_db = optimize.brentq(miss, -60.0, 60.0, xtol=1e-4)
+    return snr_db - 10.0 * math.log10(int(coherent_ms) * 1e-3)
 
 
 def acquisition_upsampling(sampling_rate_hz: float) -> int:
@@ -229,7 +306,8 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
             pfa: float = 1e-3, refine: bool = True, carrier_hz: float = F_B3I,
             code_source: Callable[[int], np.ndarray] | None = None,
             workers: int | None = None, prn_batch: int = 8,
-            keep_grid: bool = False, upsample: int | None = None) -> list[AcquisitionResult]:
+            keep_grid: bool = False, upsample: int | None = None,
+            clean: bool = True, shared_doppler_min: int = 3) -> list[AcquisitionResult]:
     """Search PRNs in a block of IF samples.
 
     Parameters
@@ -273,6 +351,12 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
     upsample : int, optional
         Zero-stuffing factor of the search (module notes); default
         :func:`acquisition_upsampling` of ``sampling_rate_hz`` (1 at 14.6 MHz and above).
+    clean : bool, optional
+        Remove the DC offset and blank narrowband lines before the search
+        (:func:`~sdr_di.receiver.narrowband.remove_dc_and_lines`). Default True.
+    shared_doppler_min : int, optional
+        Note the detections when at least this many PRNs are detected in one Doppler bin
+        (module notes, "Real inputs"). Default 3.
 
     Returns
     -------
@@ -283,31 +367,33 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
     ------
     UnknownPrnError
         A PRN outside 1..63.
-    ValueError
-        Too few samples, non-integer or non-positive ``coherent_ms``, bad parameters.
+    AcquisitionError
+        (a ``ValueError``) Too few samples, non-integer or non-positive ``coherent_ms``,
+        bad parameters.
     """
     prn_list = [check_prn(p) for p in (range(1, 64) if prns is None else prns)]
-    if isinstance(coherent_ms, bool) or int(coherent_ms) != coherent_ms or coherent_ms < 1:
-        raise ValueError(f"coherent_ms must be an integer number of ms >= 1, got {coherent_ms}")
-    m_ms = int(coherent_ms)
-    k_nc = int(noncoherent)
-    if k_nc < 1:
-        raise ValueError(f"noncoherent must be >= 1, got {noncoherent}")
+    m_ms, k_nc = check_search(coherent_ms, noncoherent, doppler_range_hz, pfa)
     fs = float(sampling_rate_hz)
     if not fs > 0:
-        raise ValueError(f"sampling rate must be positive, got {sampling_rate_hz}")
+        raise AcquisitionError(f"sampling rate must be positive, got {sampling_rate_hz}")
     x = np.asarray(samples)
     if x.ndim != 1:
-        raise ValueError(f"samples must be 1-D, got shape {x.shape}")
+        raise AcquisitionError(f"samples must be 1-D, got shape {x.shape}")
     n_ms0 = round(fs * 1e-3)  # samples per code period
     n_c0 = round(m_ms * fs * 1e-3)  # samples per coherent block
     need = k_nc * n_c0
     if x.size < need:
-        raise ValueError(f"acquisition needs {need} samples ({k_nc} x {m_ms} ms at "
-                         f"{fs / 1e6:g} MHz), got {x.size}")
+        raise AcquisitionError(f"acquisition needs {need} samples ({k_nc} x {m_ms} ms at "
+                               f"{fs / 1e6:g} MHz), got {x.size}")
     u = acquisition_upsampling(fs) if upsample is None else int(upsample)
     if u < 1:
-        raise ValueError(f"upsample must be >= 1, got {upsample}")
+        raise AcquisitionError(f"upsample must be >= 1, got {upsample}")
+    lines = None
+    if clean:
+        cleaned = remove_dc_and_lines(x[:need], fs, workers=workers)
+        x, lines = cleaned.samples, cleaned.line_hz
+        if not cleaned.input_power > 0.0:
+            return [_silent(p, m_ms, k_nc, pfa, lines) for p in prn_list]
     # the search grid: zero-stuffed samples at u fs (module notes)
     fs_g = fs * u
     n_ms = u * n_ms0  # lags searched
@@ -364,7 +450,60 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
                 found[prn] = _evaluate(grid[ip], prn, dopplers, x, fs, u, if_hz, n_ms0, n_c0,
                                        k_nc, m_ms, threshold, median_gamma, pfa, refine,
                                        carrier_hz, codes[prn], code_len, keep_grid)
+                found[prn].lines_hz = lines
+    _note_shared_doppler(found, shared_doppler_min, step)
     return [dataclasses.replace(found[p]) for p in prn_list]
+
+
+def check_search(coherent_ms, noncoherent, doppler_range_hz: float = 5000.0,
+                 pfa: float = 1e-3) -> tuple[int, int]:
+    """Checked ``(M, K)`` of a search; raises :class:`AcquisitionError` naming the bad one."""
+    if isinstance(coherent_ms, bool) or int(coherent_ms) != coherent_ms or coherent_ms < 1:
+        raise AcquisitionError(
+            f"coherent_ms must be an integer number of ms >= 1, got {coherent_ms}")
+    if isinstance(noncoherent, bool) or int(noncoherent) != noncoherent or noncoherent < 1:
+        raise AcquisitionError(f"noncoherent must be an integer >= 1, got {noncoherent}")
+    if not 0.0 <= float(doppler_range_hz) <= 50e3:
+        raise AcquisitionError(f"doppler range must be in [0, 50000] Hz, got {doppler_range_hz}")
+    if not 0.0 < float(pfa) < 1.0:
+        raise AcquisitionError(f"pfa must be in (0, 1), got {pfa}")
+    return int(coherent_ms), int(noncoherent)
+
+
+def _silent(prn: int, m_ms: int, k_nc: int, pfa: float, lines) -> AcquisitionResult:
+    """Result for an input without power (constant file, all zeros after DC removal)."""
+    return AcquisitionResult(
+        prn=prn, detected=False, code_phase_chips=math.nan, code_phase_samples=math.nan,
+        doppler_hz=math.nan, doppler_coarse_hz=math.nan, cn0_dbhz=math.nan, peak_metric=0.0,
+        threshold=math.nan, pfa=pfa, noise_power=0.0, coherent_ms=m_ms, noncoherent=k_nc,
+        notes=("no signal power in the input (constant samples)",), lines_hz=lines)
+
+
+def _note_shared_doppler(found: dict[int, AcquisitionResult], n_min: int,
+                         step_hz: float) -> None:
+    """Note the detections of ``n_min`` or more PRNs at one Doppler (module notes, "Real
+    inputs"): Dopplers within ``_SHARED_DOPPLER_HZ`` of each other when refined, within half
+    a bin otherwise. A line leaks into every PRN at the same frequency; satellites rarely
+    share a Doppler that closely (7 satellites over +-3.6 kHz: three within 10 Hz has a
+    probability of about 1e-3)."""
+    det = sorted((r.doppler_hz, prn) for prn, r in found.items() if r.detected)
+    groups: list[list[int]] = []
+    prev = None
+    for fd, prn in det:
+        r = found[prn]
+        tol = _SHARED_DOPPLER_HZ if r.doppler_refined and prev is not None and \
+            found[prev[1]].doppler_refined else 0.5 * step_hz
+        if prev is not None and fd - prev[0] <= tol:
+            groups[-1].append(prn)
+        else:
+            groups.append([prn])
+        prev = (fd, prn)
+    for prns in groups:
+        if len(prns) >= max(2, n_min):
+            for p in prns:
+                found[p].notes = found[p].notes + (
+                    f"same Doppler as {len(prns) - 1} other PRNs: a line or artefact more "
+                    "likely than satellites",)
 
 
 def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: float, u: int,
@@ -394,12 +533,18 @@ def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: 
     rate = CHIP_RATE_B3I * (1.0 + fd / carrier_hz)
     theta = float(np.mod(-tau_f * rate / (fs * u), code_len))
     cn0 = math.nan
+    refined = False
+    notes: list[str] = []
     if detected and refine:
         xs = _samples(x[:k_nc * n_c])
         noise_1ms = noise * n_ms / n_c
         tab = bit_windows(padded_replicas(code))
         theta, _ = _refine_code(xs, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
-        fd = _refine_doppler(xs, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
+        fd, refined = _refine_doppler(xs, tab, code_len, theta, fd, fs, if_hz, n_ms,
+                                      carrier_hz)
+        if not refined:
+            notes.append(f"doppler not refined (fewer than {_MIN_REFINE_EPOCHS} whole code "
+                         "periods after the code phase): grid value")
         theta, p = _refine_code(xs, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
         snr = (float(np.mean(np.abs(p) ** 2)) - noise_1ms) / noise_1ms
         cn0 = 10.0 * math.log10(snr / (n_ms / fs)) if snr > 0 else math.nan
@@ -415,7 +560,8 @@ def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: 
         doppler_hz=fd, doppler_coarse_hz=float(dopplers[j]), cn0_dbhz=cn0, peak_metric=peak,
         threshold=threshold, pfa=pfa, noise_power=noise,
         grid=(s / noise) if keep_grid else None,
-        doppler_bins_hz=dopplers.copy() if keep_grid else None)
+        doppler_bins_hz=dopplers.copy() if keep_grid else None, coherent_ms=m_ms,
+        noncoherent=k_nc, doppler_refined=refined, notes=tuple(notes))
 
 
 def _epoch_starts(x_size: int, theta: float, fd: float, fs: float, n_ms: int, code_len: int,
@@ -510,10 +656,11 @@ def _refine_code(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
 
 
 def _refine_doppler(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
-    """Doppler residual from the frequency of the squared 1 ms prompts (bit signs removed)."""
+    """Doppler residual from the frequency of the squared 1 ms prompts (bit signs removed);
+    returns ``(fd, refined)`` (not refined with fewer than ``_MIN_REFINE_EPOCHS`` prompts)."""
     starts = _epoch_starts(smp[2], theta, fd, fs, n_ms, code_len, carrier_hz)
-    if starts.size < 4:
-        return fd
+    if starts.size < _MIN_REFINE_EPOCHS:
+        return fd, False
     p = _block_prompts(smp, tab, code_len, np.array([theta]), fd, fs, if_hz, starts, n_ms,
                        carrier_hz, 0.1)[1]
     z = p * p
@@ -525,7 +672,7 @@ def _refine_doppler(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
     if f2 >= 0.5:
         f2 -= 1.0
     t_blk = float(starts[-1] - starts[0]) / (starts.size - 1) / fs
-    return fd + 0.5 * f2 / t_blk
+    return fd + 0.5 * f2 / t_blk, True
 
 
 def _resolve_doppler(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz):
@@ -533,7 +680,7 @@ def _resolve_doppler(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
     (module notes, refinement step 5)."""
     cands = (fd, fd - 500.0, fd + 500.0)
     starts = _epoch_starts(smp[2], theta, fd, fs, n_ms, code_len, carrier_hz)
-    if starts.size < 4:
+    if starts.size < _MIN_REFINE_EPOCHS:
         return fd
     rate = CHIP_RATE_B3I * (1.0 + fd / carrier_hz)
     n = min(math.floor(code_len * fs / rate), n_ms)
@@ -546,19 +693,34 @@ def _resolve_doppler(smp, tab, code_len, theta, fd, fs, if_hz, n_ms, carrier_hz)
     return float(cands[int(np.argmax(power.mean(axis=1)))])
 
 
-def acquire_source(source, start_sample: int = 0, **kwargs) -> list[AcquisitionResult]:
+def acquire_source(source, start_sample: int = 0, *, fit: bool = True,
+                   **kwargs) -> list[AcquisitionResult]:
     """Acquire from an :class:`~sdr_di.receiver.ifreader.IfSource`.
 
     Reads just the ``coherent_ms x noncoherent`` ms needed from ``start_sample`` and calls
     :func:`acquire` with the source's sample rate, (corrected) IF and carrier; the code phases
     refer to sample ``start_sample`` of the file. Keyword arguments go to :func:`acquire`.
+
+    A file that ends before ``noncoherent`` blocks are read is searched with the whole blocks
+    it holds (``fit=True``, the default; the results' ``noncoherent`` says how many), down to
+    one coherent block; shorter than that raises :class:`AcquisitionError`.
     """
     fs = source.sampling_rate_hz
-    m_ms = kwargs.get("coherent_ms", 1)
-    k_nc = kwargs.get("noncoherent", 20)
-    n = k_nc * round(int(m_ms) * fs * 1e-3)
-    if start_sample + n > source.n_samples:
-        raise ValueError(f"{source.path}: acquisition needs samples [{start_sample}, "
-                         f"{start_sample + n}), the file has {source.n_samples}")
+    m_ms, k_nc = check_search(kwargs.get("coherent_ms", 1), kwargs.get("noncoherent", 20),
+                              kwargs.get("doppler_range_hz", 5000.0), kwargs.get("pfa", 1e-3))
+    n_c = round(m_ms * fs * 1e-3)
+    avail = source.n_samples - int(start_sample)
+    if avail < n_c:
+        raise AcquisitionError(
+            f"{source.path}: {max(avail, 0)} samples from sample {start_sample}; acquisition "
+            f"needs at least one coherent block of {m_ms} ms ({n_c} samples at "
+            f"{fs / 1e6:g} MHz)")
+    if k_nc * n_c > avail:
+        if not fit:
+            raise AcquisitionError(
+                f"{source.path}: acquisition needs samples [{start_sample}, "
+                f"{start_sample + k_nc * n_c}), the file has {source.n_samples}")
+        k_nc = avail // n_c
+    kwargs["coherent_ms"], kwargs["noncoherent"] = m_ms, k_nc
     kwargs.setdefault("carrier_hz", source.carrier_hz)
-    return acquire(source.read(start_sample, n), fs, source.if_hz, **kwargs)
+    return acquire(source.read(start_sample, k_nc * n_c), fs, source.if_hz, **kwargs)
