@@ -800,7 +800,8 @@ class Channel:
             prn=self.prn, sample_index=s, t_tx_week=week, t_tx_sow=sow, doppler_hz=f_est,
             carrier_phase_cycles=cphase, cn0_dbhz=self.cn0_dbhz, code_lock=self.code_lock,
             carrier_lock=self.carrier_lock, time_valid=tv, code_phase_chips=code_phase,
-            state=self.state.name, slip_count=self.slip_count)
+            state=self.state.name, slip_count=self.slip_count,
+            half_cycle_resolved=tv and self._frame is not None and self._frame["pol"] != 0)
 
     def __repr__(self) -> str:
         return (f"Channel(prn={self.prn}, {self.nav}, state={self.state.name}, "

@@ -12,6 +12,8 @@ Outputs in ``out_dir`` (``STEM`` = IF file name without extension):
 ``STEM_pvt.csv``   one row per output epoch (``docs/solution_format.md``)
 ``STEM.nmea``      GGA and RMC sentences at the output rate (valid fixes)
 ``STEM_channels.csv``  one row per channel: final state, C/N0, decoded ephemeris, time
+``STEM_obs.rnx``   RINEX 3.05 observations (B3I ``C6I L6I D6I S6I``, BDT)
+``STEM_nav.rnx``   RINEX 3.05 navigation file of the decoded records and Klobuchar set
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from pathlib import Path
 
 from ..errors import SdrDiError
 from ..io.atomic import atomic_open, ensure_output_dir
+from ..io.rinex_writer import RinexOutputs, rinex_names
 from ..io.solution_files import NmeaWriter, SolutionCsvWriter
 from .ifreader import IfSource
 from .pvt import PvtEngine
@@ -131,8 +134,11 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     engine = PvtEngine(source.sampling_rate_hz, {}, None)
     files = {"pvt": out_dir / f"{stem}_pvt.csv", "nmea": out_dir / f"{stem}.nmea",
              "channels": out_dir / f"{stem}_channels.csv"}
+    files["rinex_obs"], files["rinex_nav"] = (out_dir / n for n in rinex_names(stem))
     csv_w = SolutionCsvWriter(files["pvt"])
     nmea_w = NmeaWriter(files["nmea"], rate_hz=None)
+    rinex_w = RinexOutputs(files["rinex_obs"], files["rinex_nav"], marker_name=stem,
+                           interval_s=1.0 / rate_hz)
     bar = None
     t_wall = time.perf_counter()
     counts = {"epochs": 0, "fixes": 0}
@@ -152,6 +158,9 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         if sol.valid:
             counts["fixes"] += 1
             nmea_w.write(sol)
+        if observations:  # the observables the PVT used (formed again: same clock, same sample)
+            rinex_w.write(engine.builder(observations), observations, sol, ephemerides,
+                          rx.klobuchar)
         if bar is not None:
             done = sample / source.sampling_rate_hz
             bar.update(round(done - bar.n, 3))
@@ -174,9 +183,11 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
                 fh.write(",".join(str(row[k]) for k in keys) + "\n")
         csv_w.close()
         nmea_w.close()
+        rinex_w.close()
     except BaseException:
         csv_w.abort()
         nmea_w.abort()
+        rinex_w.abort()
         raise
     finally:
         if bar is not None:

@@ -107,6 +107,10 @@ class ChannelObservation:
         :class:`ChannelState` name.
     slip_count : int
         Carrier-phase discontinuities so far (module notes).
+    half_cycle_resolved : bool
+        The preamble polarity has resolved the Costas loop's half-cycle ambiguity of
+        ``carrier_phase_cycles`` (False before frame synchronization and after a return to
+        tracking until the next preamble).
     """
 
     prn: int
@@ -122,6 +126,7 @@ class ChannelObservation:
     code_phase_chips: float = math.nan
     state: str = ""
     slip_count: int = 0
+    half_cycle_resolved: bool = False
 
 
 @dataclasses.dataclass
