@@ -258,15 +258,19 @@ def test_tag_source_reads_pocketsdr_lists(tmp_path):
     assert tag_source(tag, 3, if_hz=2e6).sample_format == "pocket_raw16_real3"
 
 
-# -- end to end: a generated B3I snippet re-encoded as PocketSDR 2-bit ----------------------
+# -- end to end: a generated B3I snippet re-encoded in the peers' formats -------------------
 
 @pytest.fixture(scope="module")
-def pocket_file(tmp_path_factory):
+def snippet(tmp_path_factory):
+    """0.1 s of the default scenario at 2.5 MHz (complex baseband, 4-bit in iq_int8)."""
     g = tmp_path_factory.mktemp("gen")
     assert main(["generate", "--no-progress", "--duration", "0.1", "--fs", "2.5e6", "--out",
                  str(g)]) == 0
     meta = json.loads((g / "default.json").read_text())
-    x = IfSource.from_sidecar(g / "default.json").read(0, meta["n_samples"])
+    return IfSource.from_sidecar(g / "default.json").read(0, meta["n_samples"]), meta
+
+
+def encode_pocket_raw8(x, meta):
     sigma_lsb = meta["agc"]["gain_lsb"]  # stored LSB per noise sigma
 
     def code(v):  # 2-bit quantizer: sign and |v| >= sigma (near optimal for 2 bits)
@@ -275,16 +279,34 @@ def pocket_file(tmp_path_factory):
     # RF channel 2 carries B3I (Q stored negated), channel 1 unrelated noise at an L1 LO
     nib2 = code(x.real) | code(-x.imag) << 2
     nib1 = np.random.default_rng(0).integers(0, 16, x.size, dtype=np.uint8)
-    d = tmp_path_factory.mktemp("pocket")
-    p = write(d, (nib1 | nib2 << 4).astype(np.uint8).tobytes(),
-              tag_text("RAW8", fs_mhz="2.5", f_lo="1575.42,1268.52", iq="2,2", bits="2,2"))
-    return p, meta
+    return ((nib1 | nib2 << 4).astype(np.uint8).tobytes(),
+            tag_text("RAW8", fs_mhz="2.5", f_lo="1575.42,1268.52", iq="2,2", bits="2,2"))
 
 
-def test_pocket_2bit_snippet_acquired_with_flags_from_the_tag(pocket_file):
-    p, meta = pocket_file
+def encode_signalsim_int4x2(x, meta):
+    def nibble(v):  # sign bit 3, magnitude |v| (the values become +-(2|v| + 1))
+        return ((v < 0) << 3 | np.minimum(np.abs(v), 7).astype(np.uint8)).astype(np.uint8)
+
+    return ((nibble(x.real) << 4 | nibble(x.imag)).astype(np.uint8).tobytes(),
+            tag_text("INT4X2", fs_mhz="2.500000", f_lo="1268.520000", iq="1", bits="4",
+                     prog="IFDataGen", SCALE="1.0"))
+
+
+def encode_pocket_int8x2(x, meta):
+    iq = np.stack([x.real, -x.imag], axis=1).astype(np.int8)  # Q negated on disk
+    return iq.tobytes(), tag_text("INT8X2", fs_mhz="2.5", iq="2", bits="8")
+
+
+ENCODERS = {"pocket_raw8_iq2": encode_pocket_raw8, "iq_int4_sm": encode_signalsim_int4x2,
+            "iq_int8": encode_pocket_int8x2}
+
+
+@pytest.mark.parametrize("fmt", sorted(ENCODERS))
+def test_generated_snippet_acquired_with_flags_from_the_tag(tmp_path, snippet, fmt):
+    x, meta = snippet
+    p = write(tmp_path, *ENCODERS[fmt](x, meta))
     src = open_source(p)  # no options: all from x.bin.tag
-    assert (src.format.name, src.rf_channel, src.if_hz) == ("pocket_raw8_iq2", 2, 0.0)
+    assert (src.format.name, src.if_hz, src.sampling_rate_hz) == (fmt, 0.0, 2.5e6)
     truth = {s["prn"]: s for s in meta["satellites"]}
     res = {r.prn: r for r in acquire_source(src, prns=[*truth, 1, 40])}
     for prn, t in truth.items():
@@ -296,10 +318,11 @@ def test_pocket_2bit_snippet_acquired_with_flags_from_the_tag(pocket_file):
     assert not res[1].detected and not res[40].detected
 
 
-def test_run_cli_on_tagged_file_needs_no_flags(pocket_file, capsys):
-    p, meta = pocket_file
+def test_run_cli_on_tagged_file_needs_no_flags(tmp_path, snippet, capsys):
+    x, meta = snippet
+    p = write(tmp_path, *encode_pocket_raw8(x, meta))
     prns = ",".join(f"C{s['prn']:02d}" for s in meta["satellites"][:3])
     assert main(["run", str(p), "--no-progress", "--prn", prns, "--out",
-                 str(p.parent / "run")]) == 0
+                 str(tmp_path / "run")]) == 0
     out = capsys.readouterr().out
     assert all(f"C{s['prn']:02d}" in out for s in meta["satellites"][:3]), out
