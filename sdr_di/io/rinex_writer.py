@@ -17,7 +17,7 @@ Observables (RINEX 3.05 definitions, receiver conventions of
     (``-carrier_phase_cycles`` of the channel), so that it grows with the range like the
     pseudorange; written for channels in carrier lock only. ``D6I`` Doppler [Hz], positive
     for an approaching satellite. ``S6I`` C/N0 [dB-Hz] (``SIGNAL STRENGTH UNIT DBHZ``).
-    The signal strength indicator (SSI, 1-9, RINEX 3.05 section 5.7) of ``C``, ``L`` and
+    The signal strength indicator (SSI, 1-9, RINEX's standardized S/N indicator) of ``C``, ``L`` and
     ``D`` is ``clip(floor(C/N0 / 6), 1, 9)``.
 
 Loss of lock indicator of ``L6I``
@@ -50,10 +50,10 @@ Streaming and atomicity
     few per satellite and hour) are kept in memory and the file is written at
     :meth:`RinexNavWriter.close`.
 
-Formats are those of RINEX 3.05 tables A2 (observation header), A3 (observation records: epoch
-``'>',1X,I4,4(1X,I2.2),F11.7,2X,I1,I3,6X,F15.12``, satellite ``A1,I2.2,m(F14.3,I1,I1)``), A5
-and A14 (navigation header and BDS record: ``A1,I2.2,1X,I4,5(1X,I2.2),3D19.12`` then
-``4X,4D19.12``).
+Record formats (RINEX 3.05): observation epoch ``'>',1X,I4,4(1X,I2.2),F11.7,2X,I1,I3,6X,F15.12``
+and satellite ``A1,I2.2,m(F14.3,I1,I1)``; BDS navigation record
+``A1,I2.2,1X,I4,5(1X,I2.2),3D19.12`` then ``4X,4D19.12``; header lines ``A60`` + label
+``A20``.
 """
 
 from __future__ import annotations
@@ -75,12 +75,15 @@ from ..timebase import bdt_to_datetime
 from .atomic import atomic_open
 
 __all__ = [
+    "LLI_HALF_CYCLE",
+    "LLI_LOST_LOCK",
     "OBS_TYPES",
     "RINEX_VERSION",
     "RinexNavWriter",
     "RinexObsWriter",
     "RinexOutputs",
     "SatObservation",
+    "format_nav_record",
     "rinex_names",
     "signal_strength_indicator",
 ]
@@ -106,8 +109,8 @@ def rinex_names(stem: str) -> tuple[str, str]:
 def signal_strength_indicator(cn0_dbhz: float) -> int | None:
     """RINEX signal strength indicator 1..9 of a C/N0 [dB-Hz] (None when unknown).
 
-    RINEX 3.05 table 12: 1 below 12 dB-Hz, then one step per 6 dB (5 = 30-35 dB-Hz), 9 at
-    54 dB-Hz and above.
+    RINEX standardized S/N indicators: 1 below 12 dB-Hz, then one step per 6 dB (5 = 30-35
+    dB-Hz), 9 at 54 dB-Hz and above.
     """
     c = float(cn0_dbhz)
     if not math.isfinite(c):
