@@ -9,9 +9,17 @@ decoded records take precedence; ``assist=False`` uses decoded messages only).
 Outputs in ``out_dir`` (``STEM`` = IF file name without extension), written under temporary
 names and renamed when complete:
 
-``STEM_deep.csv``          one row per output epoch (``docs/solution_format.md``, deep mode)
+``STEM_deep.csv``          one row per output epoch (``docs/deep.md``); ``nav_change``
+                           marks the rows where the loop took up navigation data since
+                           the previous row: 1 an ephemeris, 2 the ionosphere model, 3 both
 ``STEM_deep_summary.json`` filter, hand-over time, channels, error metrics vs the reference,
-                           time shares of the loop stages
+                           time shares of the loop stages, ``navigation`` (per satellite
+                           the ephemeris source and toe over time, the ionosphere and
+                           troposphere models and their sources) and ``warnings``
+
+Warnings of the run (:class:`~sdr_di.receiver.navdata.NavDataWarning`: no ionosphere model
+at the hand-over) are printed as one ``sdr-di: warning: ...`` line each on stderr and kept
+in the summary.
 """
 
 from __future__ import annotations
@@ -19,7 +27,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +37,7 @@ import numpy as np
 from ..errors import ImuDataError
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..receiver.ifreader import IfSource
+from ..receiver.navdata import NavDataWarning
 from .vector_loop import DeepConfig, DeepReceiver, DeepResult
 
 __all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
@@ -35,7 +46,7 @@ DEEP_COLUMNS = (
     "t_s", "bdt_week", "bdt_sow", "lat_deg", "lon_deg", "h_m", "v_e", "v_n", "v_u",
     "pitch_deg", "roll_deg", "yaw_deg", "clock_bias_m", "clock_drift_mps", "n_used",
     "att_err_e_deg", "att_err_n_deg", "att_err_u_deg", "vel_err_e", "vel_err_n", "vel_err_u",
-    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m",
+    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m", "nav_change",
 )
 
 
@@ -79,7 +90,9 @@ def write_deep_csv(path: Path, res: DeepResult) -> Path:
     data = np.column_stack([
         res.t, np.full(res.t.size, res.week), res.sow, np.degrees(res.llh[:, :2]),
         res.llh[:, 2], res.v_n, np.degrees(res.att), res.clock_bias_m, res.clock_drift_mps,
-        res.n_used, res.att_err, res.vel_err, res.pos_err]) if res.t.size else np.zeros(
+        res.n_used, res.att_err, res.vel_err, res.pos_err,
+        res.nav_change if res.nav_change.size == res.t.size else np.zeros(res.t.size)]) \
+        if res.t.size else np.zeros(
         (0, len(DEEP_COLUMNS)))
     with atomic_open(path, "w") as fh:
         fh.write(f"# sdr-di deep solution, filter {res.filter_name}, hand-over at "
@@ -158,11 +171,20 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
 
     try:
         rx = DeepReceiver(cfg)
-        res = rx.run(source, imu, prns=prns, nav=nav, truth=truth, progress=cb,
-                     duration_s=duration_s)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", NavDataWarning)
+            res = rx.run(source, imu, prns=prns, nav=nav, truth=truth, progress=cb,
+                         duration_s=duration_s)
     finally:
         if bar is not None:
             bar.close()
+    notes = []
+    for w in caught:
+        if issubclass(w.category, NavDataWarning):
+            notes.append(str(w.message))
+            print(f"sdr-di: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     wall = time.perf_counter() - t_wall
     metrics = res.metrics()
     write_deep_csv(files["solution"], res)
@@ -175,6 +197,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
         "adaptation_s": res.adaptation_s,
         "profile": {k: _finite(v) for k, v in res.profile.items()},
         "wall_s": wall,
+        "navigation": res.navigation,
+        "warnings": notes,
     }
     with atomic_open(files["summary"], "w") as fh:
         json.dump(summary, fh, indent=2)

@@ -72,6 +72,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import warnings
 from collections.abc import Callable
 
 import numba
@@ -86,7 +87,6 @@ from ..ins.mechanization import StrapdownINS
 from ..integration.measurements import RangeRateMeasurementModel
 from ..integration.metrics import nav_errors, summarize
 from ..receiver._numba_correlate_bits import correlate_epl_bits, mean_power
-from ..receiver.assistance import AssistedEphemerides
 from ..receiver.correlator import (
     CODE_PAD,
     bit_windows,
@@ -96,6 +96,7 @@ from ..receiver.correlator import (
     reduce_code_phase,
 )
 from ..receiver.ifreader import IfSource
+from ..receiver.navdata import NavDataInForce, NavDataWarning
 from ..receiver.observables import ReceiverTime
 from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
@@ -104,6 +105,7 @@ from ..receiver.tracking import ChannelState
 from ..signal.codes import NH20, b3i_code
 from ..sim.imu import ImuErrorModel
 from .bit_power import BitPower
+from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
 from .prefilter import PreFilterBank
 
@@ -162,6 +164,10 @@ class DeepConfig:
         (3, 3, 5) deg: the no-sideslip, coordinated-turn assumptions).
     chunk_ms : int
         Samples read per refill [ms].
+    iono_wait_s : float
+        Seconds after the first fix the hand-over waits for ionosphere coefficients (from the
+        assistance file or the signal) before it goes ahead without them, with a warning;
+        the loop switches the model on when they are decoded (module notes).
     """
 
     filter: str = "ff-aukf"
@@ -183,6 +189,7 @@ class DeepConfig:
     p0_att_deg: tuple = (0.05, 0.05, 0.1)
     chunk_ms: int = 200
     coherent_ms: int = 20
+    iono_wait_s: float = 30.0
 
     def __post_init__(self) -> None:
         if self.clock not in _CLOCKS:
@@ -215,6 +222,9 @@ class DeepResult:
     handover_s : time of the hand-over [s since file start]
     filter_name : str;  adaptation_s : float (time in the adaptive rule, if any)
     profile : dict (seconds per stage: scalar, read, nco, correlate, prefilter, filter, ins)
+    nav_change : (n,) int, navigation data taken up since the previous row: 0 none, bit 1
+        an ephemeris, bit 2 the ionosphere model
+    navigation : dict, the navigation data in force over the run (``_navigation_summary``)
     """
 
     t: np.ndarray
@@ -237,6 +247,8 @@ class DeepResult:
     filter_name: str
     adaptation_s: float
     profile: dict
+    nav_change: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, int))
+    navigation: dict = dataclasses.field(default_factory=dict)
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
@@ -261,6 +273,7 @@ class _Chan:
     f_scalar: float = 0.0    # scalar loop Doppler at the hand-over [Hz]
     rejoining: bool = False  # lost: waits for a whole window of fresh prompts
     fast_fail: int = 0       # last tests: 0 pass, 1 fast test failed, 2 loss test too
+    nav: ChannelNavDecoder | None = None   # navigation message after the hand-over
 
 
 def _imu_offset_s(source: IfSource, imu) -> float:
@@ -392,29 +405,33 @@ class DeepReceiver:
         if source.start_week is not None and source.start_sow is not None:
             rt = ReceiverTime.from_sample_zero(fs, source.start_week, source.start_sow)
         engine = PvtEngine(fs, {}, None, rx_time=rt)
-        eph_src = AssistedEphemerides(nav)
-        nav_iono = None
-        if nav is not None:
-            from ..sim.generate import broadcast_iono
-
-            nav_iono = broadcast_iono(nav)[0]
+        navdata = NavDataInForce(nav)
+        engine.navdata = navdata
         hand: dict = {}
 
         def on_epoch(sample, obs, ephs):
             if not obs:            # nothing tracked at this epoch: no fix, keep going
                 return False
-            eph_src.decoded = ephs
-            engine.ephemerides = eph_src
-            engine.iono = rx.klobuchar if rx.klobuchar is not None else nav_iono
+            navdata.offer_decoded(ephs, rx.klobuchar, sample / fs)
+            engine.ephemerides, engine.iono = navdata, navdata.klobuchar
             sol = engine.process(obs)
             if not sol.valid or not sol.velocity_valid:
                 return False
             hand.setdefault("first_fix", sample)
             trk = [o for o in obs if o.state == ChannelState.TRACK.name]
             ok = [o for o in trk if o.time_valid and o.code_lock
-                  and eph_src.has(o.prn, sol.week, sol.sow)]
-            waited = (sample - hand["first_fix"]) / fs >= cfg.handover_wait_s
+                  and navdata.has(o.prn, sol.week, sol.sow)]
+            since_fix = (sample - hand["first_fix"]) / fs
+            waited = since_fix >= cfg.handover_wait_s
+            if navdata.klobuchar is None and since_fix < cfg.iono_wait_s:
+                return False       # wait for the ionosphere coefficients (module notes)
             if len(ok) >= 4 and (len(ok) == len(trk) or waited):
+                if navdata.klobuchar is None:
+                    warnings.warn(
+                        f"deep: hand-over at {sample / fs:.1f} s without ionosphere "
+                        f"coefficients ({navdata.assistance_iono_label} in the assistance "
+                        f"data, none decoded after {since_fix:.1f} s): no ionosphere model "
+                        "until subframe 1 is decoded", NavDataWarning, stacklevel=3)
                 hand.update(sample=sample, sol=sol, prns=[o.prn for o in ok])
                 return True
             return False
@@ -429,11 +446,11 @@ class DeepReceiver:
                 ("no satellite found" if not found else
                  f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
                  "ephemeris and a valid fix"))
-        return self._vector_loop(source, imu, off, n_per, stop, rx, engine, eph_src,
-                                 nav_iono, hand, truth, progress, t_scalar, t_all)
+        return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
+                                 hand, truth, progress, t_scalar, t_all)
 
     # ------------------------------------------------------------------------------------
-    def _vector_loop(self, source, imu, off, n_per, stop, rx, engine, eph_src, nav_iono,
+    def _vector_loop(self, source, imu, off, n_per, stop, rx, engine, navdata,
                      hand, truth, progress, t_scalar, t_all) -> DeepResult:
         cfg = self.config
         fs = source.sampling_rate_hz
@@ -449,7 +466,7 @@ class DeepReceiver:
         def t_rel(k):
             return base_rel + (k - rt.k0) / fs
 
-        iono = rx.klobuchar if rx.klobuchar is not None else nav_iono
+        iono = navdata.klobuchar
 
         # ---- channels
         chans: list[_Chan] = []
@@ -457,15 +474,17 @@ class DeepReceiver:
             c = rx.channels[prn]
             s = int(c.next_start)
             o = c.observation_at(s)
-            eph = eph_src.select(prn, sol.week, sol.sow)
+            eph = navdata.select(prn, sol.week, sol.sow)
             e = round((o.t_tx_sow - S0) * 1000.0)
             bit_ms = 20 if c.is_d1 else 2
             chans.append(_Chan(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s, epoch=e,
                                phase=float(c.phi),
                                power=BitPower(max(cfg.cn0_window_ms // bit_ms, 2)),
-                               bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz)))
+                               bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz),
+                               nav=_handover_decoder(c, e, round(S0 * 1000.0))))
         n_ch = len(chans)
         ephs = [c.eph for c in chans]
+        nav_log = _NavLog(navdata, chans, iono, k_h / fs, sol.week, sol.sow)
         pre = PreFilterBank(n_ch, self.scalar.config.spacing_chips, source.carrier_hz,
                             **cfg.prefilter)
         spacing = pre.spacing
@@ -549,7 +568,7 @@ class DeepReceiver:
                 "prefilter": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
         out_every = max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz))
         rows = {k: [] for k in ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve",
-                                "pe", "used", "cn0", "nis")}
+                                "pe", "used", "cn0", "nis", "nav")}
         nis_acc = [0.0, 0]
         truth_on_grid = (truth is not None and len(truth.t) == len(imu.t)
                          and np.allclose(truth.t, imu.t, atol=1e-6))
@@ -661,6 +680,7 @@ class DeepReceiver:
                     pp = P[sl]
                     mon = c.power
                     mon.add(pp, ns[sl], ep_all[sl] % c.bit_ms == 0)
+                    nav_log.demodulate(c, pp, ep_all[sl], k1 / fs)
                     if mon.new:
                         # tests on the last bit sums: _FAST_MS to leave the interval out,
                         # _LOSS_MS to declare the channel lost (module notes)
@@ -730,6 +750,19 @@ class DeepReceiver:
                 else:
                     pre.decorrelate(i)
             kf.x = np.zeros(17)
+            # -- navigation data decoded so far, taken up at the interval's end
+            new_ephs, new_iono = nav_log.changes(chans, week, S0 + t_rel(k1) - clk_b / C_LIGHT,
+                                                 iono)
+            if new_ephs is not None or new_iono is not iono:
+                step = _take_up_model_change(
+                    ephs, new_ephs or ephs, iono, new_iono, week, S0 + t_rel(k1), ins, clk_b,
+                    tau_prev, np.array([c.used for c in chans]), meas_all, kf, pre)
+                P_k0 = P_k0 + step.dP - step.Hx_rho
+                Pc_k0 = Pc_k0 + step.dPc - step.Hx_rho
+                clk_b = step.clock_bias_m
+                nav_log.taken_up(k1 / fs, chans, new_ephs, iono, new_iono, step)
+                ephs = [c.eph for c in chans]
+                iono = new_iono
             th = time.perf_counter()
             prof["ins"] += th - tg
             # -- output
@@ -746,6 +779,8 @@ class DeepReceiver:
                 rows["used"].append(use.copy())
                 rows["cn0"].append([c.cn0_dbhz for c in chans])
                 rows["nis"].append(nis_acc[0] / nis_acc[1] if nis_acc[1] else math.nan)
+                rows["nav"].append(nav_log.flag)
+                nav_log.flag = 0
                 nis_acc = [0.0, 0]
                 if truth_on_grid:
                     ae, ve, pe = nav_errors(ins.llh, ins.v_n, ins.C_b_n, truth.llh[i1],
@@ -781,7 +816,146 @@ class DeepReceiver:
             pos_err=arr("pe", 3), prns=tuple(c.prn for c in chans),
             used=np.asarray(rows["used"], bool).reshape(-1, n_ch),
             cn0_dbhz=arr("cn0", n_ch), nis=arr("nis"), handover_s=k_grid0 / fs, filter_name=kf.name,
-            adaptation_s=kf.adaptation_time_s - adapt0, profile=prof)
+            adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
+            nav_change=np.asarray(rows["nav"], int), navigation=nav_log.summary(k0 / fs))
+
+
+def _handover_decoder(sc, epoch: int, ms0: int) -> ChannelNavDecoder:
+    """Navigation decoder of a handed-over channel: the scalar channel ``sc``'s assembler
+    and the bits of its subframe in progress (its epoch counter moved to the loop's
+    numbering, in which ``sc``'s next epoch is ``epoch``)."""
+    dec = ChannelNavDecoder(sc.prn, sc.is_d1, ms0, sc.assembler)
+    runs = sc.demodulated_bits()
+    if runs:
+        e0, bits = runs[-1]
+        dec.seed(e0 + epoch - int(sc.epoch), bits)
+    return dec
+
+
+@dataclasses.dataclass
+class _ModelStep:
+    """A change of the range model taken up at one epoch (:func:`_take_up_model_change`)."""
+
+    dP: np.ndarray          # predicted code range change of every channel [m]
+    dPc: np.ndarray         # predicted carrier phase-range change [m]
+    Hx_rho: np.ndarray      # range change of the state step [m]
+    x: np.ndarray           # state step (17,)
+    clock_bias_m: float     # clock bias after the step [m]
+
+
+def _take_up_model_change(ephs_old, ephs_new, iono_old, iono_new, week: int, sow_nom: float,
+                          ins, clock_bias_m: float, tau, used: np.ndarray, meas_all, kf,
+                          pre: PreFilterBank) -> _ModelStep:
+    """Switch the range model (ephemerides, ionosphere) at a clean epoch (module notes).
+
+    The predicted ranges at the epoch move by ``dP`` (new model minus old, same position and
+    clock). A filter that ran on the old model has absorbed that step into its position and
+    clock as far as the geometry lets it: its estimate sits at ``x_c``, the least-squares
+    solution of ``H_rho x = dP`` over the channels in the measurement vector (position and
+    clock columns). The INS and the clock are moved by ``x_c`` (the loop's feedback), the
+    pre-filters by what the NCOs then move, ``dP - H x_c`` (which removes the misfit the old
+    model left in the innovations), and the position/clock covariance grows by
+    ``(x_c / 2)^2`` for the error of that projection (the filter's weights are not equal).
+    """
+    r = llh_to_ecef(*ins.llh)
+    old = predict_ranges(ephs_old, week, [sow_nom], [r], [clock_bias_m], iono_old, tau0=tau)
+    new = predict_ranges(ephs_new, week, [sow_nom], [r], [clock_bias_m], iono_new, tau0=tau)
+    dP = new.P[:, 0] - old.P[:, 0]
+    dPc = new.Pc[:, 0] - old.Pc[:, 0]
+    n = dP.size
+    meas_all.set_geometry(ins.llh, new.U[:, 0])
+    H = meas_all.matrix
+    x = np.zeros(17)
+    cols = [6, 7, 8, 15]
+    if int(np.count_nonzero(used)) >= 4:
+        x[cols] = np.linalg.lstsq(H[:n][used][:, cols], dP[used], rcond=None)[0]
+        kf.P[cols, cols] += (0.5 * x[cols]) ** 2
+    else:
+        kf.P[15, 15] += float(np.max(dP ** 2))
+    Hx = H @ x
+    z3 = np.zeros(3)
+    ins.correct(z3, z3, x[6:9], z3, z3)
+    for i in range(n):
+        pre.shift(i, -CHIP_RATE_B3I / C_LIGHT * (dP[i] - Hx[i]), Hx[n + i] / LAMBDA_B3I)
+    return _ModelStep(dP=dP, dPc=dPc, Hx_rho=Hx[:n], x=x, clock_bias_m=clock_bias_m - x[15])
+
+
+class _NavLog:
+    """Navigation data of the vector loop's channels: decoding, changes, history."""
+
+    def __init__(self, navdata: NavDataInForce, chans: list, iono, t_s: float, week: int,
+                 sow: float) -> None:
+        self.navdata = navdata
+        self.flag = 0        # changes since the last output row (DeepResult.nav_change)
+        self.ephemerides: dict = {f"C{c.prn:02d}": [] for c in chans}
+        self.ionosphere: list = []
+        self.steps: list = []
+        self._new: list = []
+        for c in chans:
+            self._eph_entry(t_s, c.prn, c.eph, navdata.select_with_source(c.prn, week, sow)[1])
+        self._iono_entry(t_s, iono)
+
+    def demodulate(self, c: _Chan, prompts, epochs, t_s: float) -> None:
+        """Feed channel ``c``'s prompts to its decoder; offer what it completes."""
+        for eph, klob in c.nav.add(prompts, epochs):
+            if eph is not None:
+                self.navdata.offer_ephemeris(eph, t_s)
+            self.navdata.offer_klobuchar(klob, t_s)
+
+    def changes(self, chans: list, week: int, sow: float, iono):
+        """``(new ephemeris list or None, ionosphere in force)`` at BDT (``week``, ``sow``)."""
+        self._new = []
+        for c in chans:
+            try:
+                e, src = self.navdata.select_with_source(c.prn, week, sow)
+            except SdrDiError:           # nothing valid any more: keep the last one
+                e, src = c.eph, None
+            self._new.append((e, src))
+        changed = any(e is not c.eph and e != c.eph for c, (e, _) in zip(chans, self._new))
+        return ([e for e, _ in self._new] if changed else None), self.navdata.klobuchar
+
+    def taken_up(self, t_s: float, chans: list, new_ephs, iono_old, iono_new,
+                 step: _ModelStep) -> None:
+        """Record the change :func:`_take_up_model_change` just made; set the channels'
+        records."""
+        if new_ephs is not None:
+            self.flag |= 1
+            for c, (e, src) in zip(chans, self._new):
+                if e is not c.eph and e != c.eph:
+                    self._eph_entry(t_s, c.prn, e, src)
+                    c.eph = e
+        if iono_new is not iono_old:
+            self.flag |= 2
+            self._iono_entry(t_s, iono_new)
+        self.steps.append({"t_s": round(t_s, 3),
+                           "max_range_step_m": float(np.max(np.abs(step.dP))),
+                           "clock_step_m": float(step.x[15]),
+                           "height_step_m": float(step.x[8])})
+
+    def _eph_entry(self, t_s, prn, e, src) -> None:
+        self.ephemerides[f"C{prn:02d}"].append(
+            {"t_s": round(t_s, 3), "source": src,
+             "week": int(e.week), "toe": float(e.toe), "aode": int(e.AODE)})
+
+    def _iono_entry(self, t_s, iono) -> None:
+        src = self.navdata.iono_source if iono is not None else None
+        self.ionosphere.append({"t_s": round(t_s, 3), "model": "klobuchar" if src else "none",
+                                "source": src})
+
+    def summary(self, t_end_s: float) -> dict:
+        """``navigation`` entry of the run summary."""
+        models = self.navdata.models()
+        return {
+            "rule": "decoded broadcast data as it arrives, assistance (RINEX) before it; "
+                    "the newer data set wins, the decoded one on a tie",
+            "ephemerides": self.ephemerides,
+            "ionosphere": {**models["ionosphere"], "history": self.ionosphere},
+            "troposphere": models["troposphere"],
+            "model_steps": self.steps,
+            "decoded_conflicts": self.navdata.n_conflicts,
+            "decoded_rejected": self.navdata.n_rejected,
+            "end_s": round(t_end_s, 3),
+        }
 
 
 def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int, k1: int):

@@ -75,6 +75,7 @@ from ..frames import C_e_n, ecef_to_llh, elevation_azimuth
 from ..orbits.atmosphere import iono_delay_b3i_m, saastamoinen_delay
 from ..orbits.broadcast import sat_pos_vel_clock
 from ..orbits.ephemeris import Ephemeris, Klobuchar
+from .navdata import NavDataInForce
 from .observables import (
     ChannelObservationLike,
     ObservableBuilder,
@@ -730,6 +731,13 @@ class PvtEngine:
     rx_time : ReceiverTime, optional
         Preset receiver clock (default: first-fix initialization, with the (week, toe) of a
         record of a mapping ``ephemerides`` as time hint for unknown transmit weeks).
+
+    Attributes
+    ----------
+    navdata : NavDataInForce
+        The navigation data in force (:mod:`~sdr_di.receiver.navdata`): a receiver offers
+        it what it decodes and sets ``ephemerides = navdata``, ``iono =
+        navdata.klobuchar``, so every mode applies the same rules.
     """
 
     def __init__(self, fs: float, ephemerides: Mapping[int, Ephemeris] | Any,
@@ -742,6 +750,7 @@ class PvtEngine:
         self.builder = ObservableBuilder(fs, rx_time, time_hint=hint)
         self.ephemerides = ephemerides
         self.iono = iono
+        self.navdata = NavDataInForce(None)
         self.config = config or PvtConfig()
         self.last_fix: PvtSolution | None = None
 

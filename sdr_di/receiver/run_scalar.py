@@ -150,8 +150,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
                               "{postfix}]")
 
     def on_epoch(sample, observations, ephemerides):
-        engine.ephemerides = ephemerides
-        engine.iono = rx.klobuchar
+        engine.ephemerides = engine.navdata.offer_decoded(ephemerides, rx.klobuchar)
+        engine.iono = engine.navdata.klobuchar
         sol = engine.process(observations)
         counts["epochs"] += 1
         csv_w.write(sol)

@@ -65,6 +65,7 @@ from .words import PREAMBLE, SUBFRAME_BITS, build_info, decode_words, encode_wor
 
 __all__ = [
     "EphemerisAssembler",
+    "assistance_klobuchar",
     "NavBits",
     "code_period_signs",
     "decode_stream",
@@ -855,3 +856,24 @@ def broadcast_klobuchar(iono: Klobuchar) -> Klobuchar:
     values = [F.PARAMS[n].from_raw(F.PARAMS[n].to_raw(v))
               for n, v in zip(names, (*iono.alpha, *iono.beta))]
     return Klobuchar(alpha=tuple(values[:4]), beta=tuple(values[4:]))
+
+
+def assistance_klobuchar(nav) -> tuple[Klobuchar | None, str]:
+    """Klobuchar coefficients of a navigation file's header, as the satellites broadcast them.
+
+    The file's BDS coefficients (``BDSA``/``BDSB``) when present; otherwise its GPS
+    coefficients (``GPSA``/``GPSB``: the same eight-parameter set with the same scale factors,
+    describing the same day's ionosphere), used with the BDS model; otherwise none. Each is
+    rounded to its ICD LSB (:func:`broadcast_klobuchar`), so a receiver taking them as
+    assistance uses the values the IF generator simulates and the D1/D2 messages carry.
+
+    Returns
+    -------
+    (Klobuchar or None, str)
+        The coefficients and where they come from, in words.
+    """
+    if getattr(nav, "iono", None) is not None:
+        return broadcast_klobuchar(nav.iono), "BDSA/BDSB"
+    if getattr(nav, "iono_gps", None) is not None:
+        return broadcast_klobuchar(nav.iono_gps), "GPSA/GPSB (file has no BDS coefficients)"
+    return None, "none (file has no Klobuchar coefficients)"
