@@ -17,6 +17,25 @@ class UsageError(SdrDiError):
     """Command-line options that do not fit together (one-line message, exit 2)."""
 
 
+class _ArgumentParser(argparse.ArgumentParser):
+    """argparse with its errors in the CLI's one-line form (``sdr-di: error: ...``, exit 2).
+
+    argparse prints the usage and ``PROG: error: ...`` itself; here the error is raised as a
+    :class:`UsageError` naming the sub-command and pointing at its ``--help``, and printed by
+    :func:`main` like every other bad input. Sub-parsers inherit the class.
+    """
+
+    def error(self, message: str):  # noqa: D102 - argparse API
+        sub = self.prog.split(" ", 1)[1] if " " in self.prog else ""
+        where = f"{sub}: " if sub else ""
+        raise UsageError(f"{where}{message} (see {self.prog} --help)")
+
+
+#: Largest BDT week accepted for ``--start-week`` (BDT week 0 began 2006-01-01; week 9999 is
+#: in 2197).
+MAX_BDT_WEEK = 9999
+
+
 def _prn_list(text: str) -> list[str]:
     return [p for p in text.replace(" ", "").split(",") if p]
 
@@ -143,6 +162,7 @@ def _add_run(sub) -> None:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from .constants import parse_prn
+    from .io.atomic import check_output_dir
     from .receiver.run_scalar import open_source, run_scalar
 
     deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
@@ -150,11 +170,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
                  if getattr(args, n) is not None] + (["--no-assist"] if args.no_assist else [])
     if args.mode != "deep" and deep_opts:
         raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep")
+    _check_run_options(args)
     prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
     source = open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
                          sample_format=args.sample_format, spectrum_inverted=args.inverted,
                          start_week=args.start_week, start_sow=args.start_sow, rfch=args.rfch)
-    out = args.out or args.if_file.with_name(args.if_file.stem + "_run")
+    out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_run"))
     if args.mode == "deep":
         return _run_deep(args, source, out, prns)
     res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress)
@@ -167,6 +188,53 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     return 0
+
+
+def _check_run_options(args: argparse.Namespace) -> None:
+    """``run``'s numbers and input file, checked before any work (one-line errors)."""
+    import math
+
+    from .constants import SECONDS_PER_WEEK
+
+    for opt, v in (("--rate", args.rate), ("--fs", args.fs), ("--filter-rate", args.filter_rate),
+                   ("--duration", args.duration)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise UsageError(f"{opt} must be a finite number > 0, got {v:g}")
+    if args.if_hz is not None and not math.isfinite(args.if_hz):
+        raise UsageError(f"--if must be a finite number [Hz], got {args.if_hz:g}")
+    if args.start_week is not None and not 0 <= args.start_week <= MAX_BDT_WEEK:
+        raise UsageError(f"--start-week must be a BDT week 0..{MAX_BDT_WEEK}, got "
+                         f"{args.start_week}")
+    sow = args.start_sow
+    if sow is not None and not (math.isfinite(sow) and 0 <= sow < SECONDS_PER_WEEK):
+        raise UsageError(f"--start-sow must be BDT seconds of week in [0, {SECONDS_PER_WEEK:g})"
+                         f", got {sow:g}")
+    path = args.if_file
+    if path.is_dir():
+        raise UsageError(f"IF file {path}: is a folder")
+    if not path.exists() and (path.suffix == ".json" or not path.with_suffix(".json").exists()):
+        raise UsageError(f"IF file {path}: no such file")
+
+
+def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
+    """Filter name, and a filter rate that divides the IMU rate, before the start-up."""
+    from .filters import FILTER_NAMES
+
+    if cfg.filter not in FILTER_NAMES:
+        raise UsageError(f"--filter: unknown filter {cfg.filter!r}; valid names: "
+                         f"{', '.join(FILTER_NAMES)}")
+    if args.filter_rate is None:
+        return
+    from .deep.run_deep import companion_files
+    from .io.imu_files import read_imu
+
+    imu_path = args.imu or companion_files(source, skip=("truth",))["imu"]
+    if imu_path is not None:
+        rate = read_imu(imu_path).rate_hz
+        n_per = rate / cfg.filter_rate_hz
+        if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
+            raise UsageError(f"--filter-rate {cfg.filter_rate_hz:g} Hz must divide the IMU "
+                             f"rate {rate:g} Hz of {imu_path}")
 
 
 def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
@@ -185,6 +253,7 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
         raise UsageError(str(exc)) from None
     if args.duration is not None and not args.duration > 0:
         raise UsageError(f"--duration must be > 0, got {args.duration:g}")
+    _check_deep_inputs(args, source, cfg)
     try:
         res = run_deep(source, out, config=cfg, imu_path=args.imu, truth_path=args.truth,
                        nav_path=args.ephemeris, assist=not args.no_assist, prns=prns,
@@ -244,12 +313,13 @@ def _add_lc(sub) -> None:
 
 def _cmd_lc(args: argparse.Namespace) -> int:
     import dataclasses
+    import math
 
     from .errors import FilterError, ImuDataError, ScenarioError
     from .filters import FILTER_NAMES
-    from .integration.loose import load_lc_scenario, make_inputs, run_loose
+    from .integration.loose import load_lc_scenario, make_inputs, min_lc_duration_s, run_loose
     from .integration.noise import NoiseWindow
-    from .io.atomic import ensure_output_dir
+    from .io.atomic import check_output_dir, ensure_output_dir
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
     from .sim.imu import ImuErrorModel
 
@@ -270,8 +340,14 @@ def _cmd_lc(args: argparse.Namespace) -> int:
             raise ScenarioError(f"--r-window: {exc}") from None
         kw["noise"] = dataclasses.replace(st.noise, windows=wins)
     st = st.replace(**kw)
-    if args.duration is not None and not args.duration > 0:
-        raise ScenarioError(f"--duration must be > 0, got {args.duration:g}")
+    out = check_output_dir(args.out or (REPO_ROOT / "signals" / "out"))
+    shortest = min_lc_duration_s(st)
+    if args.duration is not None and not (math.isfinite(args.duration)
+                                          and args.duration >= shortest):
+        raise ScenarioError(f"--duration must be >= {shortest:g} s (one GNSS interval: the "
+                            f"first filter update), got {args.duration:g}")
+    if args.seed is not None and args.seed < 0:
+        raise ScenarioError(f"--seed must be >= 0, got {args.seed}")
     seed = sc.seed if args.seed is None else args.seed
     if args.imu is not None or args.truth is not None:
         if args.imu is None or args.truth is None:
@@ -281,14 +357,21 @@ def _cmd_lc(args: argparse.Namespace) -> int:
         imu = read_imu(args.imu)
         truth, _, _ = read_truth(args.truth)
         model = ImuErrorModel.from_spec(sc.imu)
+        span = float(imu.t[-1] - imu.t[0])
+        if span < shortest:
+            raise ImuDataError(f"IMU file {args.imu}: spans {span:g} s, shorter than one GNSS "
+                               f"interval ({shortest:g} s): no filter update, no result")
     else:
         if args.duration is not None:
             sc = sc.with_overrides(duration_s=args.duration)
         if args.seed is not None:
             sc = sc.with_overrides(seed=args.seed)
+        if sc.duration_s < shortest:
+            raise ScenarioError(f"{sc.source}: duration {sc.duration_s:g} s is shorter than one "
+                                f"GNSS interval ({shortest:g} s): no filter update, no result")
         truth, imu, model = make_inputs(sc, st)
+    out = ensure_output_dir(out)  # created only now that every input is checked
     res = run_loose(truth, imu, model, st, seed=seed, duration_s=args.duration)
-    out = ensure_output_dir(args.out or (REPO_ROOT / "signals" / "out"))
     csv = res.write_csv(out / f"{sc.name}_lc_{name}.csv")
     head = (f"{'filter':14s} {'span_s':>11s} {'att_rmse_deg':>12s} {'att_max_deg':>11s} "
             f"{'vel_rmse':>9s} {'vel_max':>8s} {'pos_rmse_m':>10s} {'pos_max_m':>9s}")
@@ -308,7 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``sdr-di`` argument parser."""
     from . import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _ArgumentParser(
         prog="sdr-di",
         description="BeiDou B3I / INS deeply integrated software-receiver simulator.",
     )
@@ -324,17 +407,40 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``sdr-di`` console script; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """Entry point of the ``sdr-di`` console script; returns the exit status.
+
+    Bad input (any :class:`~sdr_di.errors.SdrDiError`, argument errors included): one line
+    ``sdr-di: error: ...`` on stderr, status 2. Ctrl-C anywhere (while modules are imported,
+    while files are written, during a campaign): ``sdr-di: interrupted``, status 130, no
+    traceback; the commands' outputs are removed or left complete (``sdr_di.io.atomic``).
+    """
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
         return args.func(args)
     except SdrDiError as exc:
-        print(f"sdr-di: error: {exc}", file=sys.stderr)
+        print(f"sdr-di: error: {_one_line(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        _quiet_after_interrupt()
         print("sdr-di: interrupted", file=sys.stderr)
         return 130
+
+
+def _one_line(text: str) -> str:
+    """An error message on one line (a message quoting file content may hold newlines)."""
+    return " ".join(text.split()) if "\n" in text or "\r" in text else text
+
+
+def _quiet_after_interrupt() -> None:
+    """Silence what would still print after Ctrl-C: Dask's shutdown logging (scheduler,
+    nanny and workers in this process) and warnings from interpreter shutdown."""
+    import logging
+    import warnings
+
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+    warnings.filterwarnings("ignore")
 
 
 if __name__ == "__main__":

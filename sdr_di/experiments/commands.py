@@ -17,6 +17,13 @@ from ..errors import CampaignError
 __all__ = ["add_parsers", "cmd_campaign", "cmd_report", "cmd_robustness"]
 
 
+#: Dask worker preload (script text) of a local campaign: the worker processes ignore SIGINT.
+#: Ctrl-C in a terminal goes to the whole process group; only the sdr-di process should act
+#: on it (record the campaign as interrupted, close the cluster, print one line), not every
+#: worker with its own KeyboardInterrupt traceback and the nanny's error log.
+_WORKERS_IGNORE_SIGINT = "import signal; signal.signal(signal.SIGINT, signal.SIG_IGN)"
+
+
 def _default_out(kind: str, experiment: str) -> Path:
     from ..scenario import REPO_ROOT
 
@@ -71,34 +78,65 @@ def add_parsers(subparsers) -> None:
 
 
 def _params(args: argparse.Namespace):
+    """Experiment, its parameters and the output folder, all checked before any work.
+
+    A ``scenario`` parameter is read and validated here, so that a bad scenario file is a
+    bad input (exit 2), not a failed run.
+    """
+    import math
+
+    from ..io.atomic import check_output_dir
     from .registry import get_experiment, parse_params
 
     exp = get_experiment(args.experiment)
     overrides = {}
     if args.duration is not None:
-        if not args.duration > 0:
-            raise CampaignError(f"--duration must be > 0, got {args.duration:g}")
+        if not (math.isfinite(args.duration) and args.duration > 0):
+            raise CampaignError(f"--duration must be a finite number > 0, got "
+                                f"{args.duration:g}")
         overrides["duration_s"] = float(args.duration)
-    return exp, parse_params(exp, args.param, overrides)
+    if args.seed < 0:
+        raise CampaignError(f"--seed must be >= 0, got {args.seed}")
+    params = parse_params(exp, args.param, overrides)
+    if params.get("scenario") is not None:
+        _check_scenario(exp.name, params["scenario"])
+    check_output_dir(args.out or _default_out(args.command, exp.name))
+    return exp, params
+
+
+def _check_scenario(experiment: str, path) -> None:
+    """Read and validate the ``scenario`` parameter (scenario tables plus an optional ``[lc]``
+    table, which the loosely coupled experiments read)."""
+    from ..errors import ScenarioError
+    from ..integration.loose import load_lc_scenario
+
+    if not str(path).strip():
+        raise ScenarioError(f"{experiment}: --param scenario= needs a scenario file")
+    load_lc_scenario(Path(str(path)))
 
 
 def cmd_campaign(args: argparse.Namespace) -> int:
     """Handler of ``sdr-di campaign``."""
     from .campaign import run_campaign
-    from .report import render_report
 
     exp, params = _params(args)
-    if args.seed < 0:
-        raise CampaignError(f"--seed must be >= 0, got {args.seed}")
+    if args.runs < 1:
+        raise CampaignError(f"--runs must be >= 1, got {args.runs}")
+    if args.workers is not None and args.workers < 1:
+        raise CampaignError(f"--workers must be >= 1, got {args.workers}")
     out = args.out or _default_out("campaign", exp.name)
 
     def show(rec: dict) -> None:
         state = "ok" if rec["status"] == "ok" else f"FAILED: {rec.get('error')}"
         print(f"  run {rec['index']:4d} seed {rec['seed']:10d}  {state}", flush=True)
 
-    res = run_campaign(exp, params, args.runs, base_seed=args.seed, scheduler=args.scheduler,
-                       workers=args.workers, out_dir=out, overwrite=args.force,
-                       on_record=show)
+    import dask
+
+    preload = [*dask.config.get("distributed.worker.preload", []), _WORKERS_IGNORE_SIGINT]
+    with dask.config.set({"distributed.worker.preload": preload}):
+        res = run_campaign(exp, params, args.runs, base_seed=args.seed,
+                           scheduler=args.scheduler, workers=args.workers, out_dir=out,
+                           overwrite=args.force, on_record=show)
     print(f"{res.n_ok}/{len(res.records)} runs completed in {res.elapsed_s:.1f} s on "
           f"{res.scheduler}")
     for r in res.failed:
@@ -109,13 +147,12 @@ def cmd_campaign(args: argparse.Namespace) -> int:
                             f"(first: {res.records[0].get('error')}); records in {out}/runs")
     print(f"aggregate {out / 'aggregate.md'}")
     if not args.no_report:
-        print(f"report    {render_report(out)}")
+        print(f"report    {_render(out)}")
     return 1 if res.failed else 0
 
 
 def cmd_robustness(args: argparse.Namespace) -> int:
     """Handler of ``sdr-di robustness``."""
-    from .report import render_report
     from .single_run import run_experiment
 
     exp, params = _params(args)
@@ -130,13 +167,29 @@ def cmd_robustness(args: argparse.Namespace) -> int:
             print(f"{k:{width}s} {v:.6g}" if isinstance(v, float) else f"{k:{width}s} {v}")
     print(f"output    {out}")
     if not args.no_report:
-        print(f"report    {render_report(out)}")
+        print(f"report    {_render(out)}")
     return 0 if res.ok else 1
 
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Handler of ``sdr-di report``."""
-    from .report import render_report
-
-    print(render_report(args.dir))
+    print(_render(args.dir))
     return 0
+
+
+def _render(folder: Path) -> Path:
+    """:func:`~sdr_di.experiments.report.render_report`, each warning (a run record it could
+    not read) printed as one line ``sdr-di: warning: ...`` on stderr."""
+    import warnings
+
+    from .report import ReportWarning, render_report
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ReportWarning)
+        path = render_report(folder)
+    for w in caught:
+        if issubclass(w.category, ReportWarning):
+            print(f"sdr-di: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return path

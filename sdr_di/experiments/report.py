@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import html
 import json
+import warnings
 from pathlib import Path
 
 from ..errors import ExperimentError
@@ -19,7 +20,7 @@ from .aggregate import aggregate
 from .execute import read_json, restore_floats
 from .tables import format_cell, read_csv_table, stats_rows
 
-__all__ = ["render_report"]
+__all__ = ["ReportWarning", "render_report"]
 
 _CSS = """
 body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
@@ -60,17 +61,62 @@ def _rows_html(head: list[str], rows: list[dict]) -> str:
     return "".join(out)
 
 
+class ReportWarning(UserWarning):
+    """A run record the report could not read (named in the message; the report goes on)."""
+
+
+#: Keys of ``campaign.json`` / ``result.json`` the report uses, and the type each must have.
+_META_TYPES: dict[str, tuple[type, ...]] = {
+    "experiment": (str,), "description": (str,), "status": (str,), "error": (str, type(None)),
+    "params": (dict,), "notes": (list,), "tables": (list,), "failed": (list,),
+}
+
+
+def _read_meta(path: Path) -> dict:
+    """``campaign.json`` / ``result.json``, checked; :class:`ExperimentError` naming the file."""
+    try:
+        meta = read_json(path)
+    except OSError as exc:
+        raise ExperimentError(f"report {path}: cannot read ({exc.strerror or exc})") from None
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
+        raise ExperimentError(f"report {path}: not JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise ExperimentError(f"report {path}: not a JSON object (top level is "
+                              f"{type(meta).__name__})")
+    for key, types in _META_TYPES.items():
+        if key in meta and not isinstance(meta[key], types):
+            raise ExperimentError(f"report {path}: {key} must be "
+                                  f"{' or '.join(t.__name__ for t in types)}, got "
+                                  f"{meta[key]!r:.60}")
+    if not all(isinstance(t, str) for t in meta.get("tables", [])):
+        raise ExperimentError(f"report {path}: tables must be a list of names")
+    if not all(isinstance(f, dict) for f in meta.get("failed", [])):
+        raise ExperimentError(f"report {path}: failed must be a list of run records")
+    return meta
+
+
 def _partial_campaign(folder: Path) -> dict:
-    """Counts, failures and aggregate from ``runs/<i>.json`` of an unfinished campaign."""
-    recs = []
-    for p in (folder / "runs").glob("*.json"):
+    """Counts, failures and aggregate from ``runs/<i>.json`` of an unfinished campaign.
+
+    A record that cannot be read (truncated by a kill, edited by hand) is skipped with a
+    :class:`ReportWarning` naming it; the list is also kept under ``"unreadable"``.
+    """
+    recs, unreadable = [], []
+    for p in sorted((folder / "runs").glob("*.json")):
         try:
-            recs.append(read_json(p))
-        except (OSError, ValueError):
+            rec = read_json(p)
+            if not isinstance(rec, dict) or not isinstance(rec.get("figures", {}), dict):
+                raise ValueError("not a run record")
+            rec["index"] = int(rec.get("index", 0))
+        except (OSError, ValueError, TypeError, RecursionError) as exc:
+            warnings.warn(ReportWarning(f"run record {p} could not be read ({exc}); "
+                                        "left out of the report"), stacklevel=2)
+            unreadable.append(p.name)
             continue
+        recs.append(rec)
     recs.sort(key=lambda r: r.get("index", 0))
     ok = [r for r in recs if r.get("status") == "ok"]
-    return {"n_ok": len(ok), "n_failed": len(recs) - len(ok),
+    return {"n_ok": len(ok), "n_failed": len(recs) - len(ok), "unreadable": unreadable,
             "failed": [r for r in recs if r.get("status") != "ok"],
             "stats": aggregate(restore_floats(r.get("figures", {})) for r in ok)}
 
@@ -100,14 +146,20 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
     Raises
     ------
     ExperimentError
-        Not a folder written by a campaign or a run.
+        Not a folder written by a campaign or a run, or its ``campaign.json`` /
+        ``result.json`` is not JSON, not an object, or has a key of the wrong type.
+
+    Warns
+    -----
+    ReportWarning
+        For each run record (``runs/<i>.json``) of an unfinished campaign that cannot be read.
     """
     folder = Path(folder)
     if (folder / "campaign.json").is_file():
-        meta = read_json(folder / "campaign.json")
+        meta = _read_meta(folder / "campaign.json")
         kind = "campaign"
     elif (folder / "result.json").is_file():
-        meta = read_json(folder / "result.json")
+        meta = _read_meta(folder / "result.json")
         kind = "run"
     else:
         raise ExperimentError(f"report {folder}: not an experiment output folder (no "
@@ -125,6 +177,9 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
                          "aggregate below comes from the run records so far)</p>")
             partial = _partial_campaign(folder)
             meta.update(partial)
+            if partial["unreadable"]:
+                parts.append("<p class='failed'>Run records that could not be read: "
+                             f"{html.escape(', '.join(partial['unreadable']))}</p>")
             parts.append("<h2>Aggregate of the runs so far</h2>" + _rows_html(
                 ["figure", "n", "mean", "std", "min", "max", "value"],
                 stats_rows(partial["stats"])))
@@ -134,18 +189,19 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
     else:
         parts.append(f"<h1>Run: {html.escape(name)}</h1>")
         parts.append(f"<p>{html.escape(meta.get('description', ''))}</p>")
-        parts.append(f"<p>seed {meta.get('seed')}, status {html.escape(meta.get('status'))}"
+        parts.append(f"<p>seed {meta.get('seed')}, status {html.escape(str(meta.get('status')))}"
                      "</p>")
         if meta.get("status") != "ok":
             parts.append(f"<p class='failed'>{html.escape(str(meta.get('error')))}</p>")
     params = json.dumps(meta.get("params", {}), indent=1)
     parts.append(f"<h2>Parameters</h2><pre>{html.escape(params)}</pre>")
     for note in meta.get("notes", []):
-        parts.append(f"<p><em>{html.escape(note)}</em></p>")
+        parts.append(f"<p><em>{html.escape(str(note))}</em></p>")
     failed = meta.get("failed") or []
     if failed:
         parts.append("<h2>Failed runs</h2><ul class='failed'>")
-        parts += [f"<li>run {f['index']} (seed {f['seed']}): {html.escape(str(f['error']))}"
+        parts += [f"<li>run {html.escape(str(f.get('index')))} (seed "
+                  f"{html.escape(str(f.get('seed')))}): {html.escape(str(f.get('error')))}"
                   "</li>" for f in failed]
         parts.append("</ul>")
     parts.append("<h2>Tables</h2>")

@@ -252,6 +252,12 @@ class LcResult:
         return path
 
 
+def min_lc_duration_s(settings: LcSettings) -> float:
+    """Shortest run that gives a result [s]: one GNSS interval (``1 / gnss_rate_hz``, 1 s by
+    default), the time to the first filter update; a shorter run has no epoch to report."""
+    return 1.0 / settings.gnss_rate_hz
+
+
 def make_inputs(sc: Scenario, settings: LcSettings | None = None):
     """Truth and measured IMU of a scenario (seeded from the scenario)."""
     from ..sim.generate import simulate_truth

@@ -34,6 +34,7 @@ def ensure_output_dir(path: str | Path) -> Path:
         It exists as a file, cannot be created, or is not writable.
     """
     path = Path(path)
+    check_output_dir(path)
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -42,6 +43,33 @@ def ensure_output_dir(path: str | Path) -> Path:
         raise OutputError(f"output directory {path}: exists and is not a directory")
     if not os.access(path, os.W_OK | os.X_OK):
         raise OutputError(f"output directory {path}: not writable")
+    return path
+
+
+def check_output_dir(path: str | Path) -> Path:
+    """Check, without creating anything, that ``path`` is or can become a writable directory.
+
+    For a command to refuse a bad ``--out`` before any work, and to create the folder only
+    when it has something to write (:func:`ensure_output_dir`).
+
+    Raises
+    ------
+    OutputError
+        ``path`` or one of its parents exists and is not a directory, or the nearest existing
+        folder is not writable.
+    """
+    path = Path(path)
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        what = "exists and is not a directory" if probe == path else f"{probe} is not a directory"
+        raise OutputError(f"output directory {path}: {what}")
+    if probe.exists() and not os.access(probe, os.W_OK | os.X_OK):
+        where = "" if probe == path else f" ({probe})"
+        raise OutputError(f"output directory {path}: not writable{where}")
     return path
 
 

@@ -46,6 +46,11 @@ IMU_GRADES: dict[str, tuple[float, float, float, float, float, float]] = {
     "perfect": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
 }
 
+#: Shortest scenario duration [s]: ten B3I code periods, and two IMU intervals at 200 Hz so
+#: that the IMU and truth files hold at least three samples (a scenario whose IMU rate is
+#: lower needs two of its intervals). Shorter durations are refused before any work.
+MIN_DURATION_S = 0.01
+
 #: Sample formats the generator writes (see :mod:`sdr_di.io.sample_formats`).
 SAMPLE_FORMATS = ("iq_int8", "real_int8", "iq_int16", "real_int16", "iq_int4")
 
@@ -375,6 +380,11 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
         gyro_random_walk_deg_sqrth=im.num("gyro_random_walk_deg_sqrth", g[5], lo=0.0),
     )
     im.check_unknown()
+    shortest = max(MIN_DURATION_S, 2.0 / imu.rate_hz)
+    if duration < shortest:
+        raise ScenarioError(
+            f"{where}: [scenario].duration_s: must be >= {shortest:g} s (the shortest scenario: "
+            f"{MIN_DURATION_S:g} s and two IMU intervals), got {duration:g}")
 
     sa = _Reader(raw.get("satellites", {}), f"{where}: [satellites]")
     eph = Path(sa.str_("ephemeris", _REQUIRED))

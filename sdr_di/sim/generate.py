@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import OutputError, ScenarioError
-from ..io.atomic import OutputSet, ensure_output_dir
+from ..io.atomic import OutputSet, check_output_dir, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
 from ..io.sidecar import file_fingerprint, write_sidecar
 from ..orbits.ephemeris import Klobuchar
@@ -101,8 +101,8 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
     SdrDiError
         Bad scenario, ephemeris or output problems (see :mod:`sdr_di.errors`).
     """
-    out_dir = ensure_output_dir(out_dir)
-    name = name or sc.name
+    out_dir = check_output_dir(out_dir)  # created once the inputs are known good
+    name = sc.name if name is None else name
     if not name or "/" in name or name.startswith("."):
         raise OutputError(f"invalid output name {name!r}")
     truth = simulate_truth(sc)
@@ -110,6 +110,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
     rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
     imu = imu_model(sc).apply(truth, rng)
 
+    out_dir = ensure_output_dir(out_dir)
     paths = {
         "if": out_dir / f"{name}.bin",
         "imu": out_dir / f"{name}_imu.csv",

@@ -1,0 +1,399 @@
+"""Every bad input a new user might type, on every command: one line ``sdr-di: error: ...``,
+exit status 2, no traceback, no output file left (issue 12 item 4).
+
+The CLI runs in-process (``sdr_di.cli.main``). ``CASES`` is a table of (id, argv); ``{d}`` in
+an argument is the shared work folder made by :func:`make_workdir` (a small generated set in
+``{d}/set``, broken sidecars, scenarios and experiment folders). The folder's file list is
+compared before and after each case: a case that leaves a file (or a folder) behind fails.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from sdr_di.cli import main
+from sdr_di.scenario import DEFAULT_SCENARIO
+
+#: Arguments of a small valid set (0.02 s at 2.5 MHz): cheap to generate, and the base of the
+#: generate cases (so a case that wrongly starts work finishes quickly).
+G = ["generate", "--no-progress", "--fs", "2.5e6"]
+GD = [*G, "--duration", "0.02"]
+LC = ["lc"]
+EXP = "noise-mismatch"
+
+CASES: list[tuple[str, list[str]]] = [
+    # -- argument parser ---------------------------------------------------------------------
+    ("no-command", []),
+    ("unknown-command", ["frobnicate"]),
+    ("unknown-option", ["generate", "--frobnicate"]),
+    ("run-no-file", ["run"]),
+    ("run-bad-mode", ["run", "{d}/set/s.bin", "--mode", "vector"]),
+    ("generate-duration-text", [*G, "--duration", "abc"]),
+    ("generate-seed-float", [*GD, "--seed", "1.5"]),
+    ("campaign-no-runs", ["campaign", EXP]),
+    ("campaign-runs-text", ["campaign", EXP, "--runs", "many"]),
+    ("lc-r-window-two-values", [*LC, "--r-window", "1", "2"]),
+    ("report-no-dir", ["report"]),
+    # -- generate ----------------------------------------------------------------------------
+    ("generate-duration-0", [*G, "--duration", "0", "--out", "{d}/o"]),
+    ("generate-duration-neg", [*G, "--duration", "-1", "--out", "{d}/o"]),
+    ("generate-duration-nan", [*G, "--duration", "nan", "--out", "{d}/o"]),
+    ("generate-duration-inf", [*G, "--duration", "inf", "--out", "{d}/o"]),
+    ("generate-duration-1e-9", [*G, "--duration", "1e-9", "--out", "{d}/o"]),
+    ("generate-duration-1ms", [*G, "--duration", "0.001", "--out", "{d}/o"]),
+    ("generate-duration-4ms", [*G, "--duration", "0.004", "--out", "{d}/o"]),
+    ("generate-duration-9ms", [*G, "--duration", "0.009", "--out", "{d}/o"]),
+    ("generate-fs-0", ["generate", "--no-progress", "--duration", "0.02", "--fs", "0",
+                       "--out", "{d}/o"]),
+    ("generate-fs-neg", ["generate", "--no-progress", "--duration", "0.02", "--fs", "-2.5e6",
+                         "--out", "{d}/o"]),
+    ("generate-fs-nan", ["generate", "--no-progress", "--duration", "0.02", "--fs", "nan",
+                         "--out", "{d}/o"]),
+    ("generate-fs-1khz", ["generate", "--no-progress", "--duration", "0.02", "--fs", "1e3",
+                          "--out", "{d}/o"]),
+    ("generate-if-nan", [*GD, "--if", "nan", "--out", "{d}/o"]),
+    ("generate-if-above-fs", [*GD, "--if", "3e6", "--out", "{d}/o"]),
+    ("generate-format-bogus", [*GD, "--format", "int3", "--out", "{d}/o"]),
+    ("generate-real-no-if", [*GD, "--format", "real_int8", "--out", "{d}/o"]),
+    ("generate-bits-0", [*GD, "--bits", "0", "--out", "{d}/o"]),
+    ("generate-bits-99", [*GD, "--bits", "99", "--out", "{d}/o"]),
+    ("generate-cn0-nan", [*GD, "--cn0", "nan", "--out", "{d}/o"]),
+    ("generate-cn0-neg", [*GD, "--cn0", "-500", "--out", "{d}/o"]),
+    ("generate-cn0-200", [*GD, "--cn0", "200", "--out", "{d}/o"]),
+    ("generate-prn-c99", [*GD, "--prn", "C99", "--out", "{d}/o"]),
+    ("generate-prn-text", [*GD, "--prn", "GPS", "--out", "{d}/o"]),
+    ("generate-prn-empty", [*GD, "--prn", ",", "--out", "{d}/o"]),
+    ("generate-prn-duplicate", [*GD, "--prn", "C10,C10", "--out", "{d}/o"]),
+    ("generate-seed-neg", [*GD, "--seed", "-1", "--out", "{d}/o"]),
+    ("generate-scenario-missing", [*GD, "--scenario", "{d}/nope.toml", "--out", "{d}/o"]),
+    ("generate-scenario-dir", [*GD, "--scenario", "{d}", "--out", "{d}/o"]),
+    ("generate-scenario-not-toml", [*GD, "--scenario", "{d}/bad.toml", "--out", "{d}/o"]),
+    ("generate-scenario-wrong-type", [*GD, "--scenario", "{d}/types.toml", "--out", "{d}/o"]),
+    ("generate-scenario-binary", [*GD, "--scenario", "{d}/set/s.bin", "--out", "{d}/o"]),
+    ("generate-scenario-empty", [*GD, "--scenario", "{d}/empty.toml", "--out", "{d}/o"]),
+    ("generate-ephemeris-missing", [*GD, "--ephemeris", "{d}/nope.rnx", "--out", "{d}/o"]),
+    ("generate-ephemeris-binary", [*GD, "--ephemeris", "{d}/set/s.bin", "--out", "{d}/o"]),
+    ("generate-ephemeris-csv", [*GD, "--ephemeris", "{d}/set/s_imu.csv", "--out", "{d}/o"]),
+    ("generate-name-empty", [*GD, "--name", "", "--out", "{d}/o"]),
+    ("generate-name-slash", [*GD, "--name", "a/b", "--out", "{d}/o"]),
+    ("generate-name-dot", [*GD, "--name", ".hidden", "--out", "{d}/o"]),
+    ("generate-out-file", [*GD, "--out", "{d}/afile"]),
+    ("generate-out-under-file", [*GD, "--out", "{d}/afile/sub"]),
+    # -- run ---------------------------------------------------------------------------------
+    ("run-missing-bin", ["run", "{d}/nope.bin"]),
+    ("run-missing-json", ["run", "{d}/nope.json"]),
+    ("run-missing-foreign", ["run", "{d}/nope.bin", "--fs", "2.5e6", "--format", "iq_int8"]),
+    ("run-directory", ["run", "{d}"]),
+    ("run-no-sidecar", ["run", "{d}/afile"]),
+    ("run-sidecar-not-json", ["run", "{d}/set/notjson.json"]),
+    ("run-sidecar-list", ["run", "{d}/set/list.json"]),
+    ("run-sidecar-string", ["run", "{d}/set/string.json"]),
+    ("run-sidecar-rate-text", ["run", "{d}/set/rate_text.json"]),
+    ("run-sidecar-rate-neg", ["run", "{d}/set/rate_neg.json"]),
+    ("run-sidecar-nsamples-text", ["run", "{d}/set/nsamp_text.json"]),
+    ("run-sidecar-nsamples-neg", ["run", "{d}/set/nsamp_neg.json"]),
+    ("run-sidecar-start-text", ["run", "{d}/set/start_text.json"]),
+    ("run-sidecar-start-week-text", ["run", "{d}/set/week_text.json"]),
+    ("run-sidecar-format-number", ["run", "{d}/set/fmt_number.json"]),
+    ("run-sidecar-format-bogus", ["run", "{d}/set/fmt_bogus.json"]),
+    ("run-sidecar-iffile-number", ["run", "{d}/set/iffile_number.json"]),
+    ("run-sidecar-iffile-missing", ["run", "{d}/set/iffile_missing.json"]),
+    ("run-sidecar-inverted-text", ["run", "{d}/set/inverted_text.json"]),
+    ("run-sidecar-carrier-text", ["run", "{d}/set/carrier_text.json"]),
+    ("run-sidecar-schema", ["run", "{d}/set/schema.json"]),
+    ("run-mixed-set-bin", ["run", "{d}/mixed/s.bin"]),
+    ("run-mixed-set-json", ["run", "{d}/mixed/s.json"]),
+    ("run-rate-0", ["run", "{d}/set/s.bin", "--rate", "0"]),
+    ("run-rate-neg", ["run", "{d}/set/s.bin", "--rate", "-5"]),
+    ("run-rate-nan", ["run", "{d}/set/s.bin", "--rate", "nan"]),
+    ("run-rate-inf", ["run", "{d}/set/s.bin", "--rate", "inf"]),
+    ("run-prn-c99", ["run", "{d}/set/s.bin", "--prn", "C99"]),
+    ("run-prn-text", ["run", "{d}/set/s.bin", "--prn", "L1"]),
+    ("run-out-file", ["run", "{d}/set/s.bin", "--out", "{d}/afile"]),
+    ("run-foreign-fs-only", ["run", "{d}/set/s.bin", "--fs", "2.5e6"]),
+    ("run-foreign-fs-0", ["run", "{d}/set/s.bin", "--fs", "0", "--format", "iq_int8"]),
+    ("run-foreign-fs-nan", ["run", "{d}/set/s.bin", "--fs", "nan", "--format", "iq_int8"]),
+    ("run-foreign-if-nan", ["run", "{d}/set/s.bin", "--fs", "2.5e6", "--format", "iq_int8",
+                            "--if", "nan"]),
+    ("run-foreign-format-bogus", ["run", "{d}/set/s.bin", "--fs", "2.5e6", "--format", "int3"]),
+    ("run-foreign-empty", ["run", "{d}/empty.bin", "--fs", "2.5e6", "--format", "iq_int8"]),
+    ("run-start-week-neg", ["run", "{d}/set/s.bin", "--fs", "2.5e6", "--format", "iq_int8",
+                            "--start-week", "-1"]),
+    ("run-start-week-huge", ["run", "{d}/set/s.bin", "--fs", "2.5e6", "--format", "iq_int8",
+                             "--start-week", "100000"]),
+    ("run-start-sow-neg", ["run", "{d}/set/s.bin", "--fs", "2.5e6", "--format", "iq_int8",
+                           "--start-sow", "-1"]),
+    ("run-start-sow-week-long", ["run", "{d}/set/s.bin", "--fs", "2.5e6", "--format",
+                                 "iq_int8", "--start-sow", "604800"]),
+    ("run-start-sow-nan", ["run", "{d}/set/s.bin", "--fs", "2.5e6", "--format", "iq_int8",
+                           "--start-sow", "nan"]),
+    ("run-deep-option-scalar", ["run", "{d}/set/s.bin", "--filter", "ekf"]),
+    ("run-deep-filter-bogus", ["run", "{d}/set/s.bin", "--mode", "deep", "--filter", "kf"]),
+    ("run-deep-filter-rate-0", ["run", "{d}/set/s.bin", "--mode", "deep", "--filter-rate",
+                                "0"]),
+    ("run-deep-filter-rate-nan", ["run", "{d}/set/s.bin", "--mode", "deep", "--filter-rate",
+                                  "nan"]),
+    ("run-deep-filter-rate-7", ["run", "{d}/set/s.bin", "--mode", "deep", "--filter-rate",
+                                "7"]),
+    ("run-deep-duration-0", ["run", "{d}/set/s.bin", "--mode", "deep", "--duration", "0"]),
+    ("run-deep-duration-nan", ["run", "{d}/set/s.bin", "--mode", "deep", "--duration", "nan"]),
+    ("run-deep-rate-0", ["run", "{d}/set/s.bin", "--mode", "deep", "--rate", "0"]),
+    ("run-deep-imu-missing", ["run", "{d}/set/s.bin", "--mode", "deep", "--imu",
+                              "{d}/nope.csv"]),
+    ("run-deep-imu-is-truth", ["run", "{d}/set/s.bin", "--mode", "deep", "--imu",
+                               "{d}/set/s_truth.csv"]),
+    ("run-deep-truth-is-imu", ["run", "{d}/set/s.bin", "--mode", "deep", "--truth",
+                               "{d}/set/s_imu.csv"]),
+    ("run-deep-ephemeris-binary", ["run", "{d}/set/s.bin", "--mode", "deep", "--ephemeris",
+                                   "{d}/set/s.bin"]),
+    ("run-deep-mixed-imu", ["run", "{d}/mixed_imu/s.bin", "--mode", "deep"]),
+    ("run-deep-companion-missing", ["run", "{d}/noimu/s.bin", "--mode", "deep"]),
+    # -- lc ----------------------------------------------------------------------------------
+    ("lc-filter-bogus", [*LC, "--filter", "kalman"]),
+    ("lc-duration-0", [*LC, "--duration", "0"]),
+    ("lc-duration-nan", [*LC, "--duration", "nan"]),
+    ("lc-duration-short", [*LC, "--duration", "0.5"]),
+    ("lc-q-scale-0", [*LC, "--q-scale", "0"]),
+    ("lc-q-scale-nan", [*LC, "--q-scale", "nan"]),
+    ("lc-r-scale-neg", [*LC, "--r-scale", "-1"]),
+    ("lc-r-window-reversed", [*LC, "--r-window", "5", "2", "10"]),
+    ("lc-r-window-nan", [*LC, "--r-window", "1", "2", "nan"]),
+    ("lc-imu-only", [*LC, "--imu", "{d}/set/s_imu.csv"]),
+    ("lc-imu-missing", [*LC, "--imu", "{d}/nope.csv", "--truth", "{d}/set/s_truth.csv"]),
+    ("lc-imu-swapped", [*LC, "--imu", "{d}/set/s_truth.csv", "--truth", "{d}/set/s_imu.csv"]),
+    ("lc-imu-too-short", [*LC, "--imu", "{d}/set/s_imu.csv", "--truth",
+                          "{d}/set/s_truth.csv"]),
+    ("lc-out-file", [*LC, "--out", "{d}/afile"]),
+    ("lc-out-under-file", [*LC, "--out", "{d}/afile/sub"]),
+    ("lc-scenario-missing", [*LC, "--scenario", "{d}/nope.toml"]),
+    ("lc-scenario-not-toml", [*LC, "--scenario", "{d}/bad.toml"]),
+    ("lc-seed-neg", [*LC, "--seed", "-3"]),
+    # -- campaign / robustness ---------------------------------------------------------------
+    ("campaign-unknown-experiment", ["campaign", "frobnicate", "--runs", "2"]),
+    ("campaign-runs-0", ["campaign", EXP, "--runs", "0", "--out", "{d}/c"]),
+    ("campaign-runs-neg", ["campaign", EXP, "--runs", "-2", "--out", "{d}/c"]),
+    ("campaign-workers-0", ["campaign", EXP, "--runs", "2", "--workers", "0", "--out",
+                            "{d}/c"]),
+    ("campaign-seed-neg", ["campaign", EXP, "--runs", "2", "--seed", "-1", "--out", "{d}/c"]),
+    ("campaign-duration-nan", ["campaign", EXP, "--runs", "2", "--duration", "nan", "--out",
+                               "{d}/c"]),
+    ("campaign-param-no-equals", ["campaign", EXP, "--runs", "2", "--param", "case", "--out",
+                                  "{d}/c"]),
+    ("campaign-param-unknown", ["campaign", EXP, "--runs", "2", "--param", "speed=3", "--out",
+                                "{d}/c"]),
+    ("campaign-param-case-bogus", ["campaign", EXP, "--runs", "2", "--param", "case=z",
+                                   "--out", "{d}/c"]),
+    ("campaign-param-filters-bogus", ["campaign", EXP, "--runs", "2", "--param",
+                                      "filters=kalman", "--out", "{d}/c"]),
+    ("campaign-param-scenario-missing", ["campaign", EXP, "--runs", "2", "--param",
+                                         "scenario={d}/nope.toml", "--out", "{d}/c"]),
+    ("campaign-out-file", ["campaign", EXP, "--runs", "2", "--out", "{d}/afile"]),
+    ("robustness-unknown-experiment", ["robustness", "frobnicate"]),
+    ("robustness-scenario-missing", ["robustness", EXP, "--param", "scenario={d}/nope.toml",
+                                     "--out", "{d}/r"]),
+    ("robustness-scenario-not-toml", ["robustness", EXP, "--param", "scenario={d}/bad.toml",
+                                      "--out", "{d}/r"]),
+    ("robustness-scenario-wrong-type", ["robustness", EXP, "--param",
+                                        "scenario={d}/types.toml", "--out", "{d}/r"]),
+    ("robustness-scenario-number", ["robustness", EXP, "--param", "scenario=12", "--out",
+                                    "{d}/r"]),
+    ("robustness-param-bool-text", ["robustness", EXP, "--param", "plots=maybe", "--out",
+                                    "{d}/r"]),
+    ("robustness-filters-bogus", ["robustness", EXP, "--param", "filters=ekf,kalman",
+                                  "--out", "{d}/r"]),
+    ("robustness-duration-0", ["robustness", EXP, "--duration", "0", "--out", "{d}/r"]),
+    ("robustness-out-file", ["robustness", EXP, "--out", "{d}/afile"]),
+    ("robustness-outage-bogus", ["robustness", "outage", "--param", "outages=5,x", "--out",
+                                 "{d}/r"]),
+    ("robustness-count-bogus", ["robustness", "count-change", "--param", "counts=7,0,7",
+                                "--out", "{d}/r"]),
+    ("robustness-weak-modes-bogus", ["robustness", "weak-signal", "--param", "modes=vector",
+                                     "--out", "{d}/r"]),
+    # -- report ------------------------------------------------------------------------------
+    ("report-missing-dir", ["report", "{d}/nope"]),
+    ("report-file", ["report", "{d}/afile"]),
+    ("report-empty-dir", ["report", "{d}/emptydir"]),
+    ("report-campaign-corrupt", ["report", "{d}/camp_corrupt"]),
+    ("report-campaign-list", ["report", "{d}/camp_list"]),
+    ("report-result-corrupt", ["report", "{d}/res_corrupt"]),
+    ("report-result-wrong-types", ["report", "{d}/res_types"]),
+]
+
+
+def _sidecar_variants(set_dir: Path) -> None:
+    meta = json.loads((set_dir / "s.json").read_text())
+
+    def put(name: str, **kw) -> None:
+        m = {**meta, **kw}
+        (set_dir / name).write_text(json.dumps(m))
+
+    (set_dir / "notjson.json").write_text("{sampling_rate_hz: 25e6")
+    (set_dir / "list.json").write_text(json.dumps([meta]))
+    (set_dir / "string.json").write_text(json.dumps("s.bin"))
+    put("rate_text.json", sampling_rate_hz="fast")
+    put("rate_neg.json", sampling_rate_hz=-2.5e6)
+    put("nsamp_text.json", n_samples="many")
+    put("nsamp_neg.json", n_samples=-5)
+    put("start_text.json", start="yesterday")
+    put("week_text.json", start={**meta["start"], "week": "755"})
+    put("fmt_number.json", sample_format=8)
+    put("fmt_bogus.json", sample_format="int3")
+    put("iffile_number.json", if_file=12)
+    put("iffile_missing.json", if_file="gone.bin")
+    put("inverted_text.json", spectrum_inverted="no")
+    put("carrier_text.json", carrier_hz="B3I")
+    put("schema.json", schema="sdr-di-if/0")
+
+
+def make_workdir(d: Path, generated: Path) -> None:
+    """Fill ``d`` with the inputs the cases name; ``generated`` holds a complete small set."""
+    shutil.copytree(generated, d / "set")
+    _sidecar_variants(d / "set")
+    # a newer, longer .bin beside the old sidecar, IMU and truth (an interrupted re-generation)
+    shutil.copytree(generated, d / "mixed")
+    with open(d / "mixed" / "s.bin", "ab") as fh:
+        fh.write(b"\x01" * 1000)
+    shutil.copytree(generated, d / "mixed_imu")
+    imu = d / "mixed_imu" / "s_imu.csv"
+    imu.write_text(imu.read_text().replace("# rate_hz: 200.0", "# rate_hz: 200.0\n# x: y"))
+    shutil.copytree(generated, d / "noimu")
+    (d / "noimu" / "s_imu.csv").unlink()
+    (d / "empty.bin").write_bytes(b"")
+    (d / "afile").write_text("not a folder\n")
+    (d / "bad.toml").write_text("[scenario\nname = 'x'\n")
+    (d / "empty.toml").write_text("")
+    (d / "types.toml").write_text(
+        DEFAULT_SCENARIO.read_text().replace("duration_s = 60.0", 'duration_s = "long"')
+        .replace('"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/'))
+    (d / "emptydir").mkdir()
+    for folder, name, text in (("camp_corrupt", "campaign.json", '{"experiment": "x", '),
+                               ("camp_list", "campaign.json", "[1, 2]"),
+                               ("res_corrupt", "result.json", "\x00\x01"),
+                               ("res_types", "result.json", '{"status": 5, "tables": 3}')):
+        (d / folder).mkdir()
+        (d / folder / name).write_text(text)
+
+
+def _snapshot(d: Path) -> set[str]:
+    return {p.relative_to(d).as_posix() for p in d.rglob("*")}
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory) -> Path:
+    from sdr_di.scenario import load_scenario
+    from sdr_di.sim.generate import generate_files
+
+    gen = tmp_path_factory.mktemp("generated")
+    sc = load_scenario(DEFAULT_SCENARIO).with_overrides(duration_s=0.02, sampling_rate_hz=2.5e6)
+    generate_files(sc, gen, name="s", progress=False)
+    d = tmp_path_factory.mktemp("bad_inputs")
+    make_workdir(d, gen)
+    return d
+
+
+def run_case(argv: list[str], capsys) -> tuple[int, str, str]:
+    """Run the CLI in-process; returns (exit status, stdout, stderr)."""
+    try:
+        rc = main(argv)
+    except SystemExit as exc:  # only --help / --version may exit this way
+        rc = exc.code if isinstance(exc.code, int) else 1
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
+
+
+@pytest.mark.parametrize("argv", [c[1] for c in CASES], ids=[c[0] for c in CASES])
+def test_bad_input_is_one_line_exit_2(workdir, capsys, argv):
+    before = _snapshot(workdir)
+    args = [a.format(d=workdir) for a in argv]
+    rc, out, err = run_case(args, capsys)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert "Traceback" not in err, err
+    assert rc == 2, (rc, err)
+    assert len(lines) == 1 and lines[0].startswith("sdr-di: error: "), err
+    assert _snapshot(workdir) == before, sorted(_snapshot(workdir) - before)
+
+
+def test_no_command_prints_one_line_and_help_still_works(capsys):
+    rc, out, err = run_case([], capsys)
+    assert rc == 2 and err.strip() == ("sdr-di: error: the following arguments are required: "
+                                       "command (see sdr-di --help)")
+    rc, out, err = run_case(["run", "--help"], capsys)
+    assert rc == 0 and out.startswith("usage: sdr-di run") and err == ""
+
+
+# -- report on a campaign with an unreadable run record -----------------------------------------
+
+def test_report_warns_for_each_unreadable_run_record(tmp_path, capsys):
+    d = tmp_path / "campaign"
+    (d / "runs").mkdir(parents=True)
+    (d / "campaign.json").write_text(json.dumps({
+        "experiment": EXP, "status": "interrupted", "runs": 3, "tables": [], "params": {}}))
+    (d / "runs" / "0.json").write_text(json.dumps(
+        {"index": 0, "seed": 1, "status": "ok", "figures": {"pos_m_rmse": 1.5}}))
+    (d / "runs" / "1.json").write_text('{"index": 1, "seed": 2, "stat')  # killed mid-write
+    (d / "runs" / "2.json").write_text("[]")
+    rc, out, err = run_case(["report", str(d)], capsys)
+    assert rc == 0, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 2 and all(ln.startswith("sdr-di: warning: run record ") for ln in lines)
+    assert "1.json" in lines[0] and "2.json" in lines[1]
+    html = (d / "report.html").read_text()
+    assert "could not be read: 1.json, 2.json" in html and "1 of 3 runs completed" in html
+
+
+# -- Ctrl-C at three points: during an import, during generation, during a campaign -------------
+
+_INTERRUPT_AT_IMPORT = """
+import os, signal, sys
+from importlib.abc import MetaPathFinder
+
+class Interrupt(MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name == "numba":  # first imported inside main(), by the generate command
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+
+sys.meta_path.insert(0, Interrupt())
+from sdr_di.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_ctrl_c_during_import_is_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-c", _INTERRUPT_AT_IMPORT, *GD, "--out",
+                          str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 130 and res.stderr == "sdr-di: interrupted\n", res.stderr
+    assert not (tmp_path / "o").exists()
+
+
+# (during generation: tests/test_output_sets.py::test_killed_regeneration_keeps_the_earlier_set)
+
+
+def test_ctrl_c_during_a_campaign_is_one_line_without_dask_noise(tmp_path):
+    """SIGINT to the whole process group, as a terminal's Ctrl-C: the workers must not print
+    their own tracebacks, the scheduler no error log."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "c"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sdr_di.cli", "campaign", EXP, "--runs", "40", "--workers", "1",
+         "--duration", "5", "--out", str(out), "--no-report"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    first = proc.stdout.readline()  # the first finished run: workers are busy now
+    assert first.strip().startswith("run"), (first, proc.stderr.read() if not first else "")
+    os.killpg(proc.pid, signal.SIGINT)
+    rest, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, (rest, err)
+    assert err == "sdr-di: interrupted\n", err
+    assert json.loads((out / "campaign.json").read_text())["status"] == "interrupted"
