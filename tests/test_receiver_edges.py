@@ -194,3 +194,92 @@ def test_generate_progress_bar_ends_at_its_total(tmp_path, capsys):
                      "--out", str(tmp_path)]) == 0
     err = capsys.readouterr().err
     assert "0.37/0.37 s" in err.replace("\r", "\n").splitlines()[-1]
+
+
+def _blockage_file(tmp_path, start_s, end_s, duration="30"):
+    """A 2.5 MHz default-scenario file with every satellite blocked in [start_s, end_s)."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "signals" / "default.toml").read_text()
+    text = text.replace('"../ephemeris/', f'"{root / "ephemeris"}/')
+    text += (f'\n[[outage]]\nprn = "all"\nstart_s = {start_s}\nend_s = {end_s}\n'
+             "blockage = true\n")
+    sc = tmp_path / "blk.toml"
+    sc.write_text(text)
+    out = tmp_path / "f"
+    assert main(["generate", "--no-progress", "--scenario", str(sc), "--duration", duration,
+                 "--fs", "2.5e6", "--out", str(out)]) == 0
+    return out / "default.bin"
+
+
+def _pvt_rows(path):
+    import io
+
+    lines = [ln for ln in open(path) if not ln.startswith("#")]
+    return list(csv.DictReader(io.StringIO("".join(lines))))
+
+
+@pytest.mark.slow
+def test_total_blockage_keeps_writing_rows_and_fixes_resume_from_the_prediction(
+        tmp_path, monkeypatch):
+    """Every channel lost for 2 s: the run goes on with ``too_few_satellites`` rows at the
+    output rate and a continuous receiver time; the channels' time is rebuilt from the
+    range predicted from the last fix (coasting disabled here: ``coast_max_s = 0``), so the
+    first fix comes within 2 s of the signals' return. Without the prediction the time waits
+    for a new subframe (6 s of D1)."""
+    from sdr_di.receiver import run_scalar as rs
+    from sdr_di.receiver.run_scalar import open_source, run_scalar
+    from sdr_di.receiver.scalar import ScalarReceiver
+    from sdr_di.receiver.tracking import TrackingConfig
+
+    f = _blockage_file(tmp_path, 21.0, 23.0)
+    cfg = TrackingConfig(coast_max_s=0.0)
+    res = run_scalar(open_source(f), tmp_path / "with", progress=False,
+                     receiver=ScalarReceiver(cfg, log=False))
+    rows = _pvt_rows(res.files["pvt"])
+    sow = [float(r["rx_sow"]) for r in rows if r["rx_sow"] != "nan"]
+    assert np.allclose(np.diff(sow), 0.2, atol=1e-6), "receiver time not continuous"
+    assert len(rows) == 149  # every 0.2 s in (0, 30) s, the blockage included
+    start = float(open_source(f).start_sow)
+    rel = [(float(r["rx_sow"]) - start, r["status"]) for r in rows if r["rx_sow"] != "nan"]
+    blocked = [st for t, st in rel if 21.5 < t < 23.0]
+    assert blocked and all(st == "too_few_satellites" for st in blocked), blocked
+    assert any(st == "fix" for t, st in rel if 19.0 < t < 21.0)
+    first_after = min(t for t, st in rel if t >= 23.0 and st == "fix")
+    assert first_after < 25.0, first_after
+
+    monkeypatch.setattr(rs, "FixPredictor", lambda *a, **k: (lambda prn, sample: None))
+    res2 = run_scalar(open_source(f), tmp_path / "without", progress=False,
+                      receiver=ScalarReceiver(cfg, log=False))
+    rel2 = [(float(r["rx_sow"]) - start, r["status"]) for r in _pvt_rows(res2.files["pvt"])
+            if r["rx_sow"] != "nan"]
+    after2 = [t for t, st in rel2 if t >= 23.0 and st == "fix"]
+    assert not after2 or min(after2) > 26.0, min(after2)
+
+
+def test_assisted_search_with_the_long_search_finds_30_dbhz_satellites(tmp_path):
+    """The sidecar's satellites at 30 dB-Hz: the 40 ms cold search of all PRNs finds few of
+    them, the assisted search (listed PRNs around their Doppler, then 400 x 1 ms for the
+    missed ones) finds them, and searches only the listed PRNs."""
+    from sdr_di.receiver.run_scalar import open_source, sidecar_assistance
+    from sdr_di.receiver.scalar import ScalarReceiver
+
+    assert main(["generate", "--no-progress", "--duration", "0.5", "--fs", "2.5e6", "--cn0",
+                 "30", "--seed", "3", "--out", str(tmp_path)]) == 0
+    src = open_source(tmp_path / "default.bin")
+    aid = sidecar_assistance(src)
+    assert len(aid) == 7 and all(d is not None for d in aid.values())
+    cold = ScalarReceiver(log=False, long_noncoherent=None)
+    cold.run(src, prns=list(aid), stop_sample=src.n_samples)
+    n_cold = sum(r.detected for r in cold.acquisition_results)
+    rx = ScalarReceiver(log=False)
+    rx.run(src, assist=aid, stop_sample=src.n_samples)
+    res = rx.acquisition_results
+    assert sorted(r.prn for r in res) == sorted(aid)
+    n_long = sum(r.detected for r in res)
+    assert n_long >= 6 and n_long >= n_cold + 3, (n_cold, n_long)
+    for r in res:
+        if r.detected:
+            assert abs(r.doppler_hz - aid[r.prn]) < 100.0, r
+            assert r.noncoherent in (40, 400)

@@ -3,7 +3,8 @@
 Paper 004 Fig. 1: every channel's NCOs are commanded from the corrected INS position and
 velocity, the satellites' broadcast orbits at transmit time, the receiver clock states and
 the atmosphere models. The model is the one the PVT solves (:mod:`sdr_di.receiver.pvt`), run
-forwards::
+forwards (:mod:`sdr_di.receiver.range_model`, which the scalar receiver's re-acquisition
+after a blockage uses too)::
 
     P  = | R_z(omega_e tau) r_sat(t_tx) - r | + b - c dt_sv(t_tx) + T + I     code [m]
     Pc = P - 2 I                                                           carrier [m]
@@ -34,102 +35,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
 
 import numpy as np
 
 from ..constants import C_LIGHT, CHIP_RATE_B3I, F_B3I
-from ..orbits.broadcast import sat_pos_vel_clock
-from ..orbits.ephemeris import Ephemeris, Klobuchar
-from ..receiver.pvt import PvtConfig, atmosphere_delays, sagnac_rotation
+from ..receiver.range_model import RangePrediction, predict_ranges
 
 __all__ = ["NcoCommand", "RangePrediction", "nco_commands", "predict_ranges"]
-
-_TAU0_S = 0.075
-
-
-@dataclasses.dataclass
-class RangePrediction:
-    """Predicted observables of ``n_sat`` satellites at ``n_t`` receive instants.
-
-    Attributes
-    ----------
-    P, Pc : ndarray (n_sat, n_t)
-        Code pseudorange and carrier phase-range [m].
-    tau : ndarray (n_sat, n_t)
-        Geometric travel time [s] (seed of the next call).
-    r_sat, v_sat : ndarray (n_sat, n_t, 3)
-        Satellite ECEF position [m] (rotated into the reception frame) and velocity [m/s].
-    U : ndarray (n_sat, n_t, 3)
-        Unit line-of-sight vectors receiver -> satellite (ECEF).
-    """
-
-    P: np.ndarray
-    Pc: np.ndarray
-    tau: np.ndarray
-    r_sat: np.ndarray
-    v_sat: np.ndarray
-    U: np.ndarray
-
-
-def predict_ranges(ephemerides: Sequence[Ephemeris], week: int, sow_nom, r_rx, clock_bias_m,
-                   iono: Klobuchar | None, *, tau0: np.ndarray | None = None,
-                   passes: int = 2, config: PvtConfig | None = None) -> RangePrediction:
-    """INS-predicted pseudoranges of several satellites at several receive instants.
-
-    Parameters
-    ----------
-    ephemerides : sequence of Ephemeris
-        One broadcast record per satellite.
-    week : int
-        BDT week of ``sow_nom``.
-    sow_nom : array_like (n_t,)
-        Receiver-clock (nominal) receive times [s of week].
-    r_rx : array_like (n_t, 3)
-        Receiver ECEF positions at those instants [m].
-    clock_bias_m : array_like (n_t,)
-        Receiver clock bias ``b`` [m] at those instants.
-    iono : Klobuchar or None
-        Broadcast ionosphere coefficients (None: no ionosphere).
-    tau0 : array_like (n_sat, n_t), optional
-        Travel-time seeds [s] (e.g. the previous call's ``tau``); default 75 ms with 3 more
-        passes.
-    passes : int
-        Travel-time iterations when seeded (2 converge to < 1e-12 s from a 1 ms seed error).
-    config : PvtConfig, optional
-        Atmosphere switches (``ionosphere``, ``troposphere``), as the PVT.
-    """
-    cfg = config or PvtConfig()
-    sow = np.atleast_1d(np.asarray(sow_nom, float))
-    r = np.asarray(r_rx, float).reshape(-1, 3)
-    b = np.broadcast_to(np.asarray(clock_bias_m, float), sow.shape)
-    n_s, n_t = len(ephemerides), sow.size
-    if tau0 is None:
-        tau = np.full((n_s, n_t), _TAU0_S)
-        passes = passes + 3
-    else:
-        tau = np.array(tau0, float).reshape(n_s, n_t)
-    t_r = sow - b / C_LIGHT                                  # BDT of reception
-    r_sat = np.empty((n_s, n_t, 3))
-    v_sat = np.empty((n_s, n_t, 3))
-    dt_sv = np.empty((n_s, n_t))
-    for _ in range(passes):
-        for i, eph in enumerate(ephemerides):
-            rs, vs, dts, _ = sat_pos_vel_clock(eph, t_r - tau[i], week=week)
-            r_sat[i], v_sat[i], dt_sv[i] = rs, vs, dts
-        rot, rho, _ = sagnac_rotation(r_sat.reshape(-1, 3), np.repeat(r[None], n_s, 0)
-                                          .reshape(-1, 3))
-        tau = rho.reshape(n_s, n_t) / C_LIGHT
-    r_rot = rot.reshape(n_s, n_t, 3)
-    rho = rho.reshape(n_s, n_t)
-    trop = np.empty((n_s, n_t))
-    ion = np.empty((n_s, n_t))
-    for j in range(n_t):
-        _, _, T, I = atmosphere_delays(r[j], r_rot[:, j], float(t_r[j]), iono, cfg)
-        trop[:, j], ion[:, j] = T, I
-    P = rho + b[None, :] - C_LIGHT * dt_sv + trop + ion
-    U = (r_rot - r[None]) / rho[..., None]
-    return RangePrediction(P=P, Pc=P - 2.0 * ion, tau=tau, r_sat=r_rot, v_sat=v_sat, U=U)
 
 
 @dataclasses.dataclass

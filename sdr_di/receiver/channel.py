@@ -499,15 +499,25 @@ class Channel:
         return self.fd, min(rng, 10000.0)
 
     def reacquired(self, sample: int, code_phase_chips: float, doppler_hz: float,
-                   cn0_dbhz: float = math.nan) -> None:
+                   cn0_dbhz: float = math.nan,
+                   t_tx: tuple[int, float] | None = None) -> None:
         """Resume tracking after a successful (re-)acquisition at ``sample``.
 
-        After a loss, the code-epoch count is carried through the outage by the coasting NCO:
-        when the re-acquired code phase agrees with the coasted one within ``coast_tol_chips``
-        (and the outage lasted at most ``coast_max_s``) the time established before the
-        outage is kept, and restored (``time_valid``) as soon as the new bit synchronization
-        falls on the same bit edges; otherwise the time is re-established from the next
-        subframe.
+        After a loss the channel's time is rebuilt, in this order of preference:
+
+        1. ``t_tx`` given (BDT week, satellite-clock transmit time [s] of the code received
+           at ``sample``, predicted from the last fix: :mod:`~sdr_di.receiver.prediction`):
+           the re-acquired code phase gives the fraction of a millisecond, the prediction the
+           whole milliseconds (it must be within +-0.5 ms: 150 km of range);
+        2. the code-epoch count carried through the outage by the coasting NCO, when the
+           re-acquired code phase agrees with the coasted one within ``coast_tol_chips`` (and
+           the outage lasted at most ``coast_max_s``): the time established before the
+           outage is kept.
+
+        Either way the time is valid again (``time_valid``) as soon as the new bit
+        synchronization falls on the bit edges that time puts them on (an independent check
+        of the whole milliseconds modulo the bit length); without either the time is
+        re-established from the next subframe.
         """
         cfg = self.cfg
         if self.lost_at_sample is None or self.state not in (ChannelState.LOST,
@@ -524,10 +534,22 @@ class Channel:
         ep_at = self.epoch + wraps + math.floor((th_pred + diff) / _LF)
         keep = dur <= cfg.coast_max_s and abs(diff) <= cfg.coast_tol_chips
         saved_time = self._time if keep else None
+        if t_tx is not None and math.isfinite(t_tx[1]):
+            saved_time = self._time_from_prediction(ep_at, th0, int(t_tx[0]), float(t_tx[1]))
         self._reset_tracking_state()
         self._restart(sample, th0, doppler_hz, cn0_dbhz, ep_at)
         self.slip_count += 1
         self._time = saved_time
+
+    def _time_from_prediction(self, ep_at: int, theta0: float, week: int,
+                              sow: float) -> tuple[int, float, int]:
+        """``_time`` (subframe-start epoch, its time, week) for a predicted transmit time
+        ``sow`` at the sample where code epoch ``ep_at`` is at phase ``theta0`` [chips]:
+        the whole milliseconds of the epoch start are the prediction's (:meth:`reacquired`)."""
+        ep_ms = round((sow - theta0 / CHIP_RATE_B3I) * 1000.0)  # epoch start [ms of week]
+        sub_ms = SUBFRAME_BITS * self.bit_ms
+        sf_ms = (ep_ms // sub_ms) * sub_ms
+        return (ep_at - (ep_ms - sf_ms), sf_ms * 1e-3, week)
 
     # -- NH / bit synchronization ----------------------------------------------------------
     def _try_bit_sync(self) -> None:

@@ -234,7 +234,8 @@ _ARRAY_FIELDS = ("prn", "t_tx_week", "t_tx_sow", "pseudorange_m", "pseudorange_r
 
 
 def form_observables(channels: Iterable[ChannelObservationLike], rx_time: ReceiverTime,
-                     *, require_carrier_lock_for_rate: bool = False) -> Observables:
+                     *, require_carrier_lock_for_rate: bool = False,
+                     sample_index: int | None = None) -> Observables:
     """Form observables from channel observations taken at one sample index.
 
     Initializes ``rx_time`` (first-fix trick) if it is not yet initialized and at least one
@@ -249,6 +250,10 @@ def form_observables(channels: Iterable[ChannelObservationLike], rx_time: Receiv
         The receiver clock (modified on first use).
     require_carrier_lock_for_rate : bool, optional
         Give a pseudorange rate only for channels in carrier lock.
+    sample_index : int, optional
+        The epoch's sample index. Needed when ``channels`` is empty (every channel lost:
+        the epoch still has a receiver time, and zero satellites); checked against the
+        channels' otherwise.
 
     Returns
     -------
@@ -259,16 +264,17 @@ def form_observables(channels: Iterable[ChannelObservationLike], rx_time: Receiv
     Raises
     ------
     ValueError
-        Channels at different sample indices, or a PRN twice.
+        Channels at different sample indices (or not at ``sample_index``), a PRN twice, or
+        neither a channel nor ``sample_index``.
     """
     chans = list(channels)
-    if not chans:
-        raise ValueError("no channel observations given")
-    k = int(chans[0].sample_index)
+    if not chans and sample_index is None:
+        raise ValueError("no channel observations and no sample index given")
+    k = int(chans[0].sample_index if sample_index is None else sample_index)
     for ch in chans:
         if int(ch.sample_index) != k:
             raise ValueError(
-                f"channel observations at different samples: C{int(chans[0].prn):02d} at {k}, "
+                f"channel observations at different samples: the epoch is at sample {k}, "
                 f"C{int(ch.prn):02d} at {int(ch.sample_index)}")
     use = [ch for ch in chans
            if ch.code_lock and ch.time_valid and math.isfinite(float(ch.t_tx_sow))]
@@ -348,7 +354,9 @@ class ObservableBuilder:
         self.rx_time = rx_time if rx_time is not None else ReceiverTime(fs, time_hint=time_hint)
         self.require_carrier_lock_for_rate = require_carrier_lock_for_rate
 
-    def __call__(self, channels: Iterable[ChannelObservationLike]) -> Observables:
+    def __call__(self, channels: Iterable[ChannelObservationLike],
+                 sample_index: int | None = None) -> Observables:
         """Observables of one epoch (see :func:`form_observables`)."""
         return form_observables(channels, self.rx_time,
-                                require_carrier_lock_for_rate=self.require_carrier_lock_for_rate)
+                                require_carrier_lock_for_rate=self.require_carrier_lock_for_rate,
+                                sample_index=sample_index)

@@ -754,9 +754,14 @@ class PvtEngine:
         self.config = config or PvtConfig()
         self.last_fix: PvtSolution | None = None
 
-    def process(self, channels: list[ChannelObservationLike]) -> PvtSolution:
-        """Observables and PVT of one epoch; the last valid fix seeds the next one."""
-        obs = self.builder(channels)
+    def process(self, channels: list[ChannelObservationLike],
+                sample_index: int | None = None) -> PvtSolution:
+        """Observables and PVT of one epoch; the last valid fix seeds the next one.
+
+        ``sample_index`` (the epoch's sample) lets an epoch without any channel (total
+        blockage) still give a row: status ``too_few_satellites`` at the receiver time.
+        """
+        obs = self.builder(channels, sample_index)
         sol = solve(obs, self.ephemerides, self.iono, self.last_fix, self.config)
         if sol.valid:
             self.last_fix = sol

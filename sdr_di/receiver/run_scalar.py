@@ -28,6 +28,7 @@ from ..io.atomic import atomic_open, ensure_output_dir
 from ..io.rinex_writer import RinexOutputs, rinex_names
 from ..io.solution_files import NmeaWriter, SolutionCsvWriter
 from .ifreader import IfSource
+from .prediction import FixPredictor
 from .pvt import PvtEngine
 from .scalar import ScalarReceiver
 
@@ -99,9 +100,25 @@ class RunSummary:
     profile: dict
 
 
+def sidecar_assistance(source: IfSource) -> dict[int, float | None]:
+    """``{prn: Doppler at sample 0 [Hz]}`` of the satellites the file's sidecar lists (empty
+    without a sidecar list): the expected satellites and where to look for them, as the
+    metadata of a recording made with an almanac prediction gives them."""
+    sats = (source.meta or {}).get("satellites") if isinstance(source.meta, dict) else None
+    out: dict[int, float | None] = {}
+    for s in sats or []:
+        try:
+            prn = int(s["prn"])
+        except (KeyError, TypeError, ValueError):
+            continue
+        fd = s.get("doppler_hz")
+        out[prn] = float(fd) if isinstance(fd, (int, float)) and math.isfinite(fd) else None
+    return out
+
+
 def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: float = 5.0,
                stem: str | None = None, progress: bool = True,
-               receiver: ScalarReceiver | None = None) -> RunSummary:
+               receiver: ScalarReceiver | None = None, assist: bool = True) -> RunSummary:
     """Run the scalar receiver over ``source`` and write the solution files.
 
     Parameters
@@ -120,6 +137,10 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         Show a progress bar (seconds processed, real-time factor, channels in lock).
     receiver : ScalarReceiver, optional
         Preconfigured receiver (loop settings, acquisition options).
+    assist : bool
+        Search the satellites the sidecar lists, around their start Doppler, with the long
+        search for those the first search misses (:func:`sidecar_assistance`; default).
+        False: a cold search of ``prns`` (default all 63).
 
     Raises
     ------
@@ -132,6 +153,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     stem = stem or source.path.stem
     rx = receiver or ScalarReceiver(log=False)
     engine = PvtEngine(source.sampling_rate_hz, {}, None)
+    # after a blockage, lost channels are searched around, and timed from, the last fix
+    rx.predictor = FixPredictor(engine, source.sampling_rate_hz, source.carrier_hz)
     files = {"pvt": out_dir / f"{stem}_pvt.csv", "nmea": out_dir / f"{stem}.nmea",
              "channels": out_dir / f"{stem}_channels.csv"}
     files["rinex_obs"], files["rinex_nav"] = (out_dir / n for n in rinex_names(stem))
@@ -152,7 +175,7 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     def on_epoch(sample, observations, ephemerides):
         engine.ephemerides = engine.navdata.offer_decoded(ephemerides, rx.klobuchar)
         engine.iono = engine.navdata.klobuchar
-        sol = engine.process(observations)
+        sol = engine.process(observations, sample)
         counts["epochs"] += 1
         csv_w.write(sol)
         if sol.valid:
@@ -170,11 +193,15 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
                                 f"{len(ephemerides)} eph")
 
     try:
-        rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=1.0 / rate_hz)
+        aid = sidecar_assistance(source) if assist else {}
+        if prns is not None:  # an explicit list: the sidecar's Dopplers where it has them
+            aid = {p: aid.get(p) for p in prns}
+        rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=1.0 / rate_hz,
+               assist=aid or None)
         if not any(r.detected for r in rx.acquisition_results) and not any(
                 c.tracking for c in rx.channels.values()):
             raise NoSatelliteError(f"{source.path}: no satellite found by acquisition "
-                                   f"(searched {len(rx.channels)} PRNs)")
+                                   f"({_search_summary(rx)})")
         channels = _channel_rows(rx)
         with atomic_open(files["channels"], "w") as fh:
             keys = list(channels[0]) if channels else ["prn"]
@@ -195,6 +222,17 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     wall = time.perf_counter() - t_wall
     return RunSummary(files, counts["epochs"], counts["fixes"], source.duration_s, wall,
                       channels, dict(rx.profile))
+
+
+def _search_summary(rx: ScalarReceiver) -> str:
+    """What the searches of a run covered, for the no-satellite message."""
+    res = rx.acquisition_results
+    if not res:
+        return f"{len(rx.channels)} PRNs, but the file is shorter than one code period"
+    k = max(r.noncoherent for r in res)
+    m = res[0].coherent_ms
+    return (f"searched {len(res)} PRNs, up to {k} x {m} ms non-coherent; "
+            f"'sdr-di acquire' shows each PRN's metric and threshold")
 
 
 def _channel_rows(rx: ScalarReceiver) -> list[dict]:
