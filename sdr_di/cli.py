@@ -7,6 +7,7 @@ stderr with exit status 2; nothing half-written is left under a final name.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -99,6 +100,109 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_file_options(p) -> None:
+    """Options that describe an IF file sdr-di did not write (``run`` and ``acquire``)."""
+    p.add_argument("--fs", type=float, default=None, metavar="HZ",
+                   help="foreign file: sampling rate [Hz]")
+    p.add_argument("--if", dest="if_hz", type=float, default=None, metavar="HZ",
+                   help="foreign file: intermediate frequency [Hz] (default 0)")
+    p.add_argument("--format", dest="sample_format", default=None,
+                   help="foreign file: sample format (iq_int8/ibyte, real_int8, iq_int16, "
+                   "real_int16, iq_int4, gr_complex, and peers' formats: docs/formats.md). "
+                   "A file with a PocketSDR/SignalSim tag (X.bin.tag) needs no options; "
+                   "these override the tag's values")
+    p.add_argument("--rfch", type=int, default=None, metavar="N",
+                   help="RF channel (1-based) of a multi-channel PocketSDR RAW file (default: "
+                   "the channel whose tagged LO is nearest B3I)")
+    p.add_argument("--inverted", action="store_true",
+                   help="foreign file: spectrum inverted")
+    p.add_argument("--start-week", type=int, default=None, help="foreign file: BDT week hint")
+    p.add_argument("--start-sow", type=float, default=None,
+                   help="foreign file: BDT seconds of week of sample 0 (hint)")
+
+
+def _open_source(args: argparse.Namespace):
+    """The IF source of ``args.if_file`` from its sidecar, tag or the file options."""
+    from .receiver.run_scalar import open_source
+
+    return open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
+                       sample_format=args.sample_format, spectrum_inverted=args.inverted,
+                       start_week=args.start_week, start_sow=args.start_sow, rfch=args.rfch)
+
+
+def _add_acquire(sub) -> None:
+    p = sub.add_parser(
+        "acquire",
+        help="search the satellites at the start of an IF file (table and CSV)",
+        description="One acquisition search (DC removal, blanking of narrowband lines, FFT "
+        "code-phase search over a Doppler grid) at the start of an IF file; prints a table "
+        "and writes STEM_acquisition.csv with one row per searched PRN. Works on any file "
+        "of at least one code period (1 ms) and says which sensitivity it gives.",
+    )
+    p.add_argument("if_file", type=Path, help="IF samples (or its .json sidecar)")
+    p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
+                   help="comma-separated PRNs to search (default all 63)")
+    p.add_argument("--coherent-ms", type=int, default=1, metavar="MS",
+                   help="coherent integration per block [ms] (default 1: safe with NH and "
+                   "data bit transitions)")
+    p.add_argument("--noncoherent", type=int, default=40, metavar="K",
+                   help="blocks summed non-coherently (default 40; reduced to what the file "
+                   "holds; about 400 for 30 dB-Hz)")
+    p.add_argument("--doppler-center", type=float, default=0.0, metavar="HZ",
+                   help="centre of the Doppler search [Hz] (default 0)")
+    p.add_argument("--doppler-range", type=float, default=5000.0, metavar="HZ",
+                   help="half-width of the Doppler search [Hz] (default 5000: B3 MEO Doppler "
+                   "is within +-3.6 kHz, the rest is about 1 ppm of oscillator offset)")
+    p.add_argument("--pfa", type=float, default=1e-3,
+                   help="false-alarm probability per PRN search (default 1e-3)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="output directory (default: beside the IF file, in <stem>_acq/)")
+    _add_file_options(p)
+    p.set_defaults(func=_cmd_acquire)
+
+
+def _cmd_acquire(args: argparse.Namespace) -> int:
+    import math
+
+    from .constants import parse_prn
+    from .receiver.acquisition import check_search
+    from .receiver.run_acquire import run_acquisition
+
+    check_search(args.coherent_ms, args.noncoherent, args.doppler_range, args.pfa)
+    if not math.isfinite(args.doppler_center):
+        raise UsageError(f"--doppler-center must be finite, got {args.doppler_center}")
+    prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
+    source = _open_source(args)
+    out = args.out or args.if_file.with_name(args.if_file.stem + "_acq")
+    rep = run_acquisition(source, out, prns=prns, coherent_ms=args.coherent_ms,
+                          noncoherent=args.noncoherent, doppler_center_hz=args.doppler_center,
+                          doppler_range_hz=args.doppler_range, pfa=args.pfa)
+    lo, hi, step = rep.doppler_bins_hz
+    short = "" if rep.noncoherent == rep.requested_noncoherent else \
+        f" (the file holds {rep.file_s * 1e3:.1f} ms: {rep.requested_noncoherent} asked)"
+    print(f"search: {rep.noncoherent} x {rep.coherent_ms} ms non-coherent{short}; Doppler "
+          f"{lo:+.0f}..{hi:+.0f} Hz in {step:g} Hz steps; pfa {args.pfa:g} per PRN")
+    print(f"sensitivity: detection probability 0.9 at {rep.cn0_pd90_dbhz:.1f} dB-Hz without "
+          "losses (add about 1-3 dB for bin straddle and bit transitions)")
+    if rep.lines_hz.size:
+        shown = ", ".join(f"{f:+.0f}" for f in rep.lines_hz[:8])
+        more = f" and {rep.lines_hz.size - 8} more" if rep.lines_hz.size > 8 else ""
+        print(f"input: {rep.lines_hz.size} narrowband line(s) blanked at {shown}{more} Hz")
+    rows = [r for r in rep.results if r.detected or len(rep.results) <= 16]
+    print("PRN  detected  Doppler [Hz]  code phase [chips]  C/N0 [dB-Hz]  metric  threshold"
+          "  notes")
+    for r in rows:
+        cn0 = f"{r.cn0_dbhz:12.1f}" if r.detected and math.isfinite(r.cn0_dbhz) else " " * 12
+        print(f"C{r.prn:02d}  {'yes' if r.detected else 'no':8s}  {r.doppler_hz:12.1f}  "
+              f"{r.code_phase_chips:18.3f}  {cn0}  {r.peak_metric:6.1f}  {r.threshold:9.1f}"
+              f"  {'; '.join(r.notes)}")
+    n_det = sum(r.detected for r in rep.results)
+    print(f"{n_det} of {len(rep.results)} PRNs detected"
+          + ("" if len(rows) == len(rep.results) else " (every PRN in the CSV)"))
+    print(f"table     {rep.csv_path}")
+    return 0
+
+
 def _add_run(sub) -> None:
     p = sub.add_parser(
         "run",
@@ -118,23 +222,10 @@ def _add_run(sub) -> None:
                    help="output directory (default: beside the IF file, in <stem>_run/)")
     p.add_argument("--rate", type=float, default=5.0, metavar="HZ",
                    help="solution output rate [Hz] (default 5)")
-    p.add_argument("--fs", type=float, default=None, metavar="HZ",
-                   help="foreign file: sampling rate [Hz]")
-    p.add_argument("--if", dest="if_hz", type=float, default=None, metavar="HZ",
-                   help="foreign file: intermediate frequency [Hz] (default 0)")
-    p.add_argument("--format", dest="sample_format", default=None,
-                   help="foreign file: sample format (iq_int8/ibyte, real_int8, iq_int16, "
-                   "real_int16, iq_int4, gr_complex, and peers' formats: docs/formats.md). "
-                   "A file with a PocketSDR/SignalSim tag (X.bin.tag) needs no options; "
-                   "these override the tag's values")
-    p.add_argument("--rfch", type=int, default=None, metavar="N",
-                   help="RF channel (1-based) of a multi-channel PocketSDR RAW file (default: "
-                   "the channel whose tagged LO is nearest B3I)")
-    p.add_argument("--inverted", action="store_true",
-                   help="foreign file: spectrum inverted")
-    p.add_argument("--start-week", type=int, default=None, help="foreign file: BDT week hint")
-    p.add_argument("--start-sow", type=float, default=None,
-                   help="foreign file: BDT seconds of week of sample 0 (hint)")
+    p.add_argument("--cold", action="store_true",
+                   help="cold start: ignore the sidecar's satellite list and Dopplers, search "
+                   "--prn (default all 63) over +-5 kHz")
+    _add_file_options(p)
     g = p.add_argument_group("deep mode")
     g.add_argument("--filter", default=None,
                    help="integration filter (default ff-aukf; any of ekf, ukf, ckf, ff-aukf, "
@@ -163,7 +254,7 @@ def _add_run(sub) -> None:
 def _cmd_run(args: argparse.Namespace) -> int:
     from .constants import parse_prn
     from .io.atomic import check_output_dir
-    from .receiver.run_scalar import open_source, run_scalar
+    from .receiver.run_scalar import run_scalar
 
     deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
                                                        "filter_rate", "align", "duration")
@@ -172,13 +263,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep")
     _check_run_options(args)
     prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
-    source = open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
-                         sample_format=args.sample_format, spectrum_inverted=args.inverted,
-                         start_week=args.start_week, start_sow=args.start_sow, rfch=args.rfch)
+    source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_run"))
     if args.mode == "deep":
         return _run_deep(args, source, out, prns)
-    res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress)
+    res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress,
+                     assist=not args.cold)
     rt = res.processed_s / max(res.wall_s, 1e-9)
     print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
           f"{res.n_fixes}/{res.n_epochs} epochs with a fix")
@@ -399,11 +489,33 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _add_generate(sub)
     _add_run(sub)
+    _add_acquire(sub)
     _add_lc(sub)
     from .experiments.commands import add_parsers as add_experiment_parsers
 
     add_experiment_parsers(sub)
     return parser
+
+
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
+def attach_negative_values(argv: list[str]) -> list[str]:
+    """``--if -5.12e6`` -> ``--if=-5.12e6``.
+
+    argparse takes a token that starts with ``-`` for an option unless it looks like a plain
+    negative number without exponent (``-5``, ``-0.5``), so a negative IF or Doppler centre
+    in engineering notation would be refused; attached with ``=`` it is a value. Only a
+    negative number that follows a long option without ``=`` is attached.
+    """
+    out: list[str] = []
+    for tok in argv:
+        if (out and _NEGATIVE_NUMBER.match(tok) and out[-1].startswith("--")
+                and "=" not in out[-1] and out[-1] != "--"):
+            out[-1] = f"{out[-1]}={tok}"
+        else:
+            out.append(tok)
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -416,6 +528,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         parser = build_parser()
+        argv = attach_negative_values(list(sys.argv[1:] if argv is None else argv))
         args = parser.parse_args(argv)
         return args.func(args)
     except SdrDiError as exc:

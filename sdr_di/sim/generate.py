@@ -122,7 +122,9 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=round(duration, 3), unit="s", desc=f"generate {name}",
+        # counted in samples (integers), shown in seconds: the bar ends exactly at its total
+        bar = tqdm(total=gen.n_samples, unit="s", unit_scale=1.0 / gen.fs,
+                   desc=f"generate {name}",
                    bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s [{elapsed}<{remaining}]")
     with OutputSet() as files:  # any error or interrupt: the .part files go, old files stay
         try:
@@ -130,7 +132,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
                 for chunk in gen.chunks():
                     fh.write(memoryview(np.ascontiguousarray(chunk)).cast("B"))
                     if bar is not None:
-                        bar.update(chunk.shape[0] / gen.fs)
+                        bar.update(int(chunk.shape[0]))
         finally:
             if bar is not None:
                 bar.close()
