@@ -278,3 +278,36 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     early_rmse = float(np.sqrt(np.mean(np.sum(pe[early] ** 2, axis=1))))
     assert early_rmse > 3.0 * rmse, (early_rmse, rmse)
     assert summ.result.nav_change.size == t.size
+
+
+@pytest.mark.slow
+def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, capsys):
+    """Same file and assistance without ionosphere lines, default ``iono_wait_s`` (30 s): the
+    hand-over waits for the scalar channels' first subframe 1 (+16..+22 s; their ephemeris
+    sets would complete only at +34 s), so there is no warning and the loop starts with the
+    broadcast Klobuchar model."""
+    import sdr_di.orbits.rinex_nav as rinex_nav
+    from sdr_di.deep.run_deep import run_deep
+    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.receiver.run_scalar import open_source
+
+    monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav))
+    src = open_source(late_start_file / "default.bin")
+    out = late_start_file / "run_wait"
+    run_deep(src, out, config=DeepConfig(filter="ekf"), progress=False, duration_s=27.0)
+    assert "warning" not in capsys.readouterr().err
+    s = json.loads((out / "default_deep_summary.json").read_text())
+    assert s["warnings"] == []
+    assert 22.0 <= s["handover_s"] < 24.0
+    hist = s["navigation"]["ionosphere"]["history"]
+    assert hist == [{"t_s": pytest.approx(s["handover_s"], abs=0.2), "model": "klobuchar",
+                     "source": "broadcast"}]
+
+
+def test_deep_config_checks_iono_wait():
+    from sdr_di.deep.vector_loop import DeepConfig
+
+    assert DeepConfig().iono_wait_s == 30.0
+    for bad in (-1.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match="iono_wait_s"):
+            DeepConfig(iono_wait_s=bad)

@@ -35,29 +35,13 @@ import numpy as np
 
 from ..constants import SECONDS_PER_WEEK
 from ..errors import NavMessageError
-from ..orbits.ephemeris import Klobuchar
-from ..signal import fields
-from ..signal.navmsg import EphemerisAssembler, decode_subframe
+from ..signal.navmsg import EphemerisAssembler, decode_subframe, klobuchar_of_subframe
 from ..signal.words import PREAMBLE, SUBFRAME_BITS
 
-__all__ = ["ChannelNavDecoder", "klobuchar_of_subframe"]
+__all__ = ["ChannelNavDecoder"]
 
 _TAU_REF_MS = 20.0
 _NPRE = PREAMBLE.size
-_KLOB = ("alpha0", "alpha1", "alpha2", "alpha3", "beta0", "beta1", "beta2", "beta3")
-
-
-def klobuchar_of_subframe(d: dict) -> Klobuchar | None:
-    """The Klobuchar coefficients a decoded subframe carries whole (D1 subframe 1), else
-    None (:func:`~sdr_di.signal.navmsg.decode_subframe` result)."""
-    raw = d.get("raw", {})
-    vals = []
-    for name in _KLOB:
-        r = fields.join_slices(name, raw)
-        if r is None:
-            return None
-        vals.append(fields.PARAMS[name].from_raw(r))
-    return Klobuchar(alpha=tuple(vals[:4]), beta=tuple(vals[4:]))
 
 
 class ChannelNavDecoder:

@@ -103,6 +103,7 @@ from ..receiver.scalar import ScalarReceiver
 from ..receiver.threads import KernelThreads
 from ..receiver.tracking import ChannelState
 from ..signal.codes import NH20, b3i_code
+from ..signal.navmsg import klobuchar_of_subframe
 from ..sim.imu import ImuErrorModel
 from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
@@ -200,6 +201,9 @@ class DeepConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be > 0, got {v!r}")
+        v = self.iono_wait_s
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            raise ValueError(f"iono_wait_s must be >= 0, got {v!r}")
 
 
 @dataclasses.dataclass
@@ -413,6 +417,8 @@ class DeepReceiver:
             if not obs:            # nothing tracked at this epoch: no fix, keep going
                 return False
             navdata.offer_decoded(ephs, rx.klobuchar, sample / fs)
+            if navdata.iono_source != "broadcast":
+                _offer_subframe_klobuchar(rx, navdata, sample / fs)
             engine.ephemerides, engine.iono = navdata, navdata.klobuchar
             sol = engine.process(obs)
             if not sol.valid or not sol.velocity_valid:
@@ -818,6 +824,17 @@ class DeepReceiver:
             cn0_dbhz=arr("cn0", n_ch), nis=arr("nis"), handover_s=k_grid0 / fs, filter_name=kf.name,
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
             nav_change=np.asarray(rows["nav"], int), navigation=nav_log.summary(k0 / fs))
+
+
+def _offer_subframe_klobuchar(rx: ScalarReceiver, navdata: NavDataInForce, t_s: float) -> None:
+    """Offer the Klobuchar set of the latest D1 subframe 1 any scalar channel decoded (the
+    channels give the coefficients only with a complete ephemeris, up to 18 s later)."""
+    for c in rx.channels.values():
+        for d in reversed(c.subframes[-5:]):
+            k = klobuchar_of_subframe(d)
+            if k is not None:
+                navdata.offer_klobuchar(k, t_s)
+                return
 
 
 def _handover_decoder(sc, epoch: int, ms0: int) -> ChannelNavDecoder:

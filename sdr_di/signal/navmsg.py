@@ -66,6 +66,7 @@ from .words import PREAMBLE, SUBFRAME_BITS, build_info, decode_words, encode_wor
 __all__ = [
     "EphemerisAssembler",
     "assistance_klobuchar",
+    "klobuchar_of_subframe",
     "NavBits",
     "code_period_signs",
     "decode_stream",
@@ -877,3 +878,24 @@ def assistance_klobuchar(nav) -> tuple[Klobuchar | None, str]:
     if getattr(nav, "iono_gps", None) is not None:
         return broadcast_klobuchar(nav.iono_gps), "GPSA/GPSB (file has no BDS coefficients)"
     return None, "none (file has no Klobuchar coefficients)"
+
+
+def klobuchar_of_subframe(sf: dict) -> Klobuchar | None:
+    """The Klobuchar coefficients a decoded subframe carries whole (D1 subframe 1), else None.
+
+    A receiver can use them as soon as subframe 1 is decoded, before subframes 2-3 complete
+    the ephemeris (:class:`EphemerisAssembler` returns them only with a complete set).
+
+    Parameters
+    ----------
+    sf : dict
+        A :func:`decode_subframe` result.
+    """
+    raw = sf.get("raw", {})
+    vals = []
+    for name in ("alpha0", "alpha1", "alpha2", "alpha3", "beta0", "beta1", "beta2", "beta3"):
+        r = F.join_slices(name, raw)
+        if r is None:
+            return None
+        vals.append(PARAMS[name].from_raw(r))
+    return Klobuchar(alpha=tuple(vals[:4]), beta=tuple(vals[4:]))
