@@ -47,7 +47,7 @@ class _NoIono:
 
 
 # ---- the rules ---------------------------------------------------------------------------------
-def test_decoded_record_wins_ties_and_the_newer_data_set_wins(nav):
+def test_decoded_record_wins_and_its_checks(nav):
     recs = {r.toe: r for r in nav.records[27]}
     r6, r7 = recs[367200.0], recs[370800.0]
     sow = 367200.0 + 1800.0                                     # 06:30: r6 on the air
@@ -71,9 +71,10 @@ def test_decoded_record_wins_ties_and_the_newer_data_set_wins(nav):
     assert nd.offer_ephemeris(dataclasses.replace(r7b, SatH1=1))
     assert nd.select_with_source(27, WEEK, sow) == (r6, RINEX)
     assert [e.kind for e in nd.events] == ["ephemeris", "ephemeris", "ephemeris", "unhealthy"]
-    # the assistance record is newer than the decoded one: it wins until the loop decodes
-    nd2 = NavDataInForce(nav, decoded={27: recs[363600.0]})
-    assert nd2.select_with_source(27, WEEK, sow) == (r6, RINEX)
+    # a decoded record older than the file's record on the air still wins (the signal's)
+    r5 = recs[363600.0]
+    nd2 = NavDataInForce(nav, decoded={27: r5})
+    assert nd2.select_with_source(27, WEEK, sow) == (r5, BROADCAST)
     # a decoded record too old to be used, and no assistance: no record
     nd3 = NavDataInForce(None, decoded={27: r6})
     assert nd3.select(27, WEEK, sow) is r6

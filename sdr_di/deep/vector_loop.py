@@ -963,8 +963,8 @@ class _NavLog:
         """``navigation`` entry of the run summary."""
         models = self.navdata.models()
         return {
-            "rule": "decoded broadcast data as it arrives, assistance (RINEX) before it; "
-                    "the newer data set wins, the decoded one on a tie",
+            "rule": "decoded broadcast data as it arrives (healthy, new data set, toe within "
+                    "its age limit), the assistance (RINEX) record on the air before it",
             "ephemerides": self.ephemerides,
             "ionosphere": {**models["ionosphere"], "history": self.ionosphere},
             "troposphere": models["troposphere"],

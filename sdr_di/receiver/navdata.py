@@ -27,13 +27,16 @@ Validity checks on a decoded record (the same for every mode)
 
 Which wins (:meth:`NavDataInForce.select`)
 ------------------------------------------
-Both a valid decoded record and an assistance record on the air: **the newer data set
-(later toe) wins, and the decoded record on a tie** (same toe). So decoded data replaces
-assistance data as soon as it arrives, whatever their content (on a tie they differ only by
-rounding or by a foreign file's processing); a RINEX record newer than the last decoded one
-(the satellite switched upload a few seconds ago and the loop has not yet decoded all of
-it) is taken until the decoder catches up. Klobuchar: the decoded set whenever one has
-been decoded, else the file's.
+Both a valid decoded record and an assistance record: **the decoded record**, whatever the
+two toes, as long as it passes the checks above. It is what the satellite sends, and the
+file's choice of the record "on the air" rests on transmission times a foreign or merged
+file may not have right (the issue-18 file: its record on the air was an hour older than the
+signal's). When a satellite switches to a new upload, the old decoded record stays in force
+until the new one is decoded (at most one D1 frame, 30 s, well inside its fit interval;
+decimetres at most); a RINEX record newer than the decoded one is not taken in between, so
+a generated file, whose signal keeps one record for its whole length, never gets a model
+its signal does not carry. Klobuchar: the decoded set whenever one has been decoded, else
+the file's.
 
 Troposphere: Saastamoinen with the standard atmosphere (:mod:`~sdr_di.receiver.pvt`), needing
 no broadcast data; recorded here so the summaries name it.
@@ -185,7 +188,7 @@ class NavDataInForce:
     # -- selection ------------------------------------------------------------------------
     def select_with_source(self, prn: int, week: int, sow: float) -> tuple[Ephemeris, str]:
         """``(record, source)`` in force for ``prn`` at BDT (``week``, ``sow``) (module
-        notes: the newer data set wins, the decoded one on a tie).
+        notes: a valid decoded record, else the assistance record on the air).
 
         Raises
         ------
@@ -197,18 +200,13 @@ class NavDataInForce:
         t = int(week) * SECONDS_PER_WEEK + float(sow)
         d = self._decoded.get(int(prn))
         max_age = DEFAULT_MAX_AGE_GEO_S if is_geo(int(prn)) else DEFAULT_MAX_AGE_S
-        if d is not None and abs(t - _toe_abs(d)) > max_age:
-            d = None
-        r = None
+        if d is not None and abs(t - _toe_abs(d)) <= max_age:
+            return d, BROADCAST
         if self.nav is not None:
             try:
-                r = self.nav.select(prn, week, sow, broadcast=True)
+                return self.nav.select(prn, week, sow, broadcast=True), RINEX
             except NoEphemerisError:
-                r = None
-        if d is not None and (r is None or _toe_abs(r) <= _toe_abs(d)):
-            return d, BROADCAST
-        if r is not None:
-            return r, RINEX
+                pass
         raise NoEphemerisError(f"no ephemeris for C{int(prn):02d} at BDT week {int(week)} "
                                f"sow {float(sow):.3f}: none decoded"
                                + ("" if self.nav is not None else ", no assistance file"))
