@@ -63,6 +63,14 @@ Decisions
   (frequency prior: the integration filter's rate uncertainty on that line of sight, at
   least 0.5 Hz), so it rejoins as soon as the signal is back, without an acquisition
   search. These thresholds were set on the ``weak-signal`` experiment (docs/experiments.md).
+* **Navigation data** in force is decided by :class:`~sdr_di.receiver.navdata.
+  NavDataInForce` (decoded data as it arrives, RINEX assistance before it). The hand-over
+  waits up to ``iono_wait_s`` after the first fix for Klobuchar coefficients, then goes
+  ahead with a :class:`~sdr_di.receiver.navdata.NavDataWarning`. After it, every channel
+  keeps decoding its message (:mod:`~sdr_di.deep.navdecode`); a new ephemeris or
+  ionosphere model is taken up at the end of the interval in which it was decoded
+  (:func:`_take_up_model_change`: the state moves by the least-squares projection of the
+  range-model step, the pre-filters by the rest; reasons in docs/deep.md).
 * **Process noise** from the IMU spec (random walks; bias random walk reaching the spec in
   ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`ClockModel`).
 """
@@ -228,7 +236,8 @@ class DeepResult:
     profile : dict (seconds per stage: scalar, read, nco, correlate, prefilter, filter, ins)
     nav_change : (n,) int, navigation data taken up since the previous row: 0 none, bit 1
         an ephemeris, bit 2 the ionosphere model
-    navigation : dict, the navigation data in force over the run (``_navigation_summary``)
+    navigation : dict, the navigation data in force over the run (summary ``navigation``
+        entry, docs/deep.md)
     """
 
     t: np.ndarray
@@ -757,8 +766,7 @@ class DeepReceiver:
                     pre.decorrelate(i)
             kf.x = np.zeros(17)
             # -- navigation data decoded so far, taken up at the interval's end
-            new_ephs, new_iono = nav_log.changes(chans, week, S0 + t_rel(k1) - clk_b / C_LIGHT,
-                                                 iono)
+            new_ephs, new_iono = nav_log.changes(chans, week, S0 + t_rel(k1) - clk_b / C_LIGHT)
             if new_ephs is not None or new_iono is not iono:
                 step = _take_up_model_change(
                     ephs, new_ephs or ephs, iono, new_iono, week, S0 + t_rel(k1), ins, clk_b,
@@ -919,7 +927,7 @@ class _NavLog:
                 self.navdata.offer_ephemeris(eph, t_s)
             self.navdata.offer_klobuchar(klob, t_s)
 
-    def changes(self, chans: list, week: int, sow: float, iono):
+    def changes(self, chans: list, week: int, sow: float):
         """``(new ephemeris list or None, ionosphere in force)`` at BDT (``week``, ``sow``)."""
         self._new = []
         for c in chans:
