@@ -165,8 +165,9 @@ def _truth_ecef(truth) -> tuple[np.ndarray, np.ndarray]:
 def scalar_run(inp, t_eval: float) -> dict:
     """Scalar receiver + PVT over the whole file; per-epoch kept channels and errors.
 
-    The PVT uses :class:`~sdr_di.receiver.assistance.AssistedEphemerides` and the IF file's time tag (as the deep
-    receiver's start-up does), and the decoded Klobuchar set, else the file's.
+    The PVT takes its ephemerides and Klobuchar set from
+    :class:`~sdr_di.receiver.navdata.NavDataInForce` (decoded data, else the file's) and the
+    IF file's time tag, as the deep receiver's start-up does.
 
     Returns
     -------
@@ -174,25 +175,22 @@ def scalar_run(inp, t_eval: float) -> dict:
         ``t`` (n,), ``kept`` (n, n_ch) bool, ``valid`` (n,) bool, ``pos_err`` (n,) [m] (NaN
         without a fix), ``prns``, epochs from ``t_eval`` on.
     """
-    from ..receiver.assistance import AssistedEphemerides
+    from ..receiver.navdata import NavDataInForce
     from ..receiver.observables import ReceiverTime
     from ..receiver.pvt import PvtEngine
-    from ..sim.generate import broadcast_iono
 
     src = inp.source
     fs = src.sampling_rate_hz
     rx = CountingScalarReceiver(log=False)
     rt = ReceiverTime.from_sample_zero(fs, src.start_week, src.start_sow)
-    ephs = AssistedEphemerides(inp.nav)
+    ephs = NavDataInForce(inp.nav)
     engine = PvtEngine(fs, ephs, None, rx_time=rt)
-    nav_iono = broadcast_iono(inp.nav)[0]
     tt, rr = _truth_ecef(inp.truth)
     prns = list(inp.prns)
     rows: dict = {"t": [], "kept": [], "valid": [], "pos_err": []}
 
     def on_epoch(sample, observations, ephemerides):
-        ephs.decoded = ephemerides
-        engine.iono = rx.klobuchar if rx.klobuchar is not None else nav_iono
+        engine.iono = ephs.offer_decoded(ephemerides, rx.klobuchar).klobuchar
         # every channel lost: PvtEngine refuses an empty epoch; it is an epoch without a fix
         sol = engine.process(observations) if observations else None
         t = sample / fs
