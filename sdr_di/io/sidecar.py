@@ -195,6 +195,10 @@ _CHECKS: tuple[tuple[str, bool, Any, str], ...] = (
 )
 
 
+#: Optional keys that may be ``null`` (no such companion file / no record).
+_NULLABLE = frozenset({"imu_file", "truth_file", "ephemeris_file", "files"})
+
+
 def read_sidecar(path: str | Path) -> dict[str, Any]:
     """Read and check a sidecar.
 
@@ -230,7 +234,7 @@ def read_sidecar(path: str | Path) -> dict[str, Any]:
             if required:
                 raise SidecarError(f"sidecar {path}: missing key {key!r}")
             continue
-        if not (meta[key] is None and not required) and not ok(meta[key]):
+        if not (meta[key] is None and key in _NULLABLE) and not ok(meta[key]):
             raise SidecarError(f"sidecar {path}: {key} must be {what}, got {meta[key]!r:.60}")
     start = meta["start"]
     week, sow = start.get("week"), start.get("sow")

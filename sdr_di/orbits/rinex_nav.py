@@ -97,6 +97,7 @@ import io
 import logging
 import math
 import warnings
+import zlib
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -323,7 +324,7 @@ def _read_text(path: Path) -> str:
     if raw[:2] == b"\x1f\x8b":
         try:
             raw = gzip.decompress(raw)
-        except (OSError, EOFError, gzip.BadGzipFile) as exc:
+        except (OSError, EOFError, zlib.error) as exc:  # BadGzipFile is an OSError
             raise EphemerisError(f"navigation file {path}: corrupt gzip data ({exc})") from None
     elif raw[:2] == b"\x1f\x9d":
         raise EphemerisError(

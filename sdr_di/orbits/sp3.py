@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import gzip
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -143,7 +144,7 @@ def _open_text(path: Path) -> list[str]:
     if raw[:2] == b"\x1f\x8b":
         try:
             raw = gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
+        except (OSError, EOFError, zlib.error) as exc:
             raise EphemerisError(f"SP3 file {path}: corrupt gzip data ({exc})") from None
     if b"\x00" in raw or not raw.strip():
         raise EphemerisError(f"SP3 file {path}: empty or binary, not an SP3 text file")
