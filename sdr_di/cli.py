@@ -165,6 +165,7 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     import math
 
     from .constants import parse_prn
+    from .io.atomic import check_output_dir
     from .receiver.acquisition import check_search
     from .receiver.run_acquire import run_acquisition
 
@@ -172,8 +173,9 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     if not math.isfinite(args.doppler_center):
         raise UsageError(f"--doppler-center must be finite, got {args.doppler_center}")
     prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
+    _check_if_file(args.if_file)
     source = _open_source(args)
-    out = args.out or args.if_file.with_name(args.if_file.stem + "_acq")
+    out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_acq"))
     rep = run_acquisition(source, out, prns=prns, coherent_ms=args.coherent_ms,
                           noncoherent=args.noncoherent, doppler_center_hz=args.doppler_center,
                           doppler_range_hz=args.doppler_range, pfa=args.pfa)
@@ -299,7 +301,11 @@ def _check_run_options(args: argparse.Namespace) -> None:
     if sow is not None and not (math.isfinite(sow) and 0 <= sow < SECONDS_PER_WEEK):
         raise UsageError(f"--start-sow must be BDT seconds of week in [0, {SECONDS_PER_WEEK:g})"
                          f", got {sow:g}")
-    path = args.if_file
+    _check_if_file(args.if_file)
+
+
+def _check_if_file(path: Path) -> None:
+    """The IF file (or its sidecar) named on the command line exists and is a file."""
     if path.is_dir():
         raise UsageError(f"IF file {path}: is a folder")
     if not path.exists() and (path.suffix == ".json" or not path.with_suffix(".json").exists()):

@@ -152,6 +152,33 @@ CASES: list[tuple[str, list[str]]] = [
                                    "{d}/set/s.bin"]),
     ("run-deep-mixed-imu", ["run", "{d}/mixed_imu/s.bin", "--mode", "deep"]),
     ("run-deep-companion-missing", ["run", "{d}/noimu/s.bin", "--mode", "deep"]),
+    # -- acquire -----------------------------------------------------------------------------
+    ("acquire-no-file", ["acquire"]),
+    ("acquire-missing", ["acquire", "{d}/nope.bin"]),
+    ("acquire-directory", ["acquire", "{d}"]),
+    ("acquire-coherent-0", ["acquire", "{d}/set/s.bin", "--coherent-ms", "0"]),
+    ("acquire-coherent-text", ["acquire", "{d}/set/s.bin", "--coherent-ms", "1.5"]),
+    ("acquire-noncoherent-0", ["acquire", "{d}/set/s.bin", "--noncoherent", "0"]),
+    ("acquire-pfa-2", ["acquire", "{d}/set/s.bin", "--pfa", "2"]),
+    ("acquire-pfa-nan", ["acquire", "{d}/set/s.bin", "--pfa", "nan"]),
+    ("acquire-doppler-range-neg", ["acquire", "{d}/set/s.bin", "--doppler-range", "-1"]),
+    ("acquire-doppler-center-nan", ["acquire", "{d}/set/s.bin", "--doppler-center", "nan"]),
+    ("acquire-prn-c99", ["acquire", "{d}/set/s.bin", "--prn", "C99"]),
+    ("acquire-out-file", ["acquire", "{d}/set/s.bin", "--out", "{d}/afile"]),
+    ("acquire-rfch-3", ["acquire", "{d}/set/s.bin", "--rfch", "3"]),
+    ("acquire-sidecar-list", ["acquire", "{d}/set/list.json"]),
+    ("acquire-mixed-set", ["acquire", "{d}/mixed/s.bin"]),
+    # -- more run / generate a new user tries ------------------------------------------------
+    ("run-if-nan-sidecar", ["run", "{d}/set/s.bin", "--if", "nan"]),
+    ("run-imu-only-scalar", ["run", "{d}/set/s.bin", "--imu", "{d}/set/s_imu.csv"]),
+    ("run-align-bogus", ["run", "{d}/set/s.bin", "--mode", "deep", "--align", "ins"]),
+    ("run-sidecar-week-huge", ["run", "{d}/set/week_huge.json"]),
+    ("run-sidecar-sow-neg", ["run", "{d}/set/sow_neg.json"]),
+    ("run-sidecar-null-carrier", ["run", "{d}/set/carrier_null.json"]),
+    ("generate-cn0-text", [*GD, "--cn0", "strong", "--out", "{d}/o"]),
+    ("generate-ephemeris-dir", [*GD, "--ephemeris", "{d}", "--out", "{d}/o"]),
+    ("generate-scenario-unknown-key", [*GD, "--scenario", "{d}/motion_str.toml", "--out",
+                                      "{d}/o"]),
     # -- lc ----------------------------------------------------------------------------------
     ("lc-filter-bogus", [*LC, "--filter", "kalman"]),
     ("lc-duration-0", [*LC, "--duration", "0"]),
@@ -247,6 +274,9 @@ def _sidecar_variants(set_dir: Path) -> None:
     put("inverted_text.json", spectrum_inverted="no")
     put("carrier_text.json", carrier_hz="B3I")
     put("schema.json", schema="sdr-di-if/0")
+    put("week_huge.json", start={**meta["start"], "week": 123456})
+    put("sow_neg.json", start={**meta["start"], "sow": -1.0})
+    put("carrier_null.json", carrier_hz=None)
 
 
 def make_workdir(d: Path, generated: Path) -> None:
@@ -269,6 +299,10 @@ def make_workdir(d: Path, generated: Path) -> None:
     (d / "types.toml").write_text(
         DEFAULT_SCENARIO.read_text().replace("duration_s = 60.0", 'duration_s = "long"')
         .replace('"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/'))
+    (d / "motion_str.toml").write_text(
+        DEFAULT_SCENARIO.read_text().split("[[motion]]")[0].replace(
+            '"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/')
+        + 'motion = "circle"\n')
     (d / "emptydir").mkdir()
     for folder, name, text in (("camp_corrupt", "campaign.json", '{"experiment": "x", '),
                                ("camp_list", "campaign.json", "[1, 2]"),
