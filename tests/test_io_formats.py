@@ -51,7 +51,7 @@ def test_output_dir_errors(tmp_path: Path):
     f.write_text("x")
     with pytest.raises(OutputError, match="not a directory|cannot create"):
         ensure_output_dir(f)
-    with pytest.raises(OutputError, match="cannot create"):
+    with pytest.raises(OutputError, match="cannot create|is not a directory"):
         ensure_output_dir(f / "sub")
 
 
