@@ -356,3 +356,26 @@ def test_run_writes_rinex_read_back_with_georinex(tmp_path, monkeypatch, capsys)
     # header only
     assert all(e["line"][41:].strip() == "" for e in epochs)
     assert "END OF HEADER" in nav_path.read_text()
+
+
+def test_outputs_pair_stamps_new_records_with_the_epoch_time(tmp_path):
+    """RinexOutputs: a record is written once, with the BDT time of the epoch it first
+    appeared at as its transmission time; the Klobuchar set goes to the header."""
+    src = load_nav(NAV)
+    a, b = src.records[27][3], src.records[30][3]
+    out = rw.RinexOutputs(tmp_path / "p_obs.rnx", tmp_path / "p_nav.rnx", marker_name="p")
+    rt = ReceiverTime(1.0e6)
+    for j, (ephs, sow) in enumerate((({27: a}, a.toe + 20.0), ({27: a, 30: b}, a.toe + 20.2),
+                                     ({27: a, 30: b}, a.toe + 20.4))):
+        k = 200_000 * j
+        chans = [_ch(27, k, tx=a.toe + 20.0 + k / 1e6 - 0.07)]
+        fix = _Fix(True, 30.0, (-2.1e6, 4.4e6, 4.0e6), sow=sow)
+        assert out.write(form_observables(chans, rt), chans, fix, ephs, KLOB if j else None)
+    assert out.close() == (tmp_path / "p_obs.rnx", tmp_path / "p_nav.rnx")
+    nav = load_nav(tmp_path / "p_nav.rnx")
+    assert nav.n_records == 2 and nav.iono is not None
+    assert nav.tx_times[(27, a.week, a.toe)] == a.week * 604800.0 + a.toe + 20.0
+    assert nav.tx_times[(30, b.week, b.toe)] == b.week * 604800.0 + a.toe + 20.2
+    hdr, epochs = _read_obs(tmp_path / "p_obs.rnx")
+    assert len(epochs) == 3 and hdr["MARKER NAME"][0].strip() == "p"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p_nav.rnx", "p_obs.rnx"]
