@@ -115,7 +115,7 @@ def test_bad_inputs(tmp_path, capsys):
     empty = tmp_path / "empty.bin"
     empty.write_bytes(b"")
     _expect(capsys, [str(empty), "--fs", "25e6", "--format", "ibyte"], "empty", out)
-    _expect(capsys, [str(tmp_path / "none.bin")], "no sidecar", out)
+    _expect(capsys, [str(tmp_path / "none.bin")], "no such file", out)
     _expect(capsys, [str(empty), "--fs", "25e6", "--format", "int3"], "unknown sample format", out)
     # truncated: the sidecar promises more samples than the file has
     g = tmp_path / "g"
