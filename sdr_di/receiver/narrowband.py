@@ -13,7 +13,10 @@ removed from the input before the search.
 
 Method
 ------
-1. **DC**: the mean of the block is subtracted (complex mean for I/Q, real mean otherwise).
+1. **DC**: the mean of the block is subtracted (complex mean for I/Q, real mean otherwise)
+   when it is significant, beyond 4 standard errors ``sqrt(P / N)`` (a 3 LSB offset on
+   4-bit noise of 40 ms at 25 MHz is about 1300 of them; a mean consistent with zero is
+   left alone rather than replaced by its own estimation noise).
 2. **Lines**: the periodogram ``|X(f)|^2`` of the whole block (one FFT of ``N`` samples,
    resolution ``fs / N``: 25 Hz on 40 ms) is compared with a local noise reference, the
    median of the periodogram over segments of ``segment_bins`` bins divided by ``ln 2`` (the
@@ -42,6 +45,9 @@ import scipy.fft
 
 __all__ = ["CleanedInput", "remove_dc_and_lines"]
 
+#: A mean is removed when it exceeds this many standard errors of the mean.
+_DC_SIGMAS = 4.0
+
 
 @dataclasses.dataclass
 class CleanedInput:
@@ -52,7 +58,7 @@ class CleanedInput:
     samples : numpy.ndarray
         Cleaned samples (``complex64`` for I/Q input, ``float32`` for real input).
     dc : complex
-        Mean removed [input units].
+        Mean removed [input units] (0 when the mean was not significant).
     line_hz : numpy.ndarray
         Centre frequencies of the blanked groups of bins [Hz], relative to the sampled band
         (baseband: -fs/2..fs/2; real input: 0..fs/2).
@@ -93,9 +99,15 @@ def remove_dc_and_lines(x: np.ndarray, sampling_rate_hz: float, *, pfa: float = 
     is_complex = np.iscomplexobj(x)
     y = np.asarray(x, dtype=np.complex64 if is_complex else np.float32)
     n = y.size
-    dc = complex(np.mean(y, dtype=np.complex128 if is_complex else np.float64))
-    y = y - (np.complex64(dc) if is_complex else np.float32(dc.real))
-    power = float(np.mean(np.abs(y) ** 2)) if n else 0.0
+    dc = complex(np.mean(y, dtype=np.complex128 if is_complex else np.float64)) if n else 0j
+    power = float(np.mean(np.abs(y - dc) ** 2)) if n else 0.0
+    # the mean is removed when it is significant: beyond _DC_SIGMAS standard errors
+    # (sqrt(power / n)); a mean consistent with zero is left alone (subtracting it would only
+    # add its own estimation noise)
+    if abs(dc) > _DC_SIGMAS * math.sqrt(power / max(n, 1)) or not power > 0.0:
+        y = y - (np.complex64(dc) if is_complex else np.float32(dc.real))
+    else:
+        dc = 0j
     empty = np.zeros(0)
     if n < 64 or not power > 0.0:
         return CleanedInput(y, dc, empty, 0.0, power)

@@ -264,8 +264,7 @@ class ScalarReceiver:
             res.update(zip(cold, self._acquire(source, sample, cold)))
         for p in prns:
             if p not in res:
-                res[p] = self._acquire(source, sample, [p], doppler_center_hz=assist[p],
-                                       doppler_range_hz=self.assist_doppler_range_hz)[0]
+                res[p] = self._acquire(source, sample, [p], **self._assisted_window(assist[p]))[0]
         k_long = self.long_noncoherent
         missed = [p for p in prns if not res[p].detected]
         if listed and k_long and missed and k_long > res[missed[0]].noncoherent:
@@ -275,9 +274,17 @@ class ScalarReceiver:
             for p in missed:
                 if assist.get(p) is not None:
                     res[p] = self._acquire(source, sample, [p], noncoherent=k_long,
-                                           doppler_center_hz=assist[p],
-                                           doppler_range_hz=self.assist_doppler_range_hz)[0]
+                                           **self._assisted_window(assist[p]))[0]
         return [res[p] for p in prns]
+
+    def _assisted_window(self, doppler_hz: float) -> dict:
+        """Doppler search around a predicted Doppler: the bins of the cold search's grid
+        (multiples of its step) that cover ``+-assist_doppler_range_hz`` around it, so that an
+        assisted search refines from the same bins as a cold one would."""
+        step = 1.0 / (2.0 * int(self.acq_kwargs.get("coherent_ms", 1)) * 1e-3)
+        centre = round(doppler_hz / step) * step
+        return {"doppler_center_hz": centre,
+                "doppler_range_hz": self.assist_doppler_range_hz + abs(doppler_hz - centre)}
 
     def _acq_len(self, fs: float) -> int:
         return int(self.acq_kwargs.get("noncoherent", 20)) * \
