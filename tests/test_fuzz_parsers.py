@@ -160,6 +160,8 @@ def generated(tmp_path_factory) -> Path:
     return d
 
 
+_FORMATS = st.sampled_from(["iq_int8", "iq_int16", "real_int8", "real_int16", "iq_int4",
+                            "gr_complex", "iq_int4_sm", "pocket_raw8_iq2", "cs8", "int3"])
 _SIDECAR_KEYS = ["schema", "if_file", "sampling_rate_hz", "if_hz", "carrier_hz",
                  "sample_format", "quantization_bits", "spectrum_inverted", "n_samples",
                  "start", "imu_file", "truth_file", "ephemeris_file", "files"]
@@ -173,12 +175,15 @@ def test_sidecar_arbitrary_json(generated, doc):
     parses_or_own_error(read_sidecar, p)
 
 
+@pytest.mark.filterwarnings("ignore::sdr_di.receiver.ifreader.IfFileWarning")
 @FUZZ
-@given(edits=st.dictionaries(st.sampled_from(_SIDECAR_KEYS), json_values | st.just(_DELETE),
+@given(edits=st.dictionaries(st.sampled_from(_SIDECAR_KEYS),
+                             json_values | _FORMATS | st.integers(1, 10**6) | st.just(_DELETE),
                              min_size=1, max_size=3),
        start=st.dictionaries(st.sampled_from(["week", "sow", "bdt"]), json_values,
-                             max_size=2))
-def test_sidecar_mutations_read_or_refused(generated, edits, start):
+                             max_size=2),
+       check_format=st.booleans())
+def test_sidecar_mutations_read_or_refused(generated, edits, start, check_format):
     meta = json.loads((generated / "s.json").read_text())
     meta["start"] = {**meta["start"], **start}
     for k, v in edits.items():
@@ -189,7 +194,7 @@ def test_sidecar_mutations_read_or_refused(generated, edits, start):
     p = generated / "fuzz.json"
     p.write_text(json.dumps(meta))
     if parses_or_own_error(read_sidecar, p) is not None:
-        parses_or_own_error(IfSource.from_sidecar, p, check_format=False)
+        parses_or_own_error(IfSource.from_sidecar, p, check_format=check_format)
 
 
 @FUZZ
