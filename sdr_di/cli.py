@@ -173,7 +173,7 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     if not math.isfinite(args.doppler_center):
         raise UsageError(f"--doppler-center must be finite, got {args.doppler_center}")
     prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
-    _check_if_file(args.if_file)
+    _check_file_options(args)
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_acq"))
     rep = run_acquisition(source, out, prns=prns, coherent_ms=args.coherent_ms,
@@ -286,12 +286,21 @@ def _check_run_options(args: argparse.Namespace) -> None:
     """``run``'s numbers and input file, checked before any work (one-line errors)."""
     import math
 
-    from .constants import SECONDS_PER_WEEK
-
-    for opt, v in (("--rate", args.rate), ("--fs", args.fs), ("--filter-rate", args.filter_rate),
+    for opt, v in (("--rate", args.rate), ("--filter-rate", args.filter_rate),
                    ("--duration", args.duration)):
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UsageError(f"{opt} must be a finite number > 0, got {v:g}")
+    _check_file_options(args)
+
+
+def _check_file_options(args: argparse.Namespace) -> None:
+    """The IF file and the options that describe it (``_add_file_options``), before any work."""
+    import math
+
+    from .constants import SECONDS_PER_WEEK
+
+    if args.fs is not None and not (math.isfinite(args.fs) and args.fs > 0):
+        raise UsageError(f"--fs must be a finite number > 0, got {args.fs:g}")
     if args.if_hz is not None and not math.isfinite(args.if_hz):
         raise UsageError(f"--if must be a finite number [Hz], got {args.if_hz:g}")
     if args.start_week is not None and not 0 <= args.start_week <= MAX_BDT_WEEK:

@@ -167,6 +167,11 @@ CASES: list[tuple[str, list[str]]] = [
     ("acquire-out-file", ["acquire", "{d}/set/s.bin", "--out", "{d}/afile"]),
     ("acquire-rfch-3", ["acquire", "{d}/set/s.bin", "--rfch", "3"]),
     ("acquire-sidecar-list", ["acquire", "{d}/set/list.json"]),
+    ("acquire-start-week-neg", ["acquire", "{d}/set/s.bin", "--fs", "2.5e6", "--format",
+                                "iq_int8", "--start-week", "-3"]),
+    ("acquire-start-sow-nan", ["acquire", "{d}/set/s.bin", "--fs", "2.5e6", "--format",
+                               "iq_int8", "--start-sow", "nan"]),
+    ("acquire-fs-inf", ["acquire", "{d}/set/s.bin", "--fs", "inf", "--format", "iq_int8"]),
     ("acquire-mixed-set", ["acquire", "{d}/mixed/s.bin"]),
     # -- more run / generate a new user tries ------------------------------------------------
     ("run-if-nan-sidecar", ["run", "{d}/set/s.bin", "--if", "nan"]),
