@@ -5,6 +5,8 @@ Usage::
 
     python scripts/bench.py generate [--durations 10 60] [--out DIR] [--keep]
     python scripts/bench.py run [--durations 10 40] [--keep] [--if-file F] [--repeat N]
+        [--search assisted|cold|both]
+    python scripts/bench.py acquire [options of scripts/bench_acquire.py]
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
     python scripts/bench.py filters [options of scripts/bench_filters.py]
     python scripts/bench.py deep [options of scripts/bench_deep.py]
@@ -21,7 +23,13 @@ a default-scenario file per duration (or ``--if-file``) and prints the process w
 real-time factor (file seconds per wall second of the whole process, and of the tracking loop
 alone), each stage's share of the wall time (``ScalarReceiver.profile``) and the peak RSS (10 s
 vs 40 s shows that memory does not grow with the file length). The machine's load average is
-printed: on a shared machine, repeat (``--repeat``) and report best and typical.
+printed: on a shared machine, repeat (``--repeat``) and report best and typical. Each file
+is run with the cold search of all 63 PRNs (``sdr-di run --cold``, the receiver before the
+assisted search) and the assisted one (``sdr-di run``: the sidecar's satellites around their
+Doppler).
+
+``acquire``: acquisition time per PRN at 25 MHz, normal (40 x 1 ms) and long (400 x 1 ms)
+searches, over +-5 kHz and +-1 kHz around a predicted Doppler.
 """
 
 from __future__ import annotations
@@ -77,9 +85,10 @@ _RUN_CHILD = """
 import json, resource, sys
 from sdr_di.receiver.run_scalar import open_source, run_scalar
 from sdr_di.receiver.scalar import ScalarReceiver
-path, out, prns = sys.argv[1], sys.argv[2], [int(p) for p in sys.argv[3].split(",")]
+path, out, search = sys.argv[1], sys.argv[2], sys.argv[3]
 rx = ScalarReceiver(log=False)
-res = run_scalar(open_source(path), out, prns=prns, progress=False, receiver=rx)
+res = run_scalar(open_source(path), out, progress=False, receiver=rx,
+                 assist=search == "assisted")
 prof = {k: v for k, v in res.profile.items() if isinstance(v, (int, float))}
 print("RESULT", json.dumps({"profile": prof, "processed_s": res.processed_s,
       "run_wall_s": res.wall_s,
@@ -90,14 +99,16 @@ print("RESULT", json.dumps({"profile": prof, "processed_s": res.processed_s,
 _STAGES = ("acquisition", "read", "correlate", "channels", "callback")
 
 
-def _run_receiver(path: Path, out: Path, prns: str) -> dict:
+def _run_receiver(path: Path, out: Path, search: str) -> dict:
     """``run_scalar`` (what ``sdr-di run --mode scalar`` runs) in a fresh process: the
-    process wall time and peak RSS, the receiver's profile."""
+    process wall time and peak RSS, the receiver's profile. ``search``: ``assisted`` (the
+    sidecar's satellites around their Doppler: ``sdr-di run``) or ``cold`` (all 63 PRNs over
+    +-5 kHz: ``sdr-di run --cold``)."""
     import resource
 
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", _RUN_CHILD, str(path), str(out), prns],
+    res = subprocess.run([sys.executable, "-c", _RUN_CHILD, str(path), str(out), search],
                          check=False, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -123,7 +134,8 @@ def bench_run(args: argparse.Namespace) -> None:
               "CPU s: the process's user + system time (all threads; on a shared machine the "
               "load-independent cost: below half the file length = 2x real time on one free "
               "core)")
-        print(f"{'file s':>6} {'wall s':>7} {'CPU s':>6} {'x real time':>11} {'tracking':>8} "
+        print(f"{'search':>8} {'file s':>6} {'wall s':>7} {'CPU s':>6} {'x real time':>11} "
+              f"{'tracking':>8} "
               + " ".join(f"{s[:7]:>7}" for s in _STAGES) + f" {'other':>6} {'peak RSS MiB':>12}")
         if args.if_file:
             files = [Path(args.if_file)]
@@ -133,16 +145,15 @@ def bench_run(args: argparse.Namespace) -> None:
                 sub = out / f"d{d:g}"
                 _run_generate(d, sub)
                 files.append(sub / "bench.bin")
-        for f in files:
-            meta = json.loads(f.with_suffix(".json").read_text())
-            prns = ",".join(str(s["prn"]) for s in meta["satellites"])
+        searches = ("cold", "assisted") if args.search == "both" else (args.search,)
+        for f, search in ((f, s) for f in files for s in searches):
             for _ in range(args.repeat):
-                r = _run_receiver(f, out / "run", prns)
+                r = _run_receiver(f, out / "run", search)
                 p = r["profile"]
                 wall = r["process_wall_s"]
                 d = r["processed_s"]
                 shares = [100.0 * p[s] / wall for s in _STAGES]
-                print(f"{d:6.1f} {wall:7.2f} {r['cpu_s']:6.1f} {d / wall:11.2f} "
+                print(f"{search:>8} {d:6.1f} {wall:7.2f} {r['cpu_s']:6.1f} {d / wall:11.2f} "
                       f"{p['realtime_factor']:8.2f} "
                       + " ".join(f"{v:6.1f}%" for v in shares)
                       + f" {100.0 - sum(shares):5.1f}% {r['maxrss'] / 2**20:12.1f}")
@@ -171,6 +182,9 @@ def main(argv: list[str] | None = None) -> None:
                         "of generating one per duration")
     r.add_argument("--repeat", type=int, default=1, help="runs per file (timings are noisy "
                                                           "on a shared machine)")
+    r.add_argument("--search", choices=("assisted", "cold", "both"), default="both",
+                   help="initial search: the sidecar's satellites around their Doppler "
+                   "(sdr-di run), all 63 PRNs cold (sdr-di run --cold), or both (default)")
     r.set_defaults(func=bench_run)
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_correlate
@@ -183,6 +197,11 @@ def main(argv: list[str] | None = None) -> None:
     f = sub.add_parser("filters", help="filter step time, 17 states, 2N measurements")
     bench_filters.add_arguments(f)
     f.set_defaults(func=bench_filters.run)
+    import bench_acquire
+
+    a = sub.add_parser("acquire", help="acquisition time per PRN, normal and long search")
+    bench_acquire.add_arguments(a)
+    a.set_defaults(func=bench_acquire.run)
     import bench_deep
 
     dp = sub.add_parser("deep", help="deep receiver real-time factor, stage shares, memory")

@@ -159,7 +159,7 @@ def test_acquire_cli_negative_if_and_too_short_file(tmp_path, capsys):
                  "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("sdr-di: error:") and "one coherent block" in err
-    assert not (tmp_path / "b" / "short_acquisition.csv").exists()
+    assert not (tmp_path / "b").exists()  # refused before any output
 
 
 @pytest.mark.parametrize("args, err", [(["--noncoherent", "0"], "noncoherent"),

@@ -120,12 +120,12 @@ def run_acquisition(source: IfSource, out_dir: str | Path, *, prns=None, coheren
     OutputError
         The table cannot be written.
     """
-    out_dir = ensure_output_dir(out_dir)
     stem = stem or source.path.stem
     prn_list = list(range(1, 64)) if prns is None else list(prns)
     results = acquire_source(source, 0, prns=prn_list, coherent_ms=coherent_ms,
                              noncoherent=noncoherent, doppler_center_hz=doppler_center_hz,
                              doppler_range_hz=doppler_range_hz, pfa=pfa)
+    out_dir = ensure_output_dir(out_dir)  # after the search: a refused file leaves nothing
     k_used = results[0].noncoherent if results else int(noncoherent)
     fs = source.sampling_rate_hz
     step = 1.0 / (2.0 * coherent_ms * 1e-3)
