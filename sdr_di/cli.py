@@ -205,6 +205,39 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     return 0
 
 
+def _approx_pos(text: str) -> tuple[float, float, float]:
+    parts = text.replace(" ", "").split(",")
+    try:
+        lat, lon, h = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected LAT,LON,H (degrees, degrees, metres), got {text!r}") from None
+    if not (abs(lat) <= 90.0 and abs(lon) <= 360.0 and -1e3 <= h <= 1e5):
+        raise argparse.ArgumentTypeError(f"position out of range: {text!r}")
+    return lat, lon, h
+
+
+def _visible_assistance(args: argparse.Namespace, source) -> dict[int, float]:
+    """Search assistance of a cold start with ephemeris, a time hint and a position: the
+    visible satellites and their Dopplers (receiver.prediction.visible_satellites)."""
+    import math
+
+    from .frames import llh_to_ecef
+    from .orbits.rinex_nav import load_nav
+    from .receiver.prediction import visible_satellites
+
+    if source.start_week is None or source.start_sow is None:
+        raise UsageError("--ephemeris/--approx-pos need the file's start time: a sidecar, or "
+                         "--start-week and --start-sow")
+    lat, lon, h = args.approx_pos
+    vis = visible_satellites(load_nav(args.ephemeris), source.start_week, source.start_sow,
+                             llh_to_ecef(math.radians(lat), math.radians(lon), h))
+    if not vis:
+        raise UsageError(f"{args.ephemeris}: no satellite above 5 deg at the file's start "
+                         f"from {lat:g}, {lon:g}, {h:g} m")
+    return vis
+
+
 def _add_run(sub) -> None:
     p = sub.add_parser(
         "run",
@@ -227,6 +260,10 @@ def _add_run(sub) -> None:
     p.add_argument("--cold", action="store_true",
                    help="cold start: ignore the sidecar's satellite list and Dopplers, search "
                    "--prn (default all 63) over +-5 kHz")
+    p.add_argument("--approx-pos", type=_approx_pos, default=None, metavar="LAT,LON,H",
+                   help="scalar mode, with --ephemeris and the file's start time: search the "
+                   "satellites visible from this approximate position [deg, deg, m] around "
+                   "their predicted Doppler (a cold start with assistance data)")
     _add_file_options(p)
     g = p.add_argument_group("deep mode")
     g.add_argument("--filter", default=None,
@@ -258,19 +295,29 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .io.atomic import check_output_dir
     from .receiver.run_scalar import run_scalar
 
+    scalar_search = args.mode != "deep" and args.approx_pos is not None
     deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
                                                        "filter_rate", "align", "duration")
-                 if getattr(args, n) is not None] + (["--no-assist"] if args.no_assist else [])
+                 if getattr(args, n) is not None
+                 and not (n == "ephemeris" and scalar_search)] \
+        + (["--no-assist"] if args.no_assist else [])
     if args.mode != "deep" and deep_opts:
-        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep")
+        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep"
+                         + (" (scalar mode takes --ephemeris with --approx-pos)"
+                            if "--ephemeris" in deep_opts else ""))
+    if args.approx_pos is not None and (args.mode == "deep" or args.ephemeris is None):
+        raise UsageError("--approx-pos: only in scalar mode, with --ephemeris")
     _check_run_options(args)
     prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_run"))
     if args.mode == "deep":
         return _run_deep(args, source, out, prns)
+    assist = not args.cold
+    if scalar_search:
+        assist = _visible_assistance(args, source)
     res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress,
-                     assist=not args.cold)
+                     assist=assist)
     rt = res.processed_s / max(res.wall_s, 1e-9)
     print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
           f"{res.n_fixes}/{res.n_epochs} epochs with a fix")

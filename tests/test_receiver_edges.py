@@ -283,3 +283,35 @@ def test_assisted_search_with_the_long_search_finds_30_dbhz_satellites(tmp_path)
         if r.detected:
             assert abs(r.doppler_hz - aid[r.prn]) < 100.0, r
             assert r.noncoherent in (40, 400)
+
+
+def test_cold_start_with_ephemeris_time_hint_and_position(tmp_path, capsys):
+    """A file read as a foreign one (no sidecar): --ephemeris, the start time and an
+    approximate position give the visible satellites and their Dopplers to search."""
+    from pathlib import Path
+
+    from sdr_di.frames import llh_to_ecef
+    from sdr_di.orbits.rinex_nav import load_nav
+    from sdr_di.receiver.prediction import visible_satellites
+
+    root = Path(__file__).resolve().parents[1]
+    rnx = root / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
+    assert main(["generate", "--no-progress", "--duration", "0.6", "--fs", "2.5e6",
+                 "--out", str(tmp_path)]) == 0
+    meta = __import__("json").loads((tmp_path / "default.json").read_text())
+    week, sow = meta["start"]["week"], meta["start"]["sow"]
+    vis = visible_satellites(load_nav(rnx), week, sow,
+                             llh_to_ecef(np.radians(40.0), np.radians(116.0), 100.0))
+    truth = {s["prn"]: s["doppler_hz"] for s in meta["satellites"]}
+    assert set(truth) <= set(vis)  # the scenario's satellites are among the visible ones
+    for p, fd in truth.items():  # static-receiver prediction: 20 m/s of motion ~ 80 Hz
+        assert abs(vis[p] - fd) < 150.0, (p, vis[p], fd)
+    args = ["run", str(tmp_path / "default.bin"), "--fs", "2.5e6", "--format", "iq_int8",
+            "--start-week", str(week), "--start-sow", str(sow), "--ephemeris", str(rnx),
+            "--no-progress", "--out", str(tmp_path / "run")]
+    assert main([*args, "--approx-pos", "40,116,100"]) == 0
+    rows = list(csv.DictReader(open(tmp_path / "run" / "default_channels.csv")))
+    assert {int(r["prn"]) for r in rows} == set(truth)
+    capsys.readouterr()
+    assert main(args) == 2  # --ephemeris without --approx-pos is deep-mode only
+    assert "--approx-pos" in capsys.readouterr().err

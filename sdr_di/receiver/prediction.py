@@ -33,7 +33,7 @@ from ..constants import C_LIGHT, F_B3I, SECONDS_PER_WEEK
 from .pvt import PvtEngine, _lookup_eph
 from .range_model import predict_ranges
 
-__all__ = ["FixPredictor", "SignalPrediction"]
+__all__ = ["FixPredictor", "SignalPrediction", "visible_satellites"]
 
 _RATE_DT_S = 0.01
 
@@ -114,3 +114,46 @@ class FixPredictor:
         w = math.floor(sow_tx / SECONDS_PER_WEEK)
         return SignalPrediction(t_tx_week=int(week + w), t_tx_sow=sow_tx - w * SECONDS_PER_WEEK,
                                 doppler_hz=doppler, age_s=dt)
+
+
+def visible_satellites(nav, week: int, sow: float, r_e, *, mask_deg: float = 5.0
+                       ) -> dict[int, float]:
+    """``{prn: predicted Doppler [Hz]}`` of the satellites above ``mask_deg`` at a time and an
+    approximate position, from a navigation file: the assistance of a cold start with
+    ephemeris and a time hint (the scalar receiver searches these first, each around its
+    Doppler).
+
+    The receiver is taken as static with a perfect clock: the Doppler errs by the receiver's
+    velocity along the line of sight (100 m/s = 420 Hz) and its oscillator offset (1 ppm =
+    1.27 kHz), which the search window must cover; a position error of 100 km moves it by
+    about 100 Hz.
+
+    Parameters
+    ----------
+    nav : NavData
+        Navigation file (:func:`~sdr_di.orbits.rinex_nav.load_nav`); per satellite the record
+        on the air at the time.
+    week, sow : int, float
+        BDT of the time hint (e.g. the IF file's start) [week, s of week].
+    r_e : array_like (3,)
+        Approximate receiver position, ECEF [m].
+    mask_deg : float
+        Elevation mask [deg].
+    """
+    from ..errors import NoEphemerisError
+    from ..frames import elevation_azimuth
+
+    r = np.asarray(r_e, float).reshape(3)
+    out: dict[int, float] = {}
+    for prn in nav.prns:
+        try:
+            eph = nav.select(prn, int(week), float(sow), broadcast=True)
+        except NoEphemerisError:
+            continue
+        pred = predict_ranges([eph], int(week), [float(sow), float(sow) + _RATE_DT_S],
+                              [r, r], [0.0, 0.0], None)
+        el, _ = elevation_azimuth(r, pred.r_sat[0, 0])
+        if np.degrees(float(el)) < mask_deg:
+            continue
+        out[int(prn)] = -(F_B3I / C_LIGHT) * float(pred.Pc[0, 1] - pred.Pc[0, 0]) / _RATE_DT_S
+    return dict(sorted(out.items()))

@@ -118,7 +118,8 @@ def sidecar_assistance(source: IfSource) -> dict[int, float | None]:
 
 def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: float = 5.0,
                stem: str | None = None, progress: bool = True,
-               receiver: ScalarReceiver | None = None, assist: bool = True) -> RunSummary:
+               receiver: ScalarReceiver | None = None,
+               assist: bool | dict[int, float | None] = True) -> RunSummary:
     """Run the scalar receiver over ``source`` and write the solution files.
 
     Parameters
@@ -137,10 +138,12 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         Show a progress bar (seconds processed, real-time factor, channels in lock).
     receiver : ScalarReceiver, optional
         Preconfigured receiver (loop settings, acquisition options).
-    assist : bool
-        Search the satellites the sidecar lists, around their start Doppler, with the long
-        search for those the first search misses (:func:`sidecar_assistance`; default).
-        False: a cold search of ``prns`` (default all 63).
+    assist : bool or dict
+        True (default): search the satellites the sidecar lists, around their start Doppler,
+        with the long search for those the first search misses (:func:`sidecar_assistance`).
+        A dict ``{prn: Doppler [Hz] or None}``: that assistance (e.g. the visible satellites
+        from ephemeris and a time hint, :func:`~sdr_di.receiver.prediction
+        .visible_satellites`). False: a cold search of ``prns`` (default all 63).
 
     Raises
     ------
@@ -193,7 +196,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
                                 f"{len(ephemerides)} eph")
 
     try:
-        aid = sidecar_assistance(source) if assist else {}
+        aid = dict(assist) if isinstance(assist, dict) else \
+            sidecar_assistance(source) if assist else {}
         if prns is not None:  # an explicit list: the sidecar's Dopplers where it has them
             aid = {p: aid.get(p) for p in prns}
         rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=1.0 / rate_hz,
