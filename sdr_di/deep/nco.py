@@ -2,19 +2,10 @@
 
 Paper 004 Fig. 1: every channel's NCOs are commanded from the corrected INS position and
 velocity, the satellites' broadcast orbits at transmit time, the receiver clock states and
-the atmosphere models. The model is the one the PVT solves (:mod:`sdr_di.receiver.pvt`), run
-forwards (:mod:`sdr_di.receiver.range_model`, which the scalar receiver's re-acquisition
-after a blockage uses too)::
-
-    P  = | R_z(omega_e tau) r_sat(t_tx) - r | + b - c dt_sv(t_tx) + T + I     code [m]
-    Pc = P - 2 I                                                           carrier [m]
-    t_sv(k) = t_nom(k) - P / c          satellite-clock transmit time of the code at sample k
-
-with ``t_nom(k)`` the receiver-clock (nominal) time of IF sample ``k``, ``b`` the receiver
-clock bias [m] (``t_nom - BDT`` times c), ``tau`` the geometric travel time (iterated; Sagnac
-by rotating the satellite into the ECEF frame of the reception instant), ``dt_sv`` the
-broadcast clock with the relativistic term, ``T`` Saastamoinen and ``I`` the B3I-scaled
-Klobuchar delay (elevations floored at 0.1 deg as in the generator and the PVT).
+the atmosphere models: the forward range model of :mod:`sdr_di.receiver.range_model` (the
+model the PVT solves, run forwards; the scalar receiver's re-acquisition after a blockage
+uses it too) gives the code pseudorange ``P``, the carrier phase-range ``Pc`` and the
+satellite-clock transmit time ``t_sv(k) = t_nom(k) - P / c`` of the code at sample ``k``.
 
 NCO commands over an interval ``[k0, k1)`` (:func:`nco_commands`):
 
