@@ -117,13 +117,15 @@ def test_bad_inputs(tmp_path, capsys):
     _expect(capsys, [str(empty), "--fs", "25e6", "--format", "ibyte"], "empty", out)
     _expect(capsys, [str(tmp_path / "none.bin")], "no such file", out)
     _expect(capsys, [str(empty), "--fs", "25e6", "--format", "int3"], "unknown sample format", out)
-    # truncated: the sidecar promises more samples than the file has
+    # truncated: the sidecar promises more samples than the file has (the set's size record
+    # catches it first: a file that is not the one the sidecar was written with)
     g = tmp_path / "g"
     assert main(["generate", "--no-progress", "--duration", "0.1", "--fs", "2.5e6", "--out",
                  str(g)]) == 0
     data = (g / "default.bin").read_bytes()
     (g / "default.bin").write_bytes(data[: len(data) // 2])
-    _expect(capsys, [str(g / "default.bin")], "shorter|truncated", out)
+    _expect(capsys, [str(g / "default.bin")], "shorter|truncated|not the file this sidecar",
+            out)
     (g / "default.bin").write_bytes(data)
     _expect(capsys, [str(g / "default.bin"), "--prn", "C21,C77"], "C77", out)
 

@@ -123,6 +123,7 @@ class Channel:
         self.transitions: list[tuple[int, ChannelState]] = []
         self.next_start = 0
         self.carrier = CarrierLoop(self.cfg.pull_in_pll_bw_hz, self.cfg.pull_in_fll_bw_hz, 0.0)
+        self._fll_bw0 = self.cfg.pull_in_fll_bw_hz  # FLL bandwidth at the start of pull-in
         self.code = CodeLoop(self.cfg.pull_in_dll_bw_hz, self.cfg.dll_order)
         self.assembler = EphemerisAssembler(self.prn)
         self.ephemeris = None
@@ -215,22 +216,26 @@ class Channel:
         return [(int(e), np.frombuffer(bytes(b), dtype=np.uint8)) for e, b in self.bit_runs]
 
     def start(self, sample: int, code_phase_chips: float, doppler_hz: float,
-              cn0_dbhz: float = math.nan) -> None:
+              cn0_dbhz: float = math.nan, fll_bw_hz: float | None = None) -> None:
         """Start tracking from an acquisition (code phase at ``sample``).
 
         The first correlation interval begins at the first code-epoch edge after ``sample``.
+        ``fll_bw_hz`` is the pull-in FLL bandwidth to start from [Hz] (default
+        ``pull_in_fll_bw_hz``; a long search's Doppler, refined over hundreds of ms, needs only
+        the minimum: the receiver passes ``pull_in_fll_min_bw_hz`` then).
         """
         self._reset_tracking_state()
         self._time = None
-        self._restart(sample, code_phase_chips, doppler_hz, cn0_dbhz, 0)
+        self._restart(sample, code_phase_chips, doppler_hz, cn0_dbhz, 0, fll_bw_hz)
 
     def _restart(self, sample: int, theta0: float, fd: float, cn0: float,
-                 epoch_at_sample: int) -> None:
+                 epoch_at_sample: int, fll_bw_hz: float | None = None) -> None:
         """Load the NCOs for pull-in. ``epoch_at_sample`` numbers the code epoch in progress
         at ``sample`` (the first correlated epoch is the next one unless ``sample`` is an
         epoch edge)."""
         self.n_acquisitions += 1
-        self.carrier.set_bandwidths(self.cfg.pull_in_pll_bw_hz, self.cfg.pull_in_fll_bw_hz)
+        self._fll_bw0 = self.cfg.pull_in_fll_bw_hz if fll_bw_hz is None else float(fll_bw_hz)
+        self.carrier.set_bandwidths(self.cfg.pull_in_pll_bw_hz, self._fll_bw0)
         self.carrier.reset(fd)
         self.code.set_bandwidth(self.cfg.pull_in_dll_bw_hz)
         self.code.reset()
@@ -434,7 +439,7 @@ class Channel:
         if self.state == ChannelState.PULL_IN:
             self._pull_in_ms += cfg.lock_eval_ms
             # FLL assist narrows as the frequency settles: halved every fll_halving_ms
-            bf = max(cfg.pull_in_fll_min_bw_hz, cfg.pull_in_fll_bw_hz *
+            bf = max(min(cfg.pull_in_fll_min_bw_hz, self._fll_bw0), self._fll_bw0 *
                      0.5 ** (self._pull_in_ms // max(1, cfg.fll_halving_ms)))
             if bf != self.carrier.fll_bw_hz:
                 self.carrier.set_bandwidths(cfg.pull_in_pll_bw_hz, bf)
@@ -462,7 +467,8 @@ class Channel:
 
     def _back_to_pull_in(self) -> None:
         self.state = ChannelState.PULL_IN
-        self.carrier.set_bandwidths(self.cfg.pull_in_pll_bw_hz, self.cfg.pull_in_fll_bw_hz)
+        # the pull-in's own FLL start (a weak channel started narrow stays narrow)
+        self.carrier.set_bandwidths(self.cfg.pull_in_pll_bw_hz, self._fll_bw0)
         self.code.set_bandwidth(self.cfg.pull_in_dll_bw_hz)
         self._pull_in_ms = 0
         self._prev_p = None
