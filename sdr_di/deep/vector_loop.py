@@ -706,6 +706,8 @@ class DeepReceiver:
                                 npow, fs, last=_LOSS_MS // c.bit_ms) >= \
                                 cfg.cn0_min_dbhz - cfg.loss_margin_db:
                             c.fast_fail = 2
+                        if c.fast_fail and c.nav is not None:
+                            c.nav.interrupt()  # no subframe from bits of a failing interval
                         if c.fast_fail >= 2:
                             # signal gone: lost, back only on a whole window of fresh bit
                             # sums, not on one still full of signal from before a blockage
