@@ -473,7 +473,7 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     from .integration.noise import NoiseWindow
     from .io.atomic import check_output_dir, ensure_output_dir
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
-    from .sim.imu import ImuErrorModel
+    from .ins.imu import ImuErrorModel
 
     sc, st = load_lc_scenario(args.scenario or DEFAULT_SCENARIO)
     name = (args.filter or st.filter).strip().lower()

@@ -91,6 +91,7 @@ from ..errors import ImuDataError, SdrDiError
 from ..filters import make_filter
 from ..frames import ecef_to_llh, llh_to_ecef
 from ..ins.error_model import ClockModel, InsErrorModel, NavState, process_noise
+from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..integration.measurements import RangeRateMeasurementModel
 from ..integration.metrics import nav_errors, summarize
@@ -112,7 +113,6 @@ from ..receiver.threads import KernelThreads
 from ..receiver.tracking import ChannelState
 from ..signal.codes import NH20, b3i_code
 from ..signal.navmsg import klobuchar_of_subframe
-from ..sim.imu import ImuErrorModel
 from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges

@@ -1,6 +1,8 @@
 """Strapdown inertial navigation: ENU navigation frame, Right-Front-Up body, CGCS2000.
 
 ``gravity``        CGCS2000 normal gravity (the project's only gravity model)
+``imu``            IMU record (:class:`ImuData`) and error model (:class:`ImuErrorModel`:
+                   scale factor, bias, random walks; generator and filter ``Q`` alike)
 ``rotation``       quaternion / rotation-vector helpers
 ``mechanization``  :class:`StrapdownINS` (200 Hz update with coning and sculling), ``navigate``
 """

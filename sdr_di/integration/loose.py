@@ -51,9 +51,9 @@ from ..errors import ImuDataError, ScenarioError
 from ..filters import make_filter
 from ..frames import radii_of_curvature
 from ..ins.error_model import InsErrorModel, NavState, process_noise, rotvec_to_dcm
+from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..scenario.schema import Scenario, parse_scenario
-from ..sim.imu import ImuErrorModel
 from .measurements import LooseMeasurementModel, loose_measurement
 from .metrics import nav_errors, summarize
 from .noise import GnssNoise, NoiseWindow

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..errors import ImuDataError
 from ..frames import euler_to_C_b_n
-from ..sim.imu import ImuData
+from ..ins.imu import ImuData
 from ..sim.trajectory import Truth
 from .atomic import OutputSet, atomic_open
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import OutputError, ScenarioError
+from ..ins.imu import ImuErrorModel
 from ..io.atomic import OutputSet, check_output_dir, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
 from ..io.sidecar import file_fingerprint, write_sidecar
@@ -35,7 +36,6 @@ from ..signal.navmsg import broadcast_klobuchar
 from ..timebase import bdt_minus_utc, bdt_to_datetime
 from .geometry import ReceiverPath
 from .ifgen import IfGenerator, build_satellites
-from .imu import ImuErrorModel
 from .motion import segment_from_spec
 from .trajectory import generate_trajectory
 
