@@ -9,10 +9,13 @@ Usage::
 On 0.5 s of the default scenario (generated once into a temp dir), times
 :func:`~sdr_di.receiver.acquisition.acquire` (input cleaning, FFT search, refinement) for:
 
-* ``normal``: 40 x 1 ms, +-5 kHz (21 bins): the cold search of ``sdr-di run``;
-* ``assisted``: 40 x 1 ms, +-1 kHz (5 bins) around a predicted Doppler;
-* ``long``: 400 x 1 ms, +-5 kHz: the long search of a listed PRN without a Doppler;
-* ``long assisted``: 400 x 1 ms, +-1 kHz: the long search around a predicted Doppler.
+* ``normal``: 40 x 1 ms, +-5 kHz in 500 Hz bins (21): the cold search of ``sdr-di run``;
+* ``assisted``: 40 x 1 ms around a predicted Doppler (the receiver's window: the cold grid's
+  bins covering +-1 kHz, 7), one call per PRN;
+* ``long``: 400 x 1 ms, +-5 kHz in 250 Hz bins (41): the long search of a listed PRN
+  without a Doppler;
+* ``long assisted``: 400 x 1 ms in 250 Hz bins around a predicted Doppler (11), one call per
+  PRN.
 
 Wall and CPU time (user + system of this process, all threads) per PRN; the FFT of the
 input blocks is shared by the PRNs of one call, so the per-PRN cost falls with more PRNs.
@@ -21,6 +24,7 @@ input blocks is shared by the PRNs of one call, so the per-PRN cost falls with m
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import resource
 import shutil
@@ -45,6 +49,7 @@ def run(args: argparse.Namespace) -> None:
     from sdr_di.cli import main as cli
     from sdr_di.receiver.acquisition import acquire
     from sdr_di.receiver.run_scalar import open_source, sidecar_assistance
+    from sdr_di.receiver.scalar import ScalarReceiver
 
     tmp = Path(tempfile.mkdtemp(prefix="sdr-di-bench-acq-"))
     try:
@@ -62,21 +67,25 @@ def run(args: argparse.Namespace) -> None:
               f"{fs / 1e6:g} MHz complex, {len(prns)} PRNs per search")
         print(f"{'search':>14} {'K x M ms':>9} {'bins':>5} {'wall s':>7} {'CPU s':>6} "
               f"{'wall s/PRN':>10} {'CPU s/PRN':>9}")
-        cases = (("normal", 40, 5000.0, False), ("assisted", 40, 1000.0, True),
-                 ("long", 400, 5000.0, False), ("long assisted", 400, 1000.0, True))
-        for name, k, rng, assisted in cases:
+        rx = ScalarReceiver()
+        cases = (("normal", 40, 500.0, False), ("assisted", 40, 500.0, True),
+                 ("long", 400, 250.0, False), ("long assisted", 400, 250.0, True))
+        for name, k, step, assisted in cases:
             best = None
             for _ in range(args.repeat):
                 t0, c0 = time.perf_counter(), _cpu()
                 if assisted:  # one call per PRN, each around its own Doppler
                     for p in prns:
+                        win = rx._assisted_window(aid.get(p) or 0.0)
                         acquire(x, fs, src.if_hz, prns=[p], noncoherent=k,
-                                doppler_center_hz=aid.get(p) or 0.0, doppler_range_hz=rng)
+                                doppler_step_hz=step, **win)
                 else:
-                    acquire(x, fs, src.if_hz, prns=prns, noncoherent=k, doppler_range_hz=rng)
+                    win = {"doppler_center_hz": 0.0, "doppler_range_hz": 5000.0}
+                    acquire(x, fs, src.if_hz, prns=prns, noncoherent=k, doppler_step_hz=step,
+                            **win)
                 w, c = time.perf_counter() - t0, _cpu() - c0
                 best = (w, c) if best is None or w < best[0] else best
-            bins = 2 * round(rng / 500.0) + 1
+            bins = 2 * math.ceil(win["doppler_range_hz"] / step - 1e-9) + 1
             w, c = best
             print(f"{name:>14} {k:>5} x 1 {bins:5d} {w:7.2f} {c:6.2f} {w / len(prns):10.3f} "
                   f"{c / len(prns):9.3f}")
