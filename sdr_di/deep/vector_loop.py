@@ -15,6 +15,13 @@ Paper 004 Fig. 1, federated architecture. Data flow of :meth:`DeepReceiver.run`:
     the pre-filters shifted by the correction's projection on each channel (their NCOs move
     by it in the next interval).
 
+Code: :meth:`DeepReceiver._vector_loop` hands over and runs the mode-independent
+:class:`~sdr_di.integration.loop.IntegrationLoop` (INS propagation, filter predict/update,
+closed-loop feedback, solution rows); :class:`VectorTracking` is deep mode's measurement
+source in it (NCO commands, correlation, pre-filters and channel management, the NCO and
+pre-filter share of the feedback, navigation data taken up). A loose or tight mode is
+another measurement source, without the NCO feedback.
+
 Decisions
 ---------
 * **Filter rate** default 50 Hz (T = 20 ms): one D1 data bit, four 200 Hz IMU samples, the
@@ -89,12 +96,13 @@ import numpy as np
 from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
 from ..errors import ImuDataError, SdrDiError
 from ..filters import make_filter
-from ..frames import ecef_to_llh, llh_to_ecef
-from ..ins.error_model import ClockModel, InsErrorModel, NavState, process_noise
+from ..frames import ecef_to_llh, llh_to_ecef, radii_of_curvature
+from ..ins.error_model import ClockModel, InsErrorModel, process_noise
 from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
+from ..integration.loop import IntegrationLoop, Interval, Measurements
 from ..integration.measurements import RangeRateMeasurementModel
-from ..integration.metrics import nav_errors, summarize
+from ..integration.metrics import summarize
 from ..receiver._numba_correlate_bits import correlate_epl_bits, mean_power
 from ..receiver.correlator import (
     CODE_PAD,
@@ -467,23 +475,80 @@ class DeepReceiver:
     # ------------------------------------------------------------------------------------
     def _vector_loop(self, source, imu, off, n_per, stop, rx, engine, navdata,
                      hand, truth, progress, t_scalar, t_all) -> DeepResult:
+        """Hand-over from the scalar start-up and the vector loop to the end of the file.
+
+        Hand-over: channels (:meth:`_handover_channels`), INS alignment (:meth:`_align_ins`),
+        clock from the fix, integration filter (:meth:`_make_filter`), pre-filters from the
+        scalar loops (:meth:`VectorTracking.start`). Then the mode-independent
+        :class:`~sdr_di.integration.loop.IntegrationLoop` runs with
+        :class:`VectorTracking` as its measurement source.
+        """
         cfg = self.config
         fs = source.sampling_rate_hz
-        n1 = round(fs * 1e-3)
         sol = hand["sol"]
         k_h = int(hand["sample"])
-        rt = engine.builder.rx_time
-        week = int(rt.week0)
-        # receiver time of sample k: sow0 + (k - k0) / fs; reference S0 = whole second before
-        S0 = math.floor(rt.sow0) - 1.0
-        base_rel = rt.sow0 - S0
+        clock = _SampleClock.of(engine.builder.rx_time, fs)
+        chans = self._handover_channels(rx, navdata, hand, clock)
+        # ---- IMU grid: the loop starts on the first IMU sample after the hand-over
+        dt_imu = 1.0 / imu.rate_hz
+        t_if = imu.t + off                     # IF-relative time of each IMU sample
+        i_h = int(np.searchsorted(t_if, max(k_h, max(c.next_start for c in chans)) / fs))
+        i_h = max(i_h, 1)
+        T = n_per * dt_imu
+        k_grid0 = round(t_if[i_h] * fs)
+        ins, llh_fix, att_sig = self._align_ins(imu, truth, sol, t_if, i_h, k_h / fs)
+        clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
+        clk_d = float(sol.clock_drift_mps)
+        kf, process, meas = self._make_filter(T, sol, llh_fix, att_sig)
 
-        def t_rel(k):
-            return base_rel + (k - rt.k0) / fs
+        prof = {"scalar": t_scalar, "read": 0.0, "nco": 0.0, "correlate": 0.0,
+                "prefilter": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
+        tracking = VectorTracking(cfg, source, chans, navdata, clock, stop, prof,
+                                  handover=(k_h / fs, sol.week, sol.sow),
+                                  spacing_chips=self.scalar.config.spacing_chips)
+        tracking.start(rx, ins, clk_b, k_grid0)
+        n1 = round(fs * 1e-3)
+        loop = IntegrationLoop(
+            imu=imu, t_if=t_if, i_start=i_h, k_start=k_grid0, n_per=n_per, fs=fs, stop=stop,
+            margin=2 * n1 + 16, ins=ins, clock_bias_m=clk_b, clock_drift_mps=clk_d, kf=kf,
+            process=process, meas=meas, sow_of_sample=clock.sow,
+            output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
+            progress=progress, profile=prof)
+        adapt0 = kf.adaptation_time_s
+        try:
+            loop.run(tracking)
+        finally:
+            tracking.close()
+        k0 = loop.k0
+        prof["total"] = time.perf_counter() - t_all
+        prof["processed_s"] = k0 / fs
+        prof["deep_s"] = (k0 - k_grid0) / fs
+        prof["loop"] = sum(prof[k] for k in ("read", "nco", "correlate", "prefilter", "filter",
+                                             "ins", "output"))
+        prof["realtime_factor"] = prof["processed_s"] / prof["total"] if prof["total"] else 0.0
+        self.profile = prof
 
-        iono = navdata.klobuchar
+        n_ch = len(chans)
+        col = loop.columns(n_ch)
+        return DeepResult(
+            t=col["t"], week=clock.week, sow=col["sow"], llh=col["llh"], v_n=col["v"],
+            att=col["att"], clock_bias_m=col["b"], clock_drift_mps=col["d"], n_used=col["n"],
+            att_err=col["ae"], vel_err=col["ve"], pos_err=col["pe"],
+            prns=tuple(c.prn for c in chans), used=col["used"], cn0_dbhz=col["cn0"],
+            nis=col["nis"], handover_s=k_grid0 / fs, filter_name=kf.name,
+            adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
+            nav_change=col["nav"], navigation=tracking.nav_log.summary(k0 / fs))
 
-        # ---- channels
+    # ------------------------------------------------------------------------------------
+    def _handover_channels(self, rx: ScalarReceiver, navdata: NavDataInForce, hand: dict,
+                           clock: _SampleClock) -> list[_Chan]:
+        """Vector-loop state of every handed-over channel, from its scalar channel: next
+        code epoch (sample and number on the satellite clock), carrier phase, C/N0, the
+        ephemeris in force at the fix and the navigation decoder with its subframe in
+        progress."""
+        cfg = self.config
+        sol = hand["sol"]
+        S0 = clock.S0
         chans: list[_Chan] = []
         for i, prn in enumerate(hand["prns"]):
             c = rx.channels[prn]
@@ -497,25 +562,24 @@ class DeepReceiver:
                                power=BitPower(max(cfg.cn0_window_ms // bit_ms, 2)),
                                bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz),
                                nav=_handover_decoder(c, e, round(S0 * 1000.0))))
-        n_ch = len(chans)
-        ephs = [c.eph for c in chans]
-        nav_log = _NavLog(navdata, chans, iono, k_h / fs, sol.week, sol.sow)
-        pre = PreFilterBank(n_ch, self.scalar.config.spacing_chips, source.carrier_hz,
-                            **cfg.prefilter)
-        spacing = pre.spacing
-        bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
-                                     for c in chans]))
-        chan_idx = np.arange(len(chans), dtype=np.int64)
-        kthreads = KernelThreads()
-        threads_before = numba.get_num_threads()
+        return chans
 
-        # ---- IMU grid and INS alignment
+    def _align_ins(self, imu, truth, sol, t_if: np.ndarray, i_h: int, t_fix_s: float):
+        """INS at IMU sample ``i_h`` (module notes, *INS initial alignment*).
+
+        Position and velocity are the WLS fix moved to ``t_if[i_h]``; attitude from the
+        reference (``align="truth"``, INS coasting on the IMU from the reference's first
+        record) or from the fix velocity and the IMU (``"gnss"``, :func:`gnss_alignment`).
+
+        Returns
+        -------
+        ins : StrapdownINS
+        llh_fix : (3,) the fix position at ``t_if[i_h]`` [rad, rad, m]
+        att_sig : (3,) initial attitude sigmas (E, N, U) [rad]
+        """
+        cfg = self.config
         dt_imu = 1.0 / imu.rate_hz
-        t_if = imu.t + off                     # IF-relative time of each IMU sample
-        i_h = int(np.searchsorted(t_if, max(k_h, max(c.next_start for c in chans)) / fs))
-        i_h = max(i_h, 1)
-        T = n_per * dt_imu
-        r_fix = sol.r_e + sol.v_e * (t_if[i_h] - k_h / fs)
+        r_fix = sol.r_e + sol.v_e * (t_if[i_h] - t_fix_s)
         llh_fix = ecef_to_llh(r_fix)
         if cfg.align == "truth":
             ins = StrapdownINS(truth.llh[0], truth.v_n[0], C_b_n=truth.C_b_n[0],
@@ -537,18 +601,27 @@ class DeepReceiver:
             ins = StrapdownINS(llh_fix, v, C_b_n=C0, t=float(imu.t[i_h]))
             ins.set_previous_increments(imu.f_b[i_h], imu.w_ib_b[i_h], dt_imu)
             att_sig = np.radians([3.0, 3.0, 5.0])
-        clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
-        clk_d = float(sol.clock_drift_mps)
+        return ins, llh_fix, att_sig
 
-        # ---- integration filter
+    def _make_filter(self, T: float, sol, llh_fix, att_sig):
+        """Integration filter of the configured name over interval ``T`` [s].
+
+        ``Q`` from the IMU spec and the clock model (:func:`~sdr_di.ins.error_model.
+        process_noise`); ``P0``: the attitude sigmas ``att_sig``, 0.1 m/s, the fix's
+        position sigma (at least 1 m; 1.5x for height and clock bias), the bias specs and
+        0.1 m/s of clock drift.
+
+        Returns
+        -------
+        kf, process (InsErrorModel), meas (RangeRateMeasurementModel, the filter's)
+        """
+        cfg = self.config
         gb, ab = cfg.imu.gyro_bias_si, cfg.imu.accel_bias_si
         Q0 = process_noise(T, gyro_random_walk_si=cfg.imu.gyro_random_walk_si,
                            accel_random_walk_si=cfg.imu.accel_random_walk_si,
                            gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=cfg.bias_time_s,
                            clock=_CLOCKS[cfg.clock])
         lat0, h0 = float(llh_fix[0]), float(llh_fix[2])
-        from ..frames import radii_of_curvature
-
         R_M, R_N = (float(r) for r in radii_of_curvature(lat0))
         cov = np.asarray(sol.cov, float)
         s_pos = math.sqrt(max(np.trace(cov[:3, :3]) / 3.0, 0.25)) if np.all(
@@ -560,280 +633,369 @@ class DeepReceiver:
                    0.1 ** 2]
         process = InsErrorModel(_CLOCKS[cfg.clock])
         meas = RangeRateMeasurementModel()
-        meas_all = RangeRateMeasurementModel()
         kf = make_filter(cfg.filter, process, meas, np.zeros(17), np.diag(p0), Q0, None, dt=T,
                          **cfg.filter_options)
+        return kf, process, meas
 
-        # ---- pre-filters from the scalar loops
-        k_grid0 = round(t_if[i_h] * fs)
+
+@dataclasses.dataclass(frozen=True)
+class _SampleClock:
+    """Receiver time of IF samples: ``sow(k) = S0 + t_rel(k)`` [s of BDT week ``week``].
+
+    ``S0`` is the whole second before the receiver time of the reference sample ``k0`` (kept
+    apart so that ``t_rel``, a few hundred seconds, keeps its sub-nanosecond resolution).
+    """
+
+    week: int
+    S0: float
+    base_rel: float
+    k0: float
+    fs: float
+
+    @classmethod
+    def of(cls, rt: ReceiverTime, fs: float) -> _SampleClock:
+        S0 = math.floor(rt.sow0) - 1.0
+        return cls(week=int(rt.week0), S0=S0, base_rel=rt.sow0 - S0, k0=rt.k0, fs=fs)
+
+    def t_rel(self, k) -> float:
+        """Receiver time of sample ``k`` minus ``S0`` [s]."""
+        return self.base_rel + (k - self.k0) / self.fs
+
+    def sow(self, k) -> float:
+        """Receiver time of sample ``k`` [s of week]."""
+        return self.S0 + self.t_rel(k)
+
+
+@dataclasses.dataclass
+class _EpochRows:
+    """Correlator rows of one interval, all channels (one row per code epoch)."""
+
+    reps: list               # rows of each channel
+    starts: np.ndarray       # first sample of each epoch
+    nsamp: np.ndarray        # samples of each epoch
+    theta: np.ndarray        # code NCO phase at the start [chips]
+    phi: np.ndarray          # carrier NCO phase at the start [cycles]
+    dphi: np.ndarray         # carrier NCO frequency [cycles/sample]
+    nh: np.ndarray           # NH20 sign (D1) or 1
+    epoch: np.ndarray        # epoch number (ms since S0 on the satellite clock)
+    dchip: np.ndarray        # code NCO rate of each channel [chips/sample]
+
+
+class VectorTracking:
+    """Deep mode's measurement source of the :class:`~sdr_di.integration.loop.
+    IntegrationLoop`: the vector tracking loop of every handed-over channel.
+
+    One interval, :meth:`measure`::
+
+        command_ncos       predicted ranges at k1 from the propagated INS and clock, code and
+                           carrier NCO commands, correlator rows of every channel's epochs
+        load_samples       the IF samples the rows need (False: the file ends)
+        correlate          E/P/L of every epoch of every channel (one numba kernel call), NH
+                           wiped off
+        prefilter          per channel: C/N0 tests and navigation decoding
+                           (:meth:`_test_channel`), pre-filter, measurement-vector gate
+                           (:meth:`_usable`) -> z, R (eq 7-9, 34)
+
+    then :meth:`feed_back` (NCO ranges and pre-filters moved by the filter's correction,
+    lost or inconsistent pre-filters restarted) and :meth:`take_up_navigation_data`.
+
+    Parameters
+    ----------
+    cfg : DeepConfig
+    source : IfSource
+    chans : list of _Chan
+        Handed-over channels (:meth:`DeepReceiver._handover_channels`).
+    navdata : NavDataInForce
+    clock : _SampleClock
+    stop : int
+        IF sample at which the data ends.
+    profile : dict
+        Seconds per stage (``nco``, ``read``, ``correlate``, ``prefilter``; the navigation
+        take-up is charged to ``ins`` with the feedback).
+    handover : (t_s, week, sow)
+        Hand-over time [s since file start] and BDT of the fix.
+    spacing_chips : float
+        Early-late spacing of the scalar receiver's correlators [chips].
+    """
+
+    def __init__(self, cfg: DeepConfig, source: IfSource, chans: list, navdata: NavDataInForce,
+                 clock: _SampleClock, stop: int, profile: dict, *, handover: tuple,
+                 spacing_chips: float) -> None:
+        self.cfg, self.source, self.chans, self.clock = cfg, source, chans, clock
+        self.fs = source.sampling_rate_hz
+        self.stop, self.profile = stop, profile
+        self.n_channels = len(chans)
+        self.iono = navdata.klobuchar
+        self.ephs = [c.eph for c in chans]
+        self.nav_log = _NavLog(navdata, chans, self.iono, *handover)
+        self.pre = PreFilterBank(self.n_channels, spacing_chips, source.carrier_hz,
+                                 **cfg.prefilter)
+        self.bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
+                                          for c in chans]))
+        self.chan_idx = np.arange(self.n_channels, dtype=np.int64)
+        self.kthreads = KernelThreads()
+        self.threads_before = numba.get_num_threads()
+        self.meas_all = RangeRateMeasurementModel()     # every channel: the feedback's H
+        # sample buffer
+        self.x_buf = np.empty(0, dtype=np.int8)
+        self.n_comp = 2
+        self.buf0 = self.buf1 = 0
+        self.npow = 1.0
+        self.chunk = max(4 * round(self.fs * 1e-3), round(cfg.chunk_ms * 1e-3 * self.fs))
+        # NCO state: predicted ranges at k0 after the feedback, last carrier NCO step
+        self.P_k0 = self.Pc_k0 = self.tau_prev = None
+        self.dp_prev = None
+        self._first = True
+        self._pred = self._P1 = self._Pc1 = None
+
+    # ------------------------------------------------------------------------------------
+    def start(self, rx: ScalarReceiver, ins, clock_bias_m: float, k_start: int) -> None:
+        """Predicted ranges at the loop's first sample ``k_start`` and every pre-filter from
+        its scalar loop: code offset of the scalar loop from the INS prediction, 3 Hz
+        frequency sigma (its Doppler is taken against the first NCO command)."""
+        clock, ephs, iono, pre = self.clock, self.ephs, self.iono, self.pre
+        week = clock.week
         r0 = llh_to_ecef(*ins.llh)
-        pred0 = predict_ranges(ephs, week, [S0 + t_rel(k_grid0)], [r0], [clk_b], iono)
-        P_k0, Pc_k0 = pred0.P[:, 0].copy(), pred0.Pc[:, 0].copy()
-        for c in chans:
+        pred0 = predict_ranges(ephs, week, [clock.sow(k_start)], [r0], [clock_bias_m], iono)
+        self.P_k0, self.Pc_k0 = pred0.P[:, 0].copy(), pred0.Pc[:, 0].copy()
+        for c in self.chans:
             sc = rx.channels[c.prn]
             s = c.next_start
-            pr = predict_ranges([c.eph], week, [S0 + t_rel(s)], [r0], [clk_b], iono)
-            chips_deep = CHIP_RATE_B3I * (t_rel(s) - pr.P[0, 0] / C_LIGHT)
+            pr = predict_ranges([c.eph], week, [clock.sow(s)], [r0], [clock_bias_m], iono)
+            chips_deep = CHIP_RATE_B3I * (clock.t_rel(s) - pr.P[0, 0] / C_LIGHT)
             dtau = c.epoch * CODE_LENGTH_B3I + float(sc.theta) - chips_deep
             pre.reset(c.idx, dtau=dtau, df=0.0, sigma_tau=0.1, sigma_phi=0.3, sigma_f=3.0)
             c.f_scalar = float(sc.fd)
+        self.tau_prev = pred0.tau
 
-        # ---- main loop
-        prof = {"scalar": t_scalar, "read": 0.0, "nco": 0.0, "correlate": 0.0,
-                "prefilter": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
-        out_every = max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz))
-        rows = {k: [] for k in ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve",
-                                "pe", "used", "cn0", "nis", "nav")}
-        nis_acc = [0.0, 0]
-        truth_on_grid = (truth is not None and len(truth.t) == len(imu.t)
-                         and np.allclose(truth.t, imu.t, atol=1e-6))
-        x_buf = np.empty(0, dtype=np.int8)
-        n_comp = 2
-        buf0 = buf1 = 0
-        npow = 1.0
-        chunk = max(4 * n1, round(cfg.chunk_ms * 1e-3 * fs))
-        tau_prev = pred0.tau
-        dp_prev = None
-        i0 = i_h
-        k0 = k_grid0
-        j = 0
-        first = True
-        next_progress = 0.0
-        adapt0 = kf.adaptation_time_s
-        while True:
-            i1 = i0 + n_per
-            if i1 >= len(imu.t):
-                break
-            k1 = round(t_if[i1] * fs)
-            if k1 + 2 * n1 + 16 > stop:
-                break
-            # -- INS over the interval
-            ta = time.perf_counter()
-            nav0 = NavState.from_ins(ins)
-            fs_ = imu.f_b[i0 + 1:i1 + 1]
-            ws_ = imu.w_ib_b[i0 + 1:i1 + 1]
-            f_mean = fs_.mean(axis=0) - ins.accel_bias
-            w_mean = ws_.mean(axis=0) - ins.gyro_bias
-            for m in range(n_per):
-                ins.step(fs_[m], ws_[m], float(imu.t[i0 + m + 1] - imu.t[i0 + m]))
-            nav1 = NavState.from_ins(ins)
-            b1 = clk_b + clk_d * T
-            tb = time.perf_counter()
-            prof["ins"] += tb - ta
-            # -- NCO commands: predictions at k1 from the propagated INS; at k0 the previous
-            # interval's, moved by the feedback (pred_new = pred_old - H x)
-            r_b = llh_to_ecef(*nav1.llh)
-            pred = predict_ranges(ephs, week, [S0 + t_rel(k1)], [r_b], [b1], iono,
-                                  tau0=tau_prev, passes=1)
-            tau_prev = pred.tau
-            P1, Pc1 = pred.P[:, 0], pred.Pc[:, 0]
-            cmd = nco_commands(P_k0, Pc_k0, P1, Pc1, k0, k1, fs, t_rel(k0), t_rel(k1),
-                               source.carrier_hz)
-            dchip = cmd.code_rate_cps / fs
-            if first:
-                for c in chans:
-                    # initial frequency error: scalar loop Doppler minus the INS prediction
-                    pre.x[c.idx, 2] = c.f_scalar - float(cmd.doppler_hz[c.idx])
-                first = False
-            dp1 = (source.if_hz + cmd.doppler_hz) / fs
-            if dp_prev is None:
-                dp_prev = dp1
-            parts = [_epoch_rows(c, float(cmd.chips0[c.idx]), float(dchip[c.idx]),
-                                 float(dp_prev[c.idx]), float(dp1[c.idx]), k0, k1)
-                     for c in chans]
-            dp_prev = dp1
-            reps = [len(p[0]) for p in parts]
-            starts = np.concatenate([p[0] for p in parts])
-            nsamp = np.concatenate([p[1] for p in parts])
-            theta = np.concatenate([p[2] for p in parts])
-            phi = np.concatenate([p[3] for p in parts])
-            dphi = np.concatenate([p[4] for p in parts])
-            nh = np.concatenate([p[5] for p in parts])
-            ep_all = np.concatenate([p[6] for p in parts])
-            tc = time.perf_counter()
-            prof["nco"] += tc - tb
-            # -- samples
-            need0, need1 = int(starts.min()), int((starts + nsamp).max())
-            if need1 > stop:
-                break
-            if need0 < buf0 or need1 > buf1:
-                n_read = min(max(chunk, need1 - need0), stop - need0)
-                x_buf, n_comp = source.read_stored(need0, n_read)
-                buf0, buf1 = need0, need0 + n_read
-                npow = mean_power(x_buf, n_comp)
-            td = time.perf_counter()
-            prof["read"] += td - tc
-            # -- correlation: every epoch of every channel in one call of the receiver's
-            # kernel on the stored samples (bit-window replicas, one rotation row per epoch)
-            n_rows = starts.size
-            tab_idx = np.repeat(chan_idx, reps)
-            rot_re, rot_im = carrier_rotation(dphi)
-            th = reduce_code_phase(theta, CODE_LENGTH_B3I)
-            threads = kthreads.pick()
-            n_sub = kernel_tasks(n_rows, int(nsamp.max()), threads)
-            out = np.empty((n_rows, 3, 2))
-            correlate_epl_bits(x_buf, n_comp, bits, tab_idx, CODE_PAD, CODE_LENGTH_B3I,
-                               starts - buf0, nsamp, th, np.repeat(dchip, reps), phi, dphi,
-                               rot_re, rot_im, np.arange(n_rows, dtype=np.int64), spacing,
-                               n_sub, out)
-            kthreads.record(threads, (time.perf_counter() - td) / float(nsamp.sum()))
-            ns = nsamp
-            epl = out.view(np.complex128)[..., 0]
-            E = epl[:, 0] * nh
-            P = epl[:, 1] * nh
-            L = epl[:, 2] * nh
-            te = time.perf_counter()
-            prof["correlate"] += te - td
-            # -- pre-filters and channel management
-            z_rho, z_rate, r_rho, r_rate, use = [], [], [], [], []
-            a = 0
-            for c, cnt in zip(chans, reps):
-                i = c.idx
-                sl = slice(a, a + cnt)
-                a += cnt
-                if cnt:
-                    pp = P[sl]
-                    mon = c.power
-                    mon.add(pp, ns[sl], ep_all[sl] % c.bit_ms == 0)
-                    nav_log.demodulate(c, pp, ep_all[sl], k1 / fs)
-                    if mon.new:
-                        # tests on the last bit sums: _FAST_MS to leave the interval out,
-                        # _LOSS_MS to declare the channel lost (module notes)
-                        fast = mon.cn0_dbhz(npow, fs, last=_FAST_MS // c.bit_ms)
-                        c.fast_fail = 0 if fast >= cfg.cn0_min_dbhz - cfg.fast_margin_db \
-                            else 1
-                        if c.fast_fail and not mon.cn0_dbhz(
-                                npow, fs, last=_LOSS_MS // c.bit_ms) >= \
-                                cfg.cn0_min_dbhz - cfg.loss_margin_db:
-                            c.fast_fail = 2
-                        if c.fast_fail and c.nav is not None:
-                            c.nav.interrupt()  # no subframe from bits of a failing interval
-                        if c.fast_fail >= 2:
-                            # signal gone: lost, back only on a whole window of fresh bit
-                            # sums, not on one still full of signal from before a blockage
-                            mon.clear()
-                            c.cn0_dbhz = math.nan
-                            c.rejoining = True
-                        elif c.fast_fail == 0 and mon.count >= (
-                                mon.p.size if c.rejoining else _CN0_MIN_MS // c.bit_ms):
-                            c.rejoining = False
-                            c.cn0_dbhz = mon.cn0_dbhz(npow, fs)
-                    cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
-                    pre.process(i, E[sl], pp, L[sl], ns[sl] / fs, cn0_lin,
-                                block_start=ep_all[sl] % min(c.bit_ms, cfg.coherent_ms) == 0)
-                gate = cfg.cn0_min_dbhz - (cfg.cn0_hysteresis_db if c.used else 0.0)
-                good = (math.isfinite(c.cn0_dbhz) and c.cn0_dbhz >= gate
-                        and cnt > 0 and c.fast_fail == 0 and not pre.nis_p[i] < cfg.nis_p_min)
-                c.used = good
-                use.append(good)
-                if good:
-                    dtau, df, vt, vf = pre.outputs(i)
-                    z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
-                    z_rate.append(LAMBDA_B3I * df)
-                    r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * vt)
-                    r_rate.append(LAMBDA_B3I ** 2 * vf)
-            tf = time.perf_counter()
-            prof["prefilter"] += tf - te
-            # -- integration filter
-            process.set_interval(nav0, nav1, f_mean, w_mean)
-            kf.predict(T)
-            use = np.asarray(use, bool)
-            n_used = int(use.sum())
-            if n_used:
-                meas.set_geometry(nav1.llh, pred.U[use, 0])
-                kf.update(np.r_[z_rho, z_rate], np.diag(np.r_[r_rho, r_rate]))
-                nis_acc[0] += kf.nis / (2 * n_used)
-                nis_acc[1] += 1
-            x = kf.x.copy()
-            tg = time.perf_counter()
-            prof["filter"] += tg - tf
-            # -- feedback: INS, clock, pre-filters
-            ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
-            clk_b = b1 - x[15]
-            clk_d = clk_d - x[16]
-            meas_all.set_geometry(nav1.llh, pred.U[:, 0])
-            Hx = meas_all.matrix @ x
-            P_k0 = P1 - Hx[:n_ch]
-            Pc_k0 = Pc1 - Hx[:n_ch]
-            Hr = meas_all.matrix[n_ch:]
-            sig_f = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hr, kf.P, Hr), 0.0)) / LAMBDA_B3I
-            for c in chans:
-                i = c.idx
-                pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
-                if c.fast_fail >= 2 or pre.nis_p[i] < cfg.nis_p_min:
-                    # lost, or inconsistent: restart from the NCO (INS) with the integration
-                    # filter's rate uncertainty as the frequency prior
-                    pre.reset(i, sigma_phi=1.0, sigma_f=max(float(sig_f[i]), _SIGMA_F_MIN))
-                else:
-                    pre.decorrelate(i)
-            kf.x = np.zeros(17)
-            # -- navigation data decoded so far, taken up at the interval's end
-            new_ephs, new_iono = nav_log.changes(chans, week, S0 + t_rel(k1) - clk_b / C_LIGHT)
-            if new_ephs is not None or new_iono is not iono:
-                step = _take_up_model_change(
-                    ephs, new_ephs or ephs, iono, new_iono, week, S0 + t_rel(k1), ins, clk_b,
-                    tau_prev, np.array([c.used for c in chans]), meas_all, kf, pre)
-                P_k0 = P_k0 + step.dP - step.Hx_rho
-                Pc_k0 = Pc_k0 + step.dPc - step.Hx_rho
-                clk_b = step.clock_bias_m
-                nav_log.taken_up(k1 / fs, chans, new_ephs, iono, new_iono, step)
-                ephs = [c.eph for c in chans]
-                iono = new_iono
-            th = time.perf_counter()
-            prof["ins"] += th - tg
-            # -- output
-            j += 1
-            if j % out_every == 0:
-                rows["t"].append(k1 / fs)
-                rows["sow"].append(S0 + t_rel(k1) - clk_b / C_LIGHT)
-                rows["llh"].append(ins.llh.copy())
-                rows["v"].append(ins.v_n.copy())
-                rows["att"].append(ins.att.copy())
-                rows["b"].append(clk_b)
-                rows["d"].append(clk_d)
-                rows["n"].append(n_used)
-                rows["used"].append(use.copy())
-                rows["cn0"].append([c.cn0_dbhz for c in chans])
-                rows["nis"].append(nis_acc[0] / nis_acc[1] if nis_acc[1] else math.nan)
-                rows["nav"].append(nav_log.flag)
-                nav_log.flag = 0
-                nis_acc = [0.0, 0]
-                if truth_on_grid:
-                    ae, ve, pe = nav_errors(ins.llh, ins.v_n, ins.C_b_n, truth.llh[i1],
-                                            truth.v_n[i1], truth.C_b_n[i1])
-                else:
-                    ae = ve = pe = np.full(3, math.nan)
-                rows["ae"].append(ae)
-                rows["ve"].append(ve)
-                rows["pe"].append(pe)
-                if progress is not None and k1 / fs >= next_progress:
-                    progress(k1 / fs, n_ch, n_used)
-                    next_progress = k1 / fs + 1.0
-            prof["output"] += time.perf_counter() - th
-            i0, k0 = i1, k1
-        numba.set_num_threads(threads_before)
-        prof["total"] = time.perf_counter() - t_all
-        prof["processed_s"] = k0 / fs
-        prof["deep_s"] = (k0 - k_grid0) / fs
-        loop = sum(prof[k] for k in ("read", "nco", "correlate", "prefilter", "filter", "ins",
-                                     "output"))
-        prof["loop"] = loop
-        prof["realtime_factor"] = prof["processed_s"] / prof["total"] if prof["total"] else 0.0
-        self.profile = prof
+    def close(self) -> None:
+        """Give numba back the thread count it had before the loop."""
+        numba.set_num_threads(self.threads_before)
 
-        def arr(key, width=None):
-            a = np.asarray(rows[key], float)
-            return a.reshape(-1, width) if width else a
+    # ------------------------------------------------------------------------------------
+    def measure(self, loop: IntegrationLoop, iv: Interval) -> Measurements | None:
+        """NCO commands, correlation and pre-filters of interval ``iv`` (class notes)."""
+        rows = self.command_ncos(iv)
+        if not self.load_samples(rows):
+            return None
+        E, P, L = self.correlate(rows)
+        return self.prefilter(iv, rows, E, P, L)
 
-        return DeepResult(
-            t=arr("t"), week=week, sow=arr("sow"), llh=arr("llh", 3), v_n=arr("v", 3),
-            att=arr("att", 3), clock_bias_m=arr("b"), clock_drift_mps=arr("d"),
-            n_used=np.asarray(rows["n"], int), att_err=arr("ae", 3), vel_err=arr("ve", 3),
-            pos_err=arr("pe", 3), prns=tuple(c.prn for c in chans),
-            used=np.asarray(rows["used"], bool).reshape(-1, n_ch),
-            cn0_dbhz=arr("cn0", n_ch), nis=arr("nis"), handover_s=k_grid0 / fs, filter_name=kf.name,
-            adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
-            nav_change=np.asarray(rows["nav"], int), navigation=nav_log.summary(k0 / fs))
+    def command_ncos(self, iv: Interval) -> _EpochRows:
+        """Code and carrier NCO commands over ``[k0, k1)`` and the correlator rows.
+
+        Ranges at ``k1`` are predicted from the propagated INS and clock (``iv.nav1``,
+        ``iv.clock_bias_m``; :func:`~sdr_di.deep.nco.predict_ranges`); at ``k0`` they are the
+        previous interval's, moved by its feedback (``pred_new = pred_old - H x``). On the
+        first interval each pre-filter's frequency starts at the scalar loop's Doppler minus
+        the INS prediction.
+        """
+        tb = time.perf_counter()
+        clock, fs, k0, k1 = self.clock, self.fs, iv.k0, iv.k1
+        r_b = llh_to_ecef(*iv.nav1.llh)
+        pred = predict_ranges(self.ephs, clock.week, [clock.sow(k1)], [r_b],
+                              [iv.clock_bias_m], self.iono, tau0=self.tau_prev, passes=1)
+        self.tau_prev = pred.tau
+        P1, Pc1 = pred.P[:, 0], pred.Pc[:, 0]
+        cmd = nco_commands(self.P_k0, self.Pc_k0, P1, Pc1, k0, k1, fs, clock.t_rel(k0),
+                           clock.t_rel(k1), self.source.carrier_hz)
+        dchip = cmd.code_rate_cps / fs
+        if self._first:
+            for c in self.chans:
+                # initial frequency error: scalar loop Doppler minus the INS prediction
+                self.pre.x[c.idx, 2] = c.f_scalar - float(cmd.doppler_hz[c.idx])
+            self._first = False
+        dp1 = (self.source.if_hz + cmd.doppler_hz) / fs
+        if self.dp_prev is None:
+            self.dp_prev = dp1
+        dp_prev = self.dp_prev
+        parts = [_epoch_rows(c, float(cmd.chips0[c.idx]), float(dchip[c.idx]),
+                             float(dp_prev[c.idx]), float(dp1[c.idx]), k0, k1)
+                 for c in self.chans]
+        self.dp_prev = dp1
+        self._pred, self._P1, self._Pc1 = pred, P1, Pc1
+        rows = _EpochRows(reps=[len(p[0]) for p in parts],
+                          starts=np.concatenate([p[0] for p in parts]),
+                          nsamp=np.concatenate([p[1] for p in parts]),
+                          theta=np.concatenate([p[2] for p in parts]),
+                          phi=np.concatenate([p[3] for p in parts]),
+                          dphi=np.concatenate([p[4] for p in parts]),
+                          nh=np.concatenate([p[5] for p in parts]),
+                          epoch=np.concatenate([p[6] for p in parts]), dchip=dchip)
+        self.profile["nco"] += time.perf_counter() - tb
+        return rows
+
+    def load_samples(self, rows: _EpochRows) -> bool:
+        """Read the stored IF samples the rows need (a chunk at a time); False when they run
+        past the end of the data."""
+        tc = time.perf_counter()
+        need0 = int(rows.starts.min())
+        need1 = int((rows.starts + rows.nsamp).max())
+        if need1 > self.stop:
+            return False
+        if need0 < self.buf0 or need1 > self.buf1:
+            n_read = min(max(self.chunk, need1 - need0), self.stop - need0)
+            self.x_buf, self.n_comp = self.source.read_stored(need0, n_read)
+            self.buf0, self.buf1 = need0, need0 + n_read
+            self.npow = mean_power(self.x_buf, self.n_comp)
+        self.profile["read"] += time.perf_counter() - tc
+        return True
+
+    def correlate(self, rows: _EpochRows):
+        """Early, prompt, late of every epoch of every channel: one call of the receiver's
+        kernel on the stored samples (bit-window replicas, one rotation row per epoch), NH
+        code wiped off. Returns ``(E, P, L)`` complex (n_rows,)."""
+        td = time.perf_counter()
+        n_rows = rows.starts.size
+        nsamp = rows.nsamp
+        tab_idx = np.repeat(self.chan_idx, rows.reps)
+        rot_re, rot_im = carrier_rotation(rows.dphi)
+        th = reduce_code_phase(rows.theta, CODE_LENGTH_B3I)
+        threads = self.kthreads.pick()
+        n_sub = kernel_tasks(n_rows, int(nsamp.max()), threads)
+        out = np.empty((n_rows, 3, 2))
+        correlate_epl_bits(self.x_buf, self.n_comp, self.bits, tab_idx, CODE_PAD,
+                           CODE_LENGTH_B3I, rows.starts - self.buf0, nsamp, th,
+                           np.repeat(rows.dchip, rows.reps), rows.phi, rows.dphi, rot_re,
+                           rot_im, np.arange(n_rows, dtype=np.int64), self.pre.spacing, n_sub,
+                           out)
+        self.kthreads.record(threads, (time.perf_counter() - td) / float(nsamp.sum()))
+        epl = out.view(np.complex128)[..., 0]
+        E = epl[:, 0] * rows.nh
+        P = epl[:, 1] * rows.nh
+        L = epl[:, 2] * rows.nh
+        self.profile["correlate"] += time.perf_counter() - td
+        return E, P, L
+
+    def prefilter(self, iv: Interval, rows: _EpochRows, E, P, L) -> Measurements:
+        """Per channel: C/N0 tests and navigation decoding, pre-filter over its epochs
+        (coherent blocks, module notes), and the measurement-vector gate; ``z`` =
+        ``[c/f_code dtau_i, lambda df_i]`` and ``R`` from the pre-filter variances of the
+        channels in the vector (paper 004 eq 7-9, 34)."""
+        te = time.perf_counter()
+        cfg, pre, fs = self.cfg, self.pre, self.fs
+        ns, ep_all = rows.nsamp, rows.epoch
+        z_rho, z_rate, r_rho, r_rate, use = [], [], [], [], []
+        a = 0
+        for c, cnt in zip(self.chans, rows.reps):
+            i = c.idx
+            sl = slice(a, a + cnt)
+            a += cnt
+            if cnt:
+                pp = P[sl]
+                self._test_channel(c, pp, ns[sl], ep_all[sl], iv.k1 / fs)
+                cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
+                pre.process(i, E[sl], pp, L[sl], ns[sl] / fs, cn0_lin,
+                            block_start=ep_all[sl] % min(c.bit_ms, cfg.coherent_ms) == 0)
+            good = self._usable(c, cnt)
+            c.used = good
+            use.append(good)
+            if good:
+                dtau, df, vt, vf = pre.outputs(i)
+                z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
+                z_rate.append(LAMBDA_B3I * df)
+                r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * vt)
+                r_rate.append(LAMBDA_B3I ** 2 * vf)
+        use = np.asarray(use, bool)
+        z = R = None
+        if use.any():
+            z = np.r_[z_rho, z_rate]
+            R = np.diag(np.r_[r_rho, r_rate])
+        m = Measurements(z=z, R=R, geometry=(iv.nav1.llh, self._pred.U[use, 0]), used=use)
+        self.profile["prefilter"] += time.perf_counter() - te
+        return m
+
+    def _test_channel(self, c: _Chan, prompts, nsamp, epochs, t_s: float) -> None:
+        """Channel management on this interval's prompts (module notes): bit sums for the
+        C/N0, navigation decoding, the fast test (interval left out), the loss test (channel
+        lost, its C/N0 window emptied) and the C/N0 taken up once the window allows."""
+        cfg, fs = self.cfg, self.fs
+        mon = c.power
+        mon.add(prompts, nsamp, epochs % c.bit_ms == 0)
+        self.nav_log.demodulate(c, prompts, epochs, t_s)
+        if mon.new:
+            # tests on the last bit sums: _FAST_MS to leave the interval out,
+            # _LOSS_MS to declare the channel lost (module notes)
+            fast = mon.cn0_dbhz(self.npow, fs, last=_FAST_MS // c.bit_ms)
+            c.fast_fail = 0 if fast >= cfg.cn0_min_dbhz - cfg.fast_margin_db else 1
+            if c.fast_fail and not mon.cn0_dbhz(
+                    self.npow, fs, last=_LOSS_MS // c.bit_ms) >= \
+                    cfg.cn0_min_dbhz - cfg.loss_margin_db:
+                c.fast_fail = 2
+            if c.fast_fail and c.nav is not None:
+                c.nav.interrupt()  # no subframe from bits of a failing interval
+            if c.fast_fail >= 2:
+                # signal gone: lost, back only on a whole window of fresh bit
+                # sums, not on one still full of signal from before a blockage
+                mon.clear()
+                c.cn0_dbhz = math.nan
+                c.rejoining = True
+            elif c.fast_fail == 0 and mon.count >= (
+                    mon.p.size if c.rejoining else _CN0_MIN_MS // c.bit_ms):
+                c.rejoining = False
+                c.cn0_dbhz = mon.cn0_dbhz(self.npow, fs)
+
+    def _usable(self, c: _Chan, n_epochs: int) -> bool:
+        """Measurement-vector gate of channel ``c`` (module notes): C/N0 at least the gate
+        (less the hysteresis while in the vector), epochs this interval, fast test passed,
+        pre-filter NIS consistent."""
+        cfg = self.cfg
+        gate = cfg.cn0_min_dbhz - (cfg.cn0_hysteresis_db if c.used else 0.0)
+        return (math.isfinite(c.cn0_dbhz) and c.cn0_dbhz >= gate
+                and n_epochs > 0 and c.fast_fail == 0
+                and not self.pre.nis_p[c.idx] < cfg.nis_p_min)
+
+    # ------------------------------------------------------------------------------------
+    def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+        """The correction ``x`` on the NCOs and the pre-filters: ranges at the next ``k0``
+        are ``P1 - H x``, each pre-filter shifted by the projection of ``x`` on its line
+        of sight (its NCOs move by it), then decorrelated, or restarted from the NCO when
+        lost or inconsistent (frequency prior: the filter's rate sigma on that line of
+        sight, at least ``_SIGMA_F_MIN``)."""
+        n_ch, pre, cfg = self.n_channels, self.pre, self.cfg
+        self.meas_all.set_geometry(iv.nav1.llh, self._pred.U[:, 0])
+        Hx = self.meas_all.matrix @ x
+        self.P_k0 = self._P1 - Hx[:n_ch]
+        self.Pc_k0 = self._Pc1 - Hx[:n_ch]
+        Hr = self.meas_all.matrix[n_ch:]
+        sig_f = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hr, loop.kf.P, Hr), 0.0)) / LAMBDA_B3I
+        for c in self.chans:
+            i = c.idx
+            pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
+            if c.fast_fail >= 2 or pre.nis_p[i] < cfg.nis_p_min:
+                # lost, or inconsistent: restart from the NCO (INS) with the integration
+                # filter's rate uncertainty as the frequency prior
+                pre.reset(i, sigma_phi=1.0, sigma_f=max(float(sig_f[i]), _SIGMA_F_MIN))
+            else:
+                pre.decorrelate(i)
+
+    def take_up_navigation_data(self, loop: IntegrationLoop, iv: Interval) -> None:
+        """Navigation data decoded so far, taken up at the interval's end
+        (:func:`_take_up_model_change`): INS position, clock, NCO ranges and pre-filters
+        move with the range model."""
+        tg = time.perf_counter()
+        clock, chans, k1 = self.clock, self.chans, iv.k1
+        new_ephs, new_iono = self.nav_log.changes(
+            chans, clock.week, clock.sow(k1) - loop.clock_bias_m / C_LIGHT)
+        if new_ephs is not None or new_iono is not self.iono:
+            step = _take_up_model_change(
+                self.ephs, new_ephs or self.ephs, self.iono, new_iono, clock.week,
+                clock.sow(k1), loop.ins, loop.clock_bias_m, self.tau_prev,
+                np.array([c.used for c in chans]), self.meas_all, loop.kf, self.pre)
+            self.P_k0 = self.P_k0 + step.dP - step.Hx_rho
+            self.Pc_k0 = self.Pc_k0 + step.dPc - step.Hx_rho
+            loop.clock_bias_m = step.clock_bias_m
+            self.nav_log.taken_up(k1 / self.fs, chans, new_ephs, self.iono, new_iono, step)
+            self.ephs = [c.eph for c in chans]
+            self.iono = new_iono
+        self.profile["ins"] += time.perf_counter() - tg
+
+    def row(self) -> dict:
+        """Channel columns of a solution row: C/N0 [dB-Hz] and the navigation data taken up
+        since the previous row (``DeepResult.nav_change``)."""
+        out = {"cn0": [c.cn0_dbhz for c in self.chans], "nav": self.nav_log.flag}
+        self.nav_log.flag = 0
+        return out
 
 
 def _offer_subframe_klobuchar(rx: ScalarReceiver, navdata: NavDataInForce, t_s: float) -> None:

@@ -1,0 +1,330 @@
+"""One integration loop for every coupling mode: INS, filter, feedback, solution rows.
+
+DESIGN section 7, "three couplings, one loop": loose (WLS fixes), tight (pseudoranges and
+rates) and deep (pre-filter outputs, with the feedback also driving the NCOs) share this
+loop; a mode differs only in its :class:`MeasurementSource`. One filter interval ``T`` (IMU
+samples ``(i0, i1]``, IF samples ``[k0, k1)``) of :meth:`IntegrationLoop.run`::
+
+    next_interval          the interval's IMU and IF sample bounds (None: end of the data)
+    propagate_ins          strapdown INS over the interval at the IMU rate; clock bias
+                           predicted to k1 with the drift
+    source.measure         the mode's measurements z, R and their geometry
+                           (deep: NCO commands from the propagated INS, correlators,
+                           pre-filters, channel management; None: the IF data ran out)
+    filter_step            process model over the interval (INS at both ends, compensated
+                           IMU average), predict, update (paper 004 eq 13-25)
+    feed_back              closed-loop correction of the INS and the clock, then the
+                           source's own feedback (deep: NCO ranges and pre-filters), error
+                           state reset to zero
+    source.take_up_navigation_data
+                           ephemeris / ionosphere decoded in the interval taken up at its end
+    write_row              solution row at the output rate (after the feedback)
+
+State layout (paper 004 Table 1): attitude error 0-2, velocity error 3-5, position error
+(lat, lon, h) 6-8, gyro bias 9-11, accelerometer bias 12-14, clock bias 15 [m], clock drift
+16 [m/s]. The clock is carried here as ``clock_bias_m`` / ``clock_drift_mps`` (receiver
+clock minus BDT, times c) beside the INS.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from typing import Protocol
+
+import numpy as np
+
+from ..constants import C_LIGHT
+from ..ins.error_model import NavState
+from .metrics import nav_errors
+
+__all__ = ["IntegrationLoop", "Interval", "MeasurementSource", "Measurements"]
+
+#: Columns of :attr:`IntegrationLoop.rows` (one entry per solution row).
+ROW_KEYS = ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve", "pe", "used", "cn0",
+            "nis", "nav")
+
+
+@dataclasses.dataclass
+class Interval:
+    """One filter interval: IMU samples ``(i0, i1]``, IF samples ``[k0, k1)``.
+
+    Attributes
+    ----------
+    i0, i1 : int
+        IMU sample indices at the interval's ends.
+    k0, k1 : int
+        IF sample indices at the interval's ends (the IMU samples' times on the IF clock).
+    nav0, nav1 : NavState
+        INS at ``i0`` and ``i1`` before the feedback (set by :meth:`IntegrationLoop.
+        propagate_ins`).
+    f_mean, w_mean : (3,) arrays
+        Bias-compensated averages of the specific force [m/s^2] and angular rate [rad/s],
+        body Right-Front-Up, over the interval.
+    clock_bias_m : float
+        Clock bias predicted to ``k1`` with the drift, before the feedback [m].
+    """
+
+    i0: int
+    i1: int
+    k0: int
+    k1: int
+    nav0: NavState | None = None
+    nav1: NavState | None = None
+    f_mean: np.ndarray | None = None
+    w_mean: np.ndarray | None = None
+    clock_bias_m: float = math.nan
+
+
+@dataclasses.dataclass
+class Measurements:
+    """What a mode measured over one interval (its filter update).
+
+    Attributes
+    ----------
+    z : (m,) array
+        Measurement vector (deep and tight: ``[delta_rho_1..N, delta_rho_dot_1..N]`` [m,
+        m/s], paper 004 eq 7-9), or None when no channel is usable.
+    R : (m, m) array
+        Its noise covariance, or None with ``z``.
+    geometry : tuple
+        Arguments of the filter's measurement model's ``set_geometry`` for this update.
+    used : (n_ch,) bool array
+        Channels in the measurement vector.
+    """
+
+    z: np.ndarray | None
+    R: np.ndarray | None
+    geometry: tuple
+    used: np.ndarray
+
+    @property
+    def n_used(self) -> int:
+        """Channels in the measurement vector."""
+        return int(self.used.sum())
+
+
+class MeasurementSource(Protocol):
+    """A coupling mode's part of the loop (deep: :class:`~sdr_di.deep.vector_loop.
+    VectorTracking`).
+
+    Attributes
+    ----------
+    n_channels : int
+        Channels reported in the rows (``used``, ``cn0``).
+    """
+
+    n_channels: int
+
+    def measure(self, loop: IntegrationLoop, iv: Interval) -> Measurements | None:
+        """Measurements of interval ``iv`` from the propagated INS (``iv.nav1``,
+        ``iv.clock_bias_m``); None when the input data ends inside the interval."""
+
+    def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+        """The mode's share of the closed-loop correction ``x`` (17,) (deep: NCOs and
+        pre-filters), after the INS and the clock took theirs."""
+
+    def take_up_navigation_data(self, loop: IntegrationLoop, iv: Interval) -> None:
+        """Switch to navigation data decoded during ``iv`` (ephemeris, ionosphere)."""
+
+    def row(self) -> dict:
+        """The mode's columns of a solution row: ``cn0`` (n_ch,) [dB-Hz] and ``nav``
+        (navigation data taken up since the last row, bits 1 ephemeris and 2 ionosphere)."""
+
+
+class IntegrationLoop:
+    """Closed-loop INS integration at the filter rate (module notes).
+
+    Parameters
+    ----------
+    imu : ImuData
+        IMU record (``t``, ``f_b``, ``w_ib_b``).
+    t_if : (n,) array
+        IF-file time of every IMU sample [s].
+    i_start, k_start : int
+        IMU and IF sample of the loop's start (the hand-over grid point).
+    n_per : int
+        IMU samples per filter interval.
+    fs : float
+        IF sampling rate [Hz].
+    stop : int
+        IF sample at which the data ends.
+    margin : int
+        IF samples past ``k1`` an interval needs (the correlators' last code epochs).
+    ins : StrapdownINS
+        Aligned INS at ``i_start``.
+    clock_bias_m, clock_drift_mps : float
+        Receiver clock at ``i_start`` [m, m/s].
+    kf : filter
+        Integration filter (:func:`~sdr_di.filters.make_filter`, 17 states).
+    process : InsErrorModel
+        Its process model.
+    meas : measurement model
+        Its measurement model (geometry set from :attr:`Measurements.geometry`).
+    sow_of_sample : callable
+        ``sow_of_sample(k)``: receiver-clock seconds of week of IF sample ``k``.
+    output_every : int
+        Filter intervals per solution row.
+    truth : Truth, optional
+        Reference on the IMU time grid (error columns; NaN without it).
+    progress : callable, optional
+        ``progress(seconds, n_channels, n_used)`` about once per second.
+    profile : dict
+        Seconds per stage, added to (``ins``, ``filter``, ``output`` here; the source adds
+        its own).
+    """
+
+    def __init__(self, *, imu, t_if: np.ndarray, i_start: int, k_start: int, n_per: int,
+                 fs: float, stop: int, margin: int, ins, clock_bias_m: float,
+                 clock_drift_mps: float, kf, process, meas,
+                 sow_of_sample: Callable[[int], float], output_every: int, truth=None,
+                 progress: Callable[[float, int, int], None] | None = None,
+                 profile: dict | None = None) -> None:
+        self.imu, self.t_if, self.n_per, self.fs = imu, t_if, n_per, fs
+        self.stop, self.margin = stop, margin
+        self.T = n_per * (1.0 / imu.rate_hz)     # filter interval [s]
+        self.ins = ins
+        self.clock_bias_m, self.clock_drift_mps = clock_bias_m, clock_drift_mps
+        self.kf, self.process, self.meas = kf, process, meas
+        self.sow_of_sample = sow_of_sample
+        self.output_every = output_every
+        self.truth = truth if (truth is not None and len(truth.t) == len(imu.t)
+                               and np.allclose(truth.t, imu.t, atol=1e-6)) else None
+        self.progress = progress
+        self.profile = profile if profile is not None else {}
+        for k in ("ins", "filter", "output"):
+            self.profile.setdefault(k, 0.0)
+        self.i0, self.k0 = i_start, k_start
+        self.n_intervals = 0
+        self.rows: dict = {k: [] for k in ROW_KEYS}
+        self._nis = [0.0, 0]
+        self._next_progress = 0.0
+
+    # ------------------------------------------------------------------------------------
+    def run(self, source: MeasurementSource) -> None:
+        """Run the loop until the IMU or the IF data ends (module notes)."""
+        while (iv := self.next_interval()) is not None:
+            self.propagate_ins(iv)
+            m = source.measure(self, iv)
+            if m is None:
+                break
+            self.filter_step(iv, m)
+            self.feed_back(iv, source)
+            source.take_up_navigation_data(self, iv)
+            self.write_row(iv, m, source)
+            self.i0, self.k0 = iv.i1, iv.k1
+
+    # ------------------------------------------------------------------------------------
+    def next_interval(self) -> Interval | None:
+        """The next interval after ``(i0, k0)``; None when the IMU record or the IF data
+        (``k1`` plus the correlators' ``margin``) ends."""
+        i1 = self.i0 + self.n_per
+        if i1 >= len(self.imu.t):
+            return None
+        k1 = round(self.t_if[i1] * self.fs)
+        if k1 + self.margin > self.stop:
+            return None
+        return Interval(self.i0, i1, self.k0, k1)
+
+    def propagate_ins(self, iv: Interval) -> None:
+        """Strapdown INS over the interval's IMU samples; clock bias predicted to ``k1``.
+
+        Sets ``iv.nav0``, ``iv.nav1`` (INS at both ends), ``iv.f_mean``, ``iv.w_mean`` (IMU
+        averages compensated with the INS bias estimates, for the process model) and
+        ``iv.clock_bias_m``.
+        """
+        ta = time.perf_counter()
+        ins, imu, i0, i1 = self.ins, self.imu, iv.i0, iv.i1
+        iv.nav0 = NavState.from_ins(ins)
+        f_b = imu.f_b[i0 + 1:i1 + 1]
+        w_ib_b = imu.w_ib_b[i0 + 1:i1 + 1]
+        iv.f_mean = f_b.mean(axis=0) - ins.accel_bias
+        iv.w_mean = w_ib_b.mean(axis=0) - ins.gyro_bias
+        for m in range(self.n_per):
+            ins.step(f_b[m], w_ib_b[m], float(imu.t[i0 + m + 1] - imu.t[i0 + m]))
+        iv.nav1 = NavState.from_ins(ins)
+        iv.clock_bias_m = self.clock_bias_m + self.clock_drift_mps * self.T
+        self.profile["ins"] += time.perf_counter() - ta
+
+    def filter_step(self, iv: Interval, m: Measurements) -> None:
+        """Process model over the interval, predict, and update with ``m`` when it has a
+        measurement (paper 004 eq 13-25); accumulates the NIS per measurement."""
+        ta = time.perf_counter()
+        kf = self.kf
+        self.process.set_interval(iv.nav0, iv.nav1, iv.f_mean, iv.w_mean)
+        kf.predict(self.T)
+        if m.n_used:
+            self.meas.set_geometry(*m.geometry)
+            kf.update(m.z, m.R)
+            self._nis[0] += kf.nis / m.z.size
+            self._nis[1] += 1
+        self.profile["filter"] += time.perf_counter() - ta
+
+    def feed_back(self, iv: Interval, source: MeasurementSource) -> np.ndarray:
+        """Closed-loop feedback of the filter's error state ``x``: the INS (attitude,
+        velocity, position, IMU biases) and the clock, then the source's own share; ``x``
+        reset to zero. Returns the ``x`` fed back (17,)."""
+        ta = time.perf_counter()
+        x = self.kf.x.copy()
+        self.ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
+        self.clock_bias_m = iv.clock_bias_m - x[15]
+        self.clock_drift_mps = self.clock_drift_mps - x[16]
+        source.feed_back(self, iv, x)
+        self.kf.x = np.zeros(17)
+        self.profile["ins"] += time.perf_counter() - ta
+        return x
+
+    def write_row(self, iv: Interval, m: Measurements, source: MeasurementSource) -> None:
+        """Solution row at ``k1`` every ``output_every`` intervals: time, BDT (receiver time
+        minus clock bias / c), INS position/velocity/attitude after the feedback, clock,
+        the source's channel columns, mean NIS since the last row, errors vs the truth."""
+        ta = time.perf_counter()
+        self.n_intervals += 1
+        if self.n_intervals % self.output_every == 0:
+            ins, rows, k1, fs = self.ins, self.rows, iv.k1, self.fs
+            rows["t"].append(k1 / fs)
+            rows["sow"].append(self.sow_of_sample(k1) - self.clock_bias_m / C_LIGHT)
+            rows["llh"].append(ins.llh.copy())
+            rows["v"].append(ins.v_n.copy())
+            rows["att"].append(ins.att.copy())
+            rows["b"].append(self.clock_bias_m)
+            rows["d"].append(self.clock_drift_mps)
+            rows["n"].append(m.n_used)
+            rows["used"].append(m.used.copy())
+            for k, v in source.row().items():
+                rows[k].append(v)
+            rows["nis"].append(self._nis[0] / self._nis[1] if self._nis[1] else math.nan)
+            self._nis = [0.0, 0]
+            if self.truth is not None:
+                tr = self.truth
+                ae, ve, pe = nav_errors(ins.llh, ins.v_n, ins.C_b_n, tr.llh[iv.i1],
+                                        tr.v_n[iv.i1], tr.C_b_n[iv.i1])
+            else:
+                ae = ve = pe = np.full(3, math.nan)
+            rows["ae"].append(ae)
+            rows["ve"].append(ve)
+            rows["pe"].append(pe)
+            if self.progress is not None and k1 / fs >= self._next_progress:
+                self.progress(k1 / fs, source.n_channels, m.n_used)
+                self._next_progress = k1 / fs + 1.0
+        self.profile["output"] += time.perf_counter() - ta
+
+    def columns(self, n_ch: int) -> dict:
+        """The rows as arrays: ``(n,)`` or ``(n, 3)`` floats, ``n`` and ``nav`` ints,
+        ``used`` ``(n, n_ch)`` bool, ``cn0`` ``(n, n_ch)``."""
+        rows = self.rows
+
+        def arr(key, width=None):
+            a = np.asarray(rows[key], float)
+            return a.reshape(-1, width) if width else a
+
+        out = {k: arr(k) for k in ("t", "sow", "b", "d", "nis")}
+        out.update({k: arr(k, 3) for k in ("llh", "v", "att", "ae", "ve", "pe")})
+        out["n"] = np.asarray(rows["n"], int)
+        out["nav"] = np.asarray(rows["nav"], int)
+        out["used"] = np.asarray(rows["used"], bool).reshape(-1, n_ch)
+        out["cn0"] = arr("cn0", n_ch)
+        return out
+
