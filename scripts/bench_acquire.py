@@ -10,12 +10,12 @@ On 0.5 s of the default scenario (generated once into a temp dir), times
 :func:`~sdr_di.receiver.acquisition.acquire` (input cleaning, FFT search, refinement) for:
 
 * ``normal``: 40 x 1 ms, +-5 kHz in 500 Hz bins (21): the cold search of ``sdr-di run``;
-* ``assisted``: 40 x 1 ms around a predicted Doppler (the receiver's window: the cold grid's
-  bins covering +-1 kHz, 7), one call per PRN;
+* ``assisted``: 40 x 1 ms around each PRN's predicted Doppler (the receiver's window: the
+  cold grid's bins covering +-1 kHz, 7 per PRN), one call whose PRNs share their bins;
 * ``long``: 400 x 1 ms, +-5 kHz in 250 Hz bins (41): the long search of a listed PRN
   without a Doppler;
-* ``long assisted``: 400 x 1 ms in 250 Hz bins around a predicted Doppler (11), one call per
-  PRN.
+* ``long assisted``: 400 x 1 ms in 250 Hz bins around each PRN's predicted Doppler (11 per
+  PRN), one call.
 
 Wall and CPU time (user + system of this process, all threads) per PRN; the FFT of the
 input blocks is shared by the PRNs of one call, so the per-PRN cost falls with more PRNs.
@@ -74,11 +74,10 @@ def run(args: argparse.Namespace) -> None:
             best = None
             for _ in range(args.repeat):
                 t0, c0 = time.perf_counter(), _cpu()
-                if assisted:  # one call per PRN, each around its own Doppler
-                    for p in prns:
-                        win = rx._assisted_window(aid.get(p) or 0.0)
-                        acquire(x, fs, src.if_hz, prns=[p], noncoherent=k,
-                                doppler_step_hz=step, **win)
+                if assisted:  # one call, each PRN around its own Doppler (shared bins)
+                    win = rx._assisted_windows(prns, {p: aid.get(p) or 0.0 for p in prns})
+                    acquire(x, fs, src.if_hz, prns=prns, noncoherent=k, doppler_step_hz=step,
+                            **win)
                 else:
                     win = {"doppler_center_hz": 0.0, "doppler_range_hz": 5000.0}
                     acquire(x, fs, src.if_hz, prns=prns, noncoherent=k, doppler_step_hz=step,

@@ -307,7 +307,8 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
             code_source: Callable[[int], np.ndarray] | None = None,
             workers: int | None = None, prn_batch: int = 8,
             keep_grid: bool = False, upsample: int | None = None,
-            clean: bool = True, shared_doppler_min: int = 3) -> list[AcquisitionResult]:
+            clean: bool = True, shared_doppler_min: int = 3,
+            doppler_centers: dict[int, float] | None = None) -> list[AcquisitionResult]:
     """Search PRNs in a block of IF samples.
 
     Parameters
@@ -332,6 +333,11 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
         Bin spacing [Hz]; default ``1 / (2 M 1 ms)``.
     doppler_center_hz : float, optional
         Centre of the Doppler search (e.g. predicted Doppler or clock drift) [Hz].
+    doppler_centers : dict, optional
+        ``{prn: centre [Hz]}``: per-PRN centres (assisted searches) overriding
+        ``doppler_center_hz`` for those PRNs; every PRN keeps the half-width and step. Bins
+        that several PRNs' grids share are transformed once (centres on a common lattice of
+        the step share most of them).
     pfa : float, optional
         False-alarm probability per PRN search. Default 1e-3.
     refine : bool, optional
@@ -402,8 +408,12 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
     t_c = n_c / fs_g
     step = float(doppler_step_hz) if doppler_step_hz else 1.0 / (2.0 * t_c)
     n_half = math.ceil(doppler_range_hz / step - 1e-9)
-    dopplers = doppler_center_hz + step * np.arange(-n_half, n_half + 1)
-    n_bins = dopplers.size
+    offsets = step * np.arange(-n_half, n_half + 1)
+    n_bins = offsets.size
+    centres = {p: float(doppler_center_hz) for p in prn_list}
+    for p, c in (doppler_centers or {}).items():
+        if check_prn(p) in centres:
+            centres[check_prn(p)] = float(c)
     if code_source is None:
         code_source = _default_code_source()
     codes = {p: np.asarray(code_source(p)) for p in dict.fromkeys(prn_list)}
@@ -428,7 +438,14 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
         for i0 in range(0, len(unique), batch_size):
             batch = unique[i0:i0 + batch_size]
             grid = np.zeros((len(batch), n_bins, n_ms), np.float32)
-            for j, fd in enumerate(dopplers):
+            # the batch's Doppler bins (PRNs whose centres lie on one lattice share them):
+            # bin -> the (PRN index, grid row) pairs it fills
+            rows: dict[float, tuple[float, list[tuple[int, int]]]] = {}
+            for ip, prn in enumerate(batch):
+                for j, o in enumerate(offsets):
+                    f = centres[prn] + o
+                    rows.setdefault(round(f, 6), (f, []))[1].append((ip, j))
+            for fd, cells in rows.values():
                 eps = fd / carrier_hz
                 ph = (if_hz + fd) / fs_g * k_idx
                 ph -= np.floor(ph)
@@ -437,19 +454,21 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
                 shifts = np.rint(eps * b_idx * n_c).astype(np.int64)
                 resample = abs(eps) * CHIP_RATE_B3I * t_c > 0.1
                 rate = CHIP_RATE_B3I * (1.0 + eps) if resample else CHIP_RATE_B3I
-                cfs = [_replica_fft(codes[prn], fs_g, n_c, rate, workers) for prn in batch]
+                cfs = {ip: _replica_fft(codes[batch[ip]], fs_g, n_c, rate, workers)
+                       for ip, _ in cells}
 
-                def one(ip: int, j: int = j, xf: np.ndarray = xf,
-                        shifts: np.ndarray = shifts, cfs: list = cfs,
+                def one(cell: tuple[int, int], xf: np.ndarray = xf,
+                        shifts: np.ndarray = shifts, cfs: dict = cfs,
                         grid: np.ndarray = grid) -> None:
+                    ip, j = cell
                     r = scipy.fft.ifft(xf * cfs[ip], axis=1, workers=1, overwrite_x=True)
                     accumulate_power(r, shifts, grid[ip, j])
 
-                list(pool.map(one, range(len(batch))))
+                list(pool.map(one, cells))
             for ip, prn in enumerate(batch):
-                found[prn] = _evaluate(grid[ip], prn, dopplers, x, fs, u, if_hz, n_ms0, n_c0,
-                                       k_nc, m_ms, threshold, median_gamma, pfa, refine,
-                                       carrier_hz, codes[prn], code_len, keep_grid)
+                found[prn] = _evaluate(grid[ip], prn, centres[prn] + offsets, x, fs, u, if_hz,
+                                       n_ms0, n_c0, k_nc, m_ms, threshold, median_gamma, pfa,
+                                       refine, carrier_hz, codes[prn], code_len, keep_grid)
                 found[prn].lines_hz = lines
     _note_shared_doppler(found, shared_doppler_min, step)
     return [dataclasses.replace(found[p]) for p in prn_list]

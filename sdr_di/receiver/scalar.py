@@ -263,9 +263,10 @@ class ScalarReceiver:
         cold = [p for p in prns if assist.get(p) is None]
         if cold:
             res.update(zip(cold, self._acquire(source, sample, cold)))
-        for p in prns:
-            if p not in res:
-                res[p] = self._acquire(source, sample, [p], **self._assisted_window(assist[p]))[0]
+        aided = [p for p in prns if p not in res]
+        if aided:
+            res.update(zip(aided, self._acquire(source, sample, aided,
+                                                **self._assisted_windows(aided, assist))))
         k_long = self.long_noncoherent
         missed = [p for p in prns if not res[p].detected]
         if listed and k_long and missed and k_long > res[missed[0]].noncoherent:
@@ -275,11 +276,18 @@ class ScalarReceiver:
             cold = [p for p in missed if assist.get(p) is None]
             if cold:
                 res.update(zip(cold, self._acquire(source, sample, cold, **fine)))
-            for p in missed:
-                if assist.get(p) is not None:
-                    res[p] = self._acquire(source, sample, [p], **fine,
-                                           **self._assisted_window(assist[p]))[0]
+            aided = [p for p in missed if assist.get(p) is not None]
+            if aided:
+                res.update(zip(aided, self._acquire(source, sample, aided, **fine,
+                                                    **self._assisted_windows(aided, assist))))
         return [res[p] for p in prns]
+
+    def _assisted_windows(self, prns: list[int], assist: dict[int, float | None]) -> dict:
+        """One search of several PRNs, each over its :meth:`_assisted_window` (the widest
+        half-width for all; the centres on the cold grid's lattice share their bins)."""
+        wins = {p: self._assisted_window(assist[p]) for p in prns}
+        return {"doppler_centers": {p: w["doppler_center_hz"] for p, w in wins.items()},
+                "doppler_range_hz": max(w["doppler_range_hz"] for w in wins.values())}
 
     def _assisted_window(self, doppler_hz: float) -> dict:
         """Doppler search around a predicted Doppler: the bins of the cold search's grid
