@@ -22,7 +22,7 @@ from sdr_di.deep import (
 )
 from sdr_di.deep._numba_prefilter import prefilter_epochs
 from sdr_di.deep.bit_power import BitPower
-from sdr_di.deep.vector_loop import _Chan, _epoch_rows
+from sdr_di.deep.vector_tracking import _Chan, _epoch_rows
 from sdr_di.errors import FilterError, ImuDataError
 from sdr_di.frames import llh_to_ecef
 from sdr_di.orbits.rinex_nav import load_nav

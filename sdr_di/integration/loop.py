@@ -107,7 +107,7 @@ class Measurements:
 
 
 class MeasurementSource(Protocol):
-    """A coupling mode's part of the loop (deep: :class:`~sdr_di.deep.vector_loop.
+    """A coupling mode's part of the loop (deep: :class:`~sdr_di.deep.vector_tracking.
     VectorTracking`).
 
     Attributes

@@ -1,0 +1,610 @@
+"""Deep mode's measurement source: vector tracking of every handed-over channel.
+
+:class:`VectorTracking` is the :class:`~sdr_di.integration.loop.MeasurementSource` of the
+deep receiver (:class:`~sdr_di.deep.vector_loop.DeepReceiver`) in the mode-independent
+:class:`~sdr_di.integration.loop.IntegrationLoop`. Per filter interval it commands every
+channel's code and carrier NCOs from the propagated INS and clock, correlates, runs the
+pre-filters and the channel management, and forms ``z`` and ``R`` (paper 004 eq 7-9, 34);
+after the filter update it takes its share of the closed-loop feedback (NCO ranges and
+pre-filters) and takes up navigation data decoded meanwhile (a new ephemeris or ionosphere
+model moves the state, the NCOs and the pre-filters together).
+
+The decisions it implements (coherent pre-filter blocks, channel management and its
+thresholds, navigation data) are the notes of :mod:`sdr_di.deep.vector_loop`, called
+*module notes* below.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import TYPE_CHECKING
+
+import numba
+import numpy as np
+
+from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
+from ..errors import SdrDiError
+from ..frames import llh_to_ecef
+from ..integration.loop import IntegrationLoop, Interval, Measurements
+from ..integration.measurements import RangeRateMeasurementModel
+from ..receiver._numba_correlate_bits import correlate_epl_bits, mean_power
+from ..receiver.correlator import (
+    CODE_PAD,
+    bit_windows,
+    carrier_rotation,
+    kernel_tasks,
+    padded_replicas,
+    reduce_code_phase,
+)
+from ..receiver.ifreader import IfSource
+from ..receiver.navdata import NavDataInForce
+from ..receiver.observables import ReceiverTime
+from ..receiver.scalar import ScalarReceiver
+from ..receiver.threads import KernelThreads
+from ..signal.codes import NH20, b3i_code
+from .bit_power import BitPower
+from .navdecode import ChannelNavDecoder
+from .nco import nco_commands, predict_ranges
+from .prefilter import PreFilterBank
+
+if TYPE_CHECKING:
+    from .vector_loop import DeepConfig
+
+__all__ = ["SampleClock", "VectorTracking"]
+
+_FAST_MS = 60        # bit sums of the fast test (interval left out) [ms]
+_LOSS_MS = 120       # bit sums of the loss test [ms]
+_CN0_MIN_MS = 40     # bit sums before the loop's own C/N0 replaces the scalar loop's [ms]
+_SIGMA_F_MIN = 0.5   # floor of a restarted pre-filter's frequency sigma [Hz]
+
+
+@dataclasses.dataclass
+class _Chan:
+    """Vector-loop state of one handed-over channel."""
+
+    prn: int
+    idx: int
+    is_d1: bool
+    eph: object
+    next_start: int          # first sample of the next code epoch
+    epoch: int               # its number (ms since S0)
+    phase: float             # carrier NCO phase at next_start [cycles]
+    power: BitPower          # recent bit sums of the prompts (C/N0, loss test)
+    bit_ms: int = 20         # data bit [ms]: D1 20, D2 2
+    cn0_dbhz: float = math.nan
+    used: bool = True
+    f_scalar: float = 0.0    # scalar loop Doppler at the hand-over [Hz]
+    rejoining: bool = False  # lost: waits for a whole window of fresh prompts
+    fast_fail: int = 0       # last tests: 0 pass, 1 fast test failed, 2 loss test too
+    nav: ChannelNavDecoder | None = None   # navigation message after the hand-over
+
+
+@dataclasses.dataclass(frozen=True)
+class SampleClock:
+    """Receiver time of IF samples: ``sow(k) = S0 + t_rel(k)`` [s of BDT week ``week``].
+
+    ``S0`` is the whole second before the receiver time of the reference sample ``k0`` (kept
+    apart so that ``t_rel``, a few hundred seconds, keeps its sub-nanosecond resolution).
+    """
+
+    week: int
+    S0: float
+    base_rel: float
+    k0: float
+    fs: float
+
+    @classmethod
+    def of(cls, rt: ReceiverTime, fs: float) -> SampleClock:
+        S0 = math.floor(rt.sow0) - 1.0
+        return cls(week=int(rt.week0), S0=S0, base_rel=rt.sow0 - S0, k0=rt.k0, fs=fs)
+
+    def t_rel(self, k) -> float:
+        """Receiver time of sample ``k`` minus ``S0`` [s]."""
+        return self.base_rel + (k - self.k0) / self.fs
+
+    def sow(self, k) -> float:
+        """Receiver time of sample ``k`` [s of week]."""
+        return self.S0 + self.t_rel(k)
+
+
+@dataclasses.dataclass
+class _EpochRows:
+    """Correlator rows of one interval, all channels (one row per code epoch)."""
+
+    reps: list               # rows of each channel
+    starts: np.ndarray       # first sample of each epoch
+    nsamp: np.ndarray        # samples of each epoch
+    theta: np.ndarray        # code NCO phase at the start [chips]
+    phi: np.ndarray          # carrier NCO phase at the start [cycles]
+    dphi: np.ndarray         # carrier NCO frequency [cycles/sample]
+    nh: np.ndarray           # NH20 sign (D1) or 1
+    epoch: np.ndarray        # epoch number (ms since S0 on the satellite clock)
+    dchip: np.ndarray        # code NCO rate of each channel [chips/sample]
+
+
+class VectorTracking:
+    """Deep mode's measurement source of the :class:`~sdr_di.integration.loop.
+    IntegrationLoop`: the vector tracking loop of every handed-over channel.
+
+    One interval, :meth:`measure`::
+
+        command_ncos       predicted ranges at k1 from the propagated INS and clock, code and
+                           carrier NCO commands, correlator rows of every channel's epochs
+        load_samples       the IF samples the rows need (False: the file ends)
+        correlate          E/P/L of every epoch of every channel (one numba kernel call), NH
+                           wiped off
+        prefilter          per channel: C/N0 tests and navigation decoding
+                           (:meth:`_test_channel`), pre-filter, measurement-vector gate
+                           (:meth:`_usable`) -> z, R (eq 7-9, 34)
+
+    then :meth:`feed_back` (NCO ranges and pre-filters moved by the filter's correction,
+    lost or inconsistent pre-filters restarted) and :meth:`take_up_navigation_data`.
+
+    Parameters
+    ----------
+    cfg : DeepConfig
+    source : IfSource
+    chans : list of _Chan
+        Handed-over channels (:meth:`~sdr_di.deep.vector_loop.DeepReceiver.
+        _handover_channels`).
+    navdata : NavDataInForce
+    clock : SampleClock
+    stop : int
+        IF sample at which the data ends.
+    profile : dict
+        Seconds per stage (``nco``, ``read``, ``correlate``, ``prefilter``; the navigation
+        take-up is charged to ``ins`` with the feedback).
+    handover : (t_s, week, sow)
+        Hand-over time [s since file start] and BDT of the fix.
+    spacing_chips : float
+        Early-late spacing of the scalar receiver's correlators [chips].
+    """
+
+    def __init__(self, cfg: DeepConfig, source: IfSource, chans: list, navdata: NavDataInForce,
+                 clock: SampleClock, stop: int, profile: dict, *, handover: tuple,
+                 spacing_chips: float) -> None:
+        self.cfg, self.source, self.chans, self.clock = cfg, source, chans, clock
+        self.fs = source.sampling_rate_hz
+        self.stop, self.profile = stop, profile
+        self.n_channels = len(chans)
+        self.iono = navdata.klobuchar
+        self.ephs = [c.eph for c in chans]
+        self.nav_log = _NavLog(navdata, chans, self.iono, *handover)
+        self.pre = PreFilterBank(self.n_channels, spacing_chips, source.carrier_hz,
+                                 **cfg.prefilter)
+        self.bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
+                                          for c in chans]))
+        self.chan_idx = np.arange(self.n_channels, dtype=np.int64)
+        self.kthreads = KernelThreads()
+        self.threads_before = numba.get_num_threads()
+        self.meas_all = RangeRateMeasurementModel()     # every channel: the feedback's H
+        # sample buffer
+        self.x_buf = np.empty(0, dtype=np.int8)
+        self.n_comp = 2
+        self.buf0 = self.buf1 = 0
+        self.npow = 1.0
+        self.chunk = max(4 * round(self.fs * 1e-3), round(cfg.chunk_ms * 1e-3 * self.fs))
+        # NCO state: predicted ranges at k0 after the feedback, last carrier NCO step
+        self.P_k0 = self.Pc_k0 = self.tau_prev = None
+        self.dp_prev = None
+        self._first = True
+        self._pred = self._P1 = self._Pc1 = None
+
+    # ------------------------------------------------------------------------------------
+    def start(self, rx: ScalarReceiver, ins, clock_bias_m: float, k_start: int) -> None:
+        """Predicted ranges at the loop's first sample ``k_start`` and every pre-filter from
+        its scalar loop: code offset of the scalar loop from the INS prediction, 3 Hz
+        frequency sigma (its Doppler is taken against the first NCO command)."""
+        clock, ephs, iono, pre = self.clock, self.ephs, self.iono, self.pre
+        week = clock.week
+        r0 = llh_to_ecef(*ins.llh)
+        pred0 = predict_ranges(ephs, week, [clock.sow(k_start)], [r0], [clock_bias_m], iono)
+        self.P_k0, self.Pc_k0 = pred0.P[:, 0].copy(), pred0.Pc[:, 0].copy()
+        for c in self.chans:
+            sc = rx.channels[c.prn]
+            s = c.next_start
+            pr = predict_ranges([c.eph], week, [clock.sow(s)], [r0], [clock_bias_m], iono)
+            chips_deep = CHIP_RATE_B3I * (clock.t_rel(s) - pr.P[0, 0] / C_LIGHT)
+            dtau = c.epoch * CODE_LENGTH_B3I + float(sc.theta) - chips_deep
+            pre.reset(c.idx, dtau=dtau, df=0.0, sigma_tau=0.1, sigma_phi=0.3, sigma_f=3.0)
+            c.f_scalar = float(sc.fd)
+        self.tau_prev = pred0.tau
+
+    def close(self) -> None:
+        """Give numba back the thread count it had before the loop."""
+        numba.set_num_threads(self.threads_before)
+
+    # ------------------------------------------------------------------------------------
+    def measure(self, loop: IntegrationLoop, iv: Interval) -> Measurements | None:
+        """NCO commands, correlation and pre-filters of interval ``iv`` (class notes)."""
+        rows = self.command_ncos(iv)
+        if not self.load_samples(rows):
+            return None
+        E, P, L = self.correlate(rows)
+        return self.prefilter(iv, rows, E, P, L)
+
+    def command_ncos(self, iv: Interval) -> _EpochRows:
+        """Code and carrier NCO commands over ``[k0, k1)`` and the correlator rows.
+
+        Ranges at ``k1`` are predicted from the propagated INS and clock (``iv.nav1``,
+        ``iv.clock_bias_m``; :func:`~sdr_di.deep.nco.predict_ranges`); at ``k0`` they are the
+        previous interval's, moved by its feedback (``pred_new = pred_old - H x``). On the
+        first interval each pre-filter's frequency starts at the scalar loop's Doppler minus
+        the INS prediction.
+        """
+        tb = time.perf_counter()
+        clock, fs, k0, k1 = self.clock, self.fs, iv.k0, iv.k1
+        r_b = llh_to_ecef(*iv.nav1.llh)
+        pred = predict_ranges(self.ephs, clock.week, [clock.sow(k1)], [r_b],
+                              [iv.clock_bias_m], self.iono, tau0=self.tau_prev, passes=1)
+        self.tau_prev = pred.tau
+        P1, Pc1 = pred.P[:, 0], pred.Pc[:, 0]
+        cmd = nco_commands(self.P_k0, self.Pc_k0, P1, Pc1, k0, k1, fs, clock.t_rel(k0),
+                           clock.t_rel(k1), self.source.carrier_hz)
+        dchip = cmd.code_rate_cps / fs
+        if self._first:
+            for c in self.chans:
+                # initial frequency error: scalar loop Doppler minus the INS prediction
+                self.pre.x[c.idx, 2] = c.f_scalar - float(cmd.doppler_hz[c.idx])
+            self._first = False
+        dp1 = (self.source.if_hz + cmd.doppler_hz) / fs
+        if self.dp_prev is None:
+            self.dp_prev = dp1
+        dp_prev = self.dp_prev
+        parts = [_epoch_rows(c, float(cmd.chips0[c.idx]), float(dchip[c.idx]),
+                             float(dp_prev[c.idx]), float(dp1[c.idx]), k0, k1)
+                 for c in self.chans]
+        self.dp_prev = dp1
+        self._pred, self._P1, self._Pc1 = pred, P1, Pc1
+        rows = _EpochRows(reps=[len(p[0]) for p in parts],
+                          starts=np.concatenate([p[0] for p in parts]),
+                          nsamp=np.concatenate([p[1] for p in parts]),
+                          theta=np.concatenate([p[2] for p in parts]),
+                          phi=np.concatenate([p[3] for p in parts]),
+                          dphi=np.concatenate([p[4] for p in parts]),
+                          nh=np.concatenate([p[5] for p in parts]),
+                          epoch=np.concatenate([p[6] for p in parts]), dchip=dchip)
+        self.profile["nco"] += time.perf_counter() - tb
+        return rows
+
+    def load_samples(self, rows: _EpochRows) -> bool:
+        """Read the stored IF samples the rows need (a chunk at a time); False when they run
+        past the end of the data."""
+        tc = time.perf_counter()
+        need0 = int(rows.starts.min())
+        need1 = int((rows.starts + rows.nsamp).max())
+        if need1 > self.stop:
+            return False
+        if need0 < self.buf0 or need1 > self.buf1:
+            n_read = min(max(self.chunk, need1 - need0), self.stop - need0)
+            self.x_buf, self.n_comp = self.source.read_stored(need0, n_read)
+            self.buf0, self.buf1 = need0, need0 + n_read
+            self.npow = mean_power(self.x_buf, self.n_comp)
+        self.profile["read"] += time.perf_counter() - tc
+        return True
+
+    def correlate(self, rows: _EpochRows):
+        """Early, prompt, late of every epoch of every channel: one call of the receiver's
+        kernel on the stored samples (bit-window replicas, one rotation row per epoch), NH
+        code wiped off. Returns ``(E, P, L)`` complex (n_rows,)."""
+        td = time.perf_counter()
+        n_rows = rows.starts.size
+        nsamp = rows.nsamp
+        tab_idx = np.repeat(self.chan_idx, rows.reps)
+        rot_re, rot_im = carrier_rotation(rows.dphi)
+        th = reduce_code_phase(rows.theta, CODE_LENGTH_B3I)
+        threads = self.kthreads.pick()
+        n_sub = kernel_tasks(n_rows, int(nsamp.max()), threads)
+        out = np.empty((n_rows, 3, 2))
+        correlate_epl_bits(self.x_buf, self.n_comp, self.bits, tab_idx, CODE_PAD,
+                           CODE_LENGTH_B3I, rows.starts - self.buf0, nsamp, th,
+                           np.repeat(rows.dchip, rows.reps), rows.phi, rows.dphi, rot_re,
+                           rot_im, np.arange(n_rows, dtype=np.int64), self.pre.spacing, n_sub,
+                           out)
+        self.kthreads.record(threads, (time.perf_counter() - td) / float(nsamp.sum()))
+        epl = out.view(np.complex128)[..., 0]
+        E = epl[:, 0] * rows.nh
+        P = epl[:, 1] * rows.nh
+        L = epl[:, 2] * rows.nh
+        self.profile["correlate"] += time.perf_counter() - td
+        return E, P, L
+
+    def prefilter(self, iv: Interval, rows: _EpochRows, E, P, L) -> Measurements:
+        """Per channel: C/N0 tests and navigation decoding, pre-filter over its epochs
+        (coherent blocks, module notes), and the measurement-vector gate; ``z`` =
+        ``[c/f_code dtau_i, lambda df_i]`` and ``R`` from the pre-filter variances of the
+        channels in the vector (paper 004 eq 7-9, 34)."""
+        te = time.perf_counter()
+        cfg, pre, fs = self.cfg, self.pre, self.fs
+        ns, ep_all = rows.nsamp, rows.epoch
+        z_rho, z_rate, r_rho, r_rate, use = [], [], [], [], []
+        a = 0
+        for c, cnt in zip(self.chans, rows.reps):
+            i = c.idx
+            sl = slice(a, a + cnt)
+            a += cnt
+            if cnt:
+                pp = P[sl]
+                self._test_channel(c, pp, ns[sl], ep_all[sl], iv.k1 / fs)
+                cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
+                pre.process(i, E[sl], pp, L[sl], ns[sl] / fs, cn0_lin,
+                            block_start=ep_all[sl] % min(c.bit_ms, cfg.coherent_ms) == 0)
+            good = self._usable(c, cnt)
+            c.used = good
+            use.append(good)
+            if good:
+                dtau, df, vt, vf = pre.outputs(i)
+                z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
+                z_rate.append(LAMBDA_B3I * df)
+                r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * vt)
+                r_rate.append(LAMBDA_B3I ** 2 * vf)
+        use = np.asarray(use, bool)
+        z = R = None
+        if use.any():
+            z = np.r_[z_rho, z_rate]
+            R = np.diag(np.r_[r_rho, r_rate])
+        m = Measurements(z=z, R=R, geometry=(iv.nav1.llh, self._pred.U[use, 0]), used=use)
+        self.profile["prefilter"] += time.perf_counter() - te
+        return m
+
+    def _test_channel(self, c: _Chan, prompts, nsamp, epochs, t_s: float) -> None:
+        """Channel management on this interval's prompts (module notes): bit sums for the
+        C/N0, navigation decoding, the fast test (interval left out), the loss test (channel
+        lost, its C/N0 window emptied) and the C/N0 taken up once the window allows."""
+        cfg, fs = self.cfg, self.fs
+        mon = c.power
+        mon.add(prompts, nsamp, epochs % c.bit_ms == 0)
+        self.nav_log.demodulate(c, prompts, epochs, t_s)
+        if mon.new:
+            # tests on the last bit sums: _FAST_MS to leave the interval out,
+            # _LOSS_MS to declare the channel lost (module notes)
+            fast = mon.cn0_dbhz(self.npow, fs, last=_FAST_MS // c.bit_ms)
+            c.fast_fail = 0 if fast >= cfg.cn0_min_dbhz - cfg.fast_margin_db else 1
+            if c.fast_fail and not mon.cn0_dbhz(
+                    self.npow, fs, last=_LOSS_MS // c.bit_ms) >= \
+                    cfg.cn0_min_dbhz - cfg.loss_margin_db:
+                c.fast_fail = 2
+            if c.fast_fail and c.nav is not None:
+                c.nav.interrupt()  # no subframe from bits of a failing interval
+            if c.fast_fail >= 2:
+                # signal gone: lost, back only on a whole window of fresh bit
+                # sums, not on one still full of signal from before a blockage
+                mon.clear()
+                c.cn0_dbhz = math.nan
+                c.rejoining = True
+            elif c.fast_fail == 0 and mon.count >= (
+                    mon.p.size if c.rejoining else _CN0_MIN_MS // c.bit_ms):
+                c.rejoining = False
+                c.cn0_dbhz = mon.cn0_dbhz(self.npow, fs)
+
+    def _usable(self, c: _Chan, n_epochs: int) -> bool:
+        """Measurement-vector gate of channel ``c`` (module notes): C/N0 at least the gate
+        (less the hysteresis while in the vector), epochs this interval, fast test passed,
+        pre-filter NIS consistent."""
+        cfg = self.cfg
+        gate = cfg.cn0_min_dbhz - (cfg.cn0_hysteresis_db if c.used else 0.0)
+        return (math.isfinite(c.cn0_dbhz) and c.cn0_dbhz >= gate
+                and n_epochs > 0 and c.fast_fail == 0
+                and not self.pre.nis_p[c.idx] < cfg.nis_p_min)
+
+    # ------------------------------------------------------------------------------------
+    def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+        """The correction ``x`` on the NCOs and the pre-filters: ranges at the next ``k0``
+        are ``P1 - H x``, each pre-filter shifted by the projection of ``x`` on its line
+        of sight (its NCOs move by it), then decorrelated, or restarted from the NCO when
+        lost or inconsistent (frequency prior: the filter's rate sigma on that line of
+        sight, at least ``_SIGMA_F_MIN``)."""
+        n_ch, pre, cfg = self.n_channels, self.pre, self.cfg
+        self.meas_all.set_geometry(iv.nav1.llh, self._pred.U[:, 0])
+        Hx = self.meas_all.matrix @ x
+        self.P_k0 = self._P1 - Hx[:n_ch]
+        self.Pc_k0 = self._Pc1 - Hx[:n_ch]
+        Hr = self.meas_all.matrix[n_ch:]
+        sig_f = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hr, loop.kf.P, Hr), 0.0)) / LAMBDA_B3I
+        for c in self.chans:
+            i = c.idx
+            pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
+            if c.fast_fail >= 2 or pre.nis_p[i] < cfg.nis_p_min:
+                # lost, or inconsistent: restart from the NCO (INS) with the integration
+                # filter's rate uncertainty as the frequency prior
+                pre.reset(i, sigma_phi=1.0, sigma_f=max(float(sig_f[i]), _SIGMA_F_MIN))
+            else:
+                pre.decorrelate(i)
+
+    def take_up_navigation_data(self, loop: IntegrationLoop, iv: Interval) -> None:
+        """Navigation data decoded so far, taken up at the interval's end
+        (:func:`_take_up_model_change`): INS position, clock, NCO ranges and pre-filters
+        move with the range model."""
+        tg = time.perf_counter()
+        clock, chans, k1 = self.clock, self.chans, iv.k1
+        new_ephs, new_iono = self.nav_log.changes(
+            chans, clock.week, clock.sow(k1) - loop.clock_bias_m / C_LIGHT)
+        if new_ephs is not None or new_iono is not self.iono:
+            step = _take_up_model_change(
+                self.ephs, new_ephs or self.ephs, self.iono, new_iono, clock.week,
+                clock.sow(k1), loop.ins, loop.clock_bias_m, self.tau_prev,
+                np.array([c.used for c in chans]), self.meas_all, loop.kf, self.pre)
+            self.P_k0 = self.P_k0 + step.dP - step.Hx_rho
+            self.Pc_k0 = self.Pc_k0 + step.dPc - step.Hx_rho
+            loop.clock_bias_m = step.clock_bias_m
+            self.nav_log.taken_up(k1 / self.fs, chans, new_ephs, self.iono, new_iono, step)
+            self.ephs = [c.eph for c in chans]
+            self.iono = new_iono
+        self.profile["ins"] += time.perf_counter() - tg
+
+    def row(self) -> dict:
+        """Channel columns of a solution row: C/N0 [dB-Hz] and the navigation data taken up
+        since the previous row (``DeepResult.nav_change``)."""
+        out = {"cn0": [c.cn0_dbhz for c in self.chans], "nav": self.nav_log.flag}
+        self.nav_log.flag = 0
+        return out
+
+
+@dataclasses.dataclass
+class _ModelStep:
+    """A change of the range model taken up at one epoch (:func:`_take_up_model_change`)."""
+
+    dP: np.ndarray          # predicted code range change of every channel [m]
+    dPc: np.ndarray         # predicted carrier phase-range change [m]
+    Hx_rho: np.ndarray      # range change of the state step [m]
+    x: np.ndarray           # state step (17,)
+    clock_bias_m: float     # clock bias after the step [m]
+
+
+def _take_up_model_change(ephs_old, ephs_new, iono_old, iono_new, week: int, sow_nom: float,
+                          ins, clock_bias_m: float, tau, used: np.ndarray, meas_all, kf,
+                          pre: PreFilterBank) -> _ModelStep:
+    """Switch the range model (ephemerides, ionosphere) at a clean epoch (module notes).
+
+    The predicted ranges at the epoch move by ``dP`` (new model minus old, same position and
+    clock). A filter that ran on the old model has absorbed that step into its position and
+    clock as far as the geometry lets it: its estimate sits at ``x_c``, the least-squares
+    solution of ``H_rho x = dP`` over the channels in the measurement vector (position and
+    clock columns). The INS and the clock are moved by ``x_c`` (the loop's feedback), the
+    pre-filters by what the NCOs then move, ``dP - H x_c`` (which removes the misfit the old
+    model left in the innovations), and the position/clock covariance grows by
+    ``(x_c / 2)^2`` for the error of that projection (the filter's weights are not equal).
+    """
+    r = llh_to_ecef(*ins.llh)
+    old = predict_ranges(ephs_old, week, [sow_nom], [r], [clock_bias_m], iono_old, tau0=tau)
+    new = predict_ranges(ephs_new, week, [sow_nom], [r], [clock_bias_m], iono_new, tau0=tau)
+    dP = new.P[:, 0] - old.P[:, 0]
+    dPc = new.Pc[:, 0] - old.Pc[:, 0]
+    n = dP.size
+    meas_all.set_geometry(ins.llh, new.U[:, 0])
+    H = meas_all.matrix
+    x = np.zeros(17)
+    cols = [6, 7, 8, 15]
+    if int(np.count_nonzero(used)) >= 4:
+        x[cols] = np.linalg.lstsq(H[:n][used][:, cols], dP[used], rcond=None)[0]
+        kf.P[cols, cols] += (0.5 * x[cols]) ** 2
+    else:
+        kf.P[15, 15] += float(np.max(dP ** 2))
+    Hx = H @ x
+    z3 = np.zeros(3)
+    ins.correct(z3, z3, x[6:9], z3, z3)
+    for i in range(n):
+        pre.shift(i, -CHIP_RATE_B3I / C_LIGHT * (dP[i] - Hx[i]), Hx[n + i] / LAMBDA_B3I)
+    return _ModelStep(dP=dP, dPc=dPc, Hx_rho=Hx[:n], x=x, clock_bias_m=clock_bias_m - x[15])
+
+
+class _NavLog:
+    """Navigation data of the vector loop's channels: decoding, changes, history."""
+
+    def __init__(self, navdata: NavDataInForce, chans: list, iono, t_s: float, week: int,
+                 sow: float) -> None:
+        self.navdata = navdata
+        self.flag = 0        # changes since the last output row (DeepResult.nav_change)
+        self.ephemerides: dict = {f"C{c.prn:02d}": [] for c in chans}
+        self.ionosphere: list = []
+        self.steps: list = []
+        self._new: list = []
+        for c in chans:
+            self._eph_entry(t_s, c.prn, c.eph, navdata.select_with_source(c.prn, week, sow)[1])
+        self._iono_entry(t_s, iono)
+
+    def demodulate(self, c: _Chan, prompts, epochs, t_s: float) -> None:
+        """Feed channel ``c``'s prompts to its decoder; offer what it completes."""
+        for eph, klob in c.nav.add(prompts, epochs):
+            if eph is not None:
+                self.navdata.offer_ephemeris(eph, t_s)
+            self.navdata.offer_klobuchar(klob, t_s)
+
+    def changes(self, chans: list, week: int, sow: float):
+        """``(new ephemeris list or None, ionosphere in force)`` at BDT (``week``, ``sow``)."""
+        self._new = []
+        for c in chans:
+            try:
+                e, src = self.navdata.select_with_source(c.prn, week, sow)
+            except SdrDiError:           # nothing valid any more: keep the last one
+                e, src = c.eph, None
+            self._new.append((e, src))
+        changed = any(e is not c.eph and e != c.eph for c, (e, _) in zip(chans, self._new))
+        return ([e for e, _ in self._new] if changed else None), self.navdata.klobuchar
+
+    def taken_up(self, t_s: float, chans: list, new_ephs, iono_old, iono_new,
+                 step: _ModelStep) -> None:
+        """Record the change :func:`_take_up_model_change` just made; set the channels'
+        records."""
+        if new_ephs is not None:
+            self.flag |= 1
+            for c, (e, src) in zip(chans, self._new):
+                if e is not c.eph and e != c.eph:
+                    self._eph_entry(t_s, c.prn, e, src)
+                    c.eph = e
+        if iono_new is not iono_old:
+            self.flag |= 2
+            self._iono_entry(t_s, iono_new)
+        self.steps.append({"t_s": round(t_s, 3),
+                           "max_range_step_m": float(np.max(np.abs(step.dP))),
+                           "clock_step_m": float(step.x[15]),
+                           "height_step_m": float(step.x[8])})
+
+    def _eph_entry(self, t_s, prn, e, src) -> None:
+        self.ephemerides[f"C{prn:02d}"].append(
+            {"t_s": round(t_s, 3), "source": src,
+             "week": int(e.week), "toe": float(e.toe), "aode": int(e.AODE)})
+
+    def _iono_entry(self, t_s, iono) -> None:
+        src = self.navdata.iono_source if iono is not None else None
+        self.ionosphere.append({"t_s": round(t_s, 3), "model": "klobuchar" if src else "none",
+                                "source": src})
+
+    def summary(self, t_end_s: float) -> dict:
+        """``navigation`` entry of the run summary."""
+        models = self.navdata.models()
+        return {
+            "rule": "decoded broadcast data as it arrives (healthy, new data set, toe within "
+                    "its age limit), the assistance (RINEX) record on the air before it",
+            "ephemerides": self.ephemerides,
+            "ionosphere": {**models["ionosphere"], "history": self.ionosphere},
+            "troposphere": models["troposphere"],
+            "model_steps": self.steps,
+            "decoded_conflicts": self.navdata.n_conflicts,
+            "decoded_rejected": self.navdata.n_rejected,
+            "end_s": round(t_end_s, 3),
+        }
+
+
+def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int, k1: int):
+    """Correlator rows of channel ``c``: its code epochs that start in ``[next_start, k1)``.
+
+    The code NCO's chip count is ``c0 + (k - k0) dc`` over the interval; epoch ``e`` ends at
+    the first sample where it reaches ``(e + 1) L``. The carrier NCO frequency of each epoch
+    [cycles per sample] is ramped linearly in time between ``dp0`` (the previous interval's
+    average, placed at its middle ``k0 - N/2``) and ``dp1`` (this interval's average, at
+    ``k0 + N/2``), so it follows the Doppler rate of the dynamics (7 m/s^2 in the circling
+    phases = 0.6 Hz over a 20 ms interval) while its integral over the interval still equals
+    the predicted carrier-phase change; the phase stays continuous. Advances the channel's
+    ``next_start``, ``epoch`` and ``phase``.
+
+    Returns ``(starts, n, theta, phi, dphi, nh_sign, epoch)`` arrays (one row per epoch;
+    ``epoch`` = ms since S0 on the satellite clock).
+    """
+    L = CODE_LENGTH_B3I
+    s0, e0 = c.next_start, c.epoch
+    if s0 >= k1:
+        z = np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), z, z, z, z, np.zeros(0, np.int64)
+    # epoch ends: ceil(k0 + ((e + 1) L - c0) / dc) until one reaches k1
+    m_max = int((k1 - s0) * dc / L) + 3
+    ends = np.ceil(k0 + ((e0 + 1 + np.arange(m_max)) * L - c0) / dc).astype(np.int64)
+    starts = np.concatenate(([s0], ends[:-1]))
+    ends = np.maximum(ends, starts + 1)
+    keep = starts < k1
+    starts, ends = starts[keep], ends[keep]
+    m = starts.size
+    n = ends - starts
+    ep = e0 + np.arange(m)
+    theta = c0 + (starts - k0) * dc - ep * L
+    N = float(k1 - k0)
+    dphi = dp0 + (dp1 - dp0) * ((starts + 0.5 * n - k0) / N + 0.5)
+    adv = np.cumsum(n * dphi)
+    phi = c.phase + np.concatenate(([0.0], adv[:-1]))
+    phi -= np.floor(phi)
+    end_phase = c.phase + float(adv[-1])
+    c.next_start, c.epoch, c.phase = int(ends[-1]), e0 + m, end_phase - math.floor(end_phase)
+    nh = NH20[ep % 20].astype(float) if c.is_d1 else np.ones(m)
+    return starts, n, theta, phi, dphi, nh, ep
