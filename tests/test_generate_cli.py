@@ -147,3 +147,37 @@ def test_console_script_exit_status(tmp_path):
     res = subprocess.run([sys.executable, "-m", "sdr_di.cli", "generate", "--prn", "C99",
                           "--out", str(tmp_path)], capture_output=True, text=True)
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "C99" in res.stderr
+
+
+@pytest.mark.slow
+def test_generated_message_switches_to_the_new_upload_and_the_receiver_takes_it(tmp_path):
+    """A file across an upload (07:00 records on the air from 07:00:18): the message carries
+    the new record from the 07:00:30 frame on, and the scalar receiver decodes and uses it."""
+    import json
+
+    from sdr_di.receiver.accuracy import solution_vs_truth
+    from sdr_di.receiver.run_scalar import open_source, run_scalar
+    from sdr_di.receiver.scalar import ScalarReceiver
+    from sdr_di.scenario import REPO_ROOT
+
+    text = (REPO_ROOT / "signals" / "default.toml").read_text()
+    text = text.replace('"../ephemeris/', f'"{REPO_ROOT / "ephemeris"}/')
+    text = text.replace('start = "2020-06-25T06:30:00"', 'start = "2020-06-25T07:00:10"')
+    sc = tmp_path / "upload.toml"
+    sc.write_text(text)
+    out = tmp_path / "f"
+    assert main(["generate", "--no-progress", "--scenario", str(sc), "--duration", "42",
+                 "--fs", "2.5e6", "--out", str(out)]) == 0
+    meta = json.loads((out / "default.json").read_text())
+    switched = {s["prn"]: s["broadcast"] for s in meta["satellites"] if len(s["broadcast"]) > 1}
+    assert switched, meta["satellites"]
+    for recs in switched.values():
+        assert recs[1]["from_s"] == pytest.approx(20.0) and recs[1]["toe"] > recs[0]["toe"]
+    rx = ScalarReceiver(log=False)
+    res = run_scalar(open_source(out / "default.bin"), tmp_path / "run", progress=False,
+                     receiver=rx)
+    taken = [p for p, recs in switched.items()
+             if p in rx.ephemerides and rx.ephemerides[p].toe == recs[1]["toe"]]
+    assert taken, {p: getattr(rx.ephemerides.get(p), "toe", None) for p in switched}
+    acc = solution_vs_truth(res.files["pvt"], out / "default_truth.csv")
+    assert acc["n_fixes"] >= 10 and acc["pos_rmse_m"] < 3.0, acc  # fixes from 38 s on

@@ -16,7 +16,11 @@ The sidecar of ``run.bin`` is ``run.json``. Keys (schema ``sdr-di-if/1``):
 ``duration_s``         n_samples / sampling_rate_hz
 ``scenario``           ``{"name", "hash", "seed"}``
 ``satellites``         list of ``{"prn", "nav": "D1"|"D2", "cn0_dbhz", "elevation_deg",
-                       "azimuth_deg", "doppler_hz", "code_phase_chips"}`` at t = 0
+                       "azimuth_deg", "doppler_hz", "code_phase_chips"}`` at t = 0, with
+                       ``"toe", "week"`` of the record the signal's orbit comes from and
+                       ``"broadcast"``: ``[{"from_s", "toe", "week", "aode"}]``, the records
+                       the message carries (a new upload from the first 30 s frame after it
+                       went on the air)
 ``imu_file``, ``truth_file``, ``ephemeris_file``   companion files
 ``generator``          ``{"name": "sdr-di", "version"}``
 ``files``              ``{NAME: {"size": bytes, "sha256_first_last_mib": hex}}`` for the IF,

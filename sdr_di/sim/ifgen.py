@@ -86,6 +86,9 @@ class SatelliteSignal:
     amplitude: float
     elevation_deg: float = float("nan")
     azimuth_deg: float = float("nan")
+    #: ``(BDT sow from which it is broadcast, record)`` of every record the message carries,
+    #: the first from the stream's start (:func:`broadcast_nav_bits`).
+    broadcast: list = dataclasses.field(default_factory=list)
 
     @property
     def is_d1(self) -> bool:
@@ -273,18 +276,70 @@ class IfGenerator:
                              azimuth_deg=round(sat.azimuth_deg, 3),
                              doppler_hz=round(float(doppler), 3),
                              code_phase_chips=round(float(st["chip0"][k, 0]), 4),
-                             toe=sat.eph.toe, week=sat.eph.week))
+                             toe=sat.eph.toe, week=sat.eph.week,
+                             broadcast=[{"from_s": round(max(t - self.sc.sow, 0.0), 3),
+                                         "toe": e.toe, "week": e.week, "aode": e.AODE}
+                                        for t, e in sat.broadcast]))
         return rows
+
+
+#: The broadcast record changes only at these boundaries of BDT [s]: a D1 frame (subframes
+#: 1-3 carry the ephemeris) and ten D2 frames (subframe 1's pages 1-10 carry it).
+RECORD_SWITCH_S = 30.0
+
+
+def broadcast_nav_bits(nav, eph: Ephemeris, week: int, sow_start: float, duration_s: float,
+                       iono: Klobuchar | None) -> tuple[NavBits, list[tuple[float, Ephemeris]]]:
+    """Navigation bits of ``eph.prn`` as the satellite sends them over an interval: the record
+    on the air (``nav.select(..., broadcast=True)``, its latest upload) from each
+    :data:`RECORD_SWITCH_S` boundary on, so a file that spans an upload carries the new record
+    from the first frame after it went on the air, as a real satellite does.
+
+    The satellite's orbit and clock in the signal (the geometry) stay those of ``eph``, the
+    record at the start: a receiver that takes up the new record then sees the difference of
+    two consecutive uploads as an ephemeris error (decimetres), which is what it sees in the
+    field.
+
+    Returns
+    -------
+    (NavBits, list of (float, Ephemeris))
+        The bits, and ``(BDT sow from which it is broadcast, record)`` per record.
+    """
+    t_end = sow_start + duration_s
+    records = [(float(sow_start), eph)]
+    t = (math.floor(sow_start / RECORD_SWITCH_S) + 1) * RECORD_SWITCH_S
+    while t < t_end:
+        try:
+            rec = nav.select(eph.prn, week, t, broadcast=True)
+        except NoEphemerisError:
+            rec = records[-1][1]
+        cur = records[-1][1]
+        if (rec.week, rec.toe, rec.AODE) != (cur.week, cur.toe, cur.AODE):
+            records.append((t, rec))
+        t += RECORD_SWITCH_S
+    parts = []
+    for i, (a, rec) in enumerate(records):
+        b = records[i + 1][0] if i + 1 < len(records) else t_end
+        parts.append(nav_bits(rec, week, a, b - a, iono=iono))
+    for p0, p1 in zip(parts, parts[1:]):
+        if abs(p0.t_end - p1.t0) > 1e-9:  # the switch falls on a subframe edge of both
+            raise RuntimeError(f"C{eph.prn:02d}: message parts do not join at {p1.t0}")
+    bits = parts[0] if len(parts) == 1 else dataclasses.replace(
+        parts[0], bits=np.concatenate([p.bits for p in parts]))
+    return bits, records
 
 
 def build_satellites(sc: Scenario, nav, path: ReceiverPath,
                      iono: Klobuchar | None) -> list[SatelliteSignal]:
-    """Select satellites and build their navigation-message streams."""
+    """Select satellites and build their navigation-message streams (the record on the air
+    at each frame: :func:`broadcast_nav_bits`)."""
     chosen = select_satellites(sc, nav, path, iono)
     sats = []
     for prn, eph, el, az in chosen:
         cn0 = sc.satellites.cn0_per_prn.get(prn, sc.satellites.cn0_dbhz)
-        bits = nav_bits(eph, sc.week, sc.sow - 1.0, sc.duration_s + 2.0, iono=iono)
+        bits, records = broadcast_nav_bits(nav, eph, sc.week, sc.sow - 1.0,
+                                           sc.duration_s + 2.0, iono)
         amp = cn0_to_amplitude(cn0, sc.signal.sampling_rate_hz, sc.signal.complex_baseband)
-        sats.append(SatelliteSignal(prn, eph, bits, cn0, amp, math.degrees(el), math.degrees(az)))
+        sats.append(SatelliteSignal(prn, eph, bits, cn0, amp, math.degrees(el),
+                                    math.degrees(az), broadcast=records))
     return sats
