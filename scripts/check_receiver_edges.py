@@ -139,7 +139,8 @@ def blockage(a) -> None:
                                  receiver=ScalarReceiver(cfg, log=False))
             finally:
                 rs.FixPredictor = saved
-            lines = [ln for ln in open(res.files["pvt"]) if not ln.startswith("#")]
+            with open(res.files["pvt"]) as fh:
+                lines = [ln for ln in fh if not ln.startswith("#")]
             rows = list(csv.DictReader(io.StringIO("".join(lines))))
             t_ret = 22.0 + dur
             rel = [(float(r["rx_sow"]) - src.start_sow, r["status"]) for r in rows

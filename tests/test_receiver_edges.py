@@ -11,13 +11,12 @@ import warnings
 import numpy as np
 import pytest
 from scipy import special
+from test_receiver_acquisition import synth
 
 from sdr_di.cli import attach_negative_values, main
 from sdr_di.errors import AcquisitionError
 from sdr_di.receiver.acquisition import acquire, detection_cn0_dbhz, detection_threshold
 from sdr_di.receiver.narrowband import remove_dc_and_lines
-
-from test_receiver_acquisition import synth
 
 P_CELL = 1e-2
 
@@ -130,7 +129,8 @@ def test_acquire_cli_on_a_4_ms_50_mhz_float_recording(tmp_path, capsys):
                  "--prn", "C08,C10", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "4 x 1 ms" in text and "40 asked" in text and "sensitivity" in text
-    rows = list(csv.DictReader(open(out / "sample_acquisition.csv")))
+    with open(out / "sample_acquisition.csv") as fh:
+        rows = list(csv.DictReader(fh))
     assert [r["prn"] for r in rows] == ["8", "10"]
     r8, r10 = rows
     assert {"prn", "detected", "doppler_hz", "code_phase_chips", "cn0_dbhz", "metric",
@@ -152,7 +152,8 @@ def test_acquire_cli_negative_if_and_too_short_file(tmp_path, capsys):
     assert main(["acquire", str(f), "--fs", "4e6", "--if", "-1.02e6", "--format", "iq_int8",
                  "--prn", "10", "--noncoherent", "10", "--doppler-center", "-1e3",
                  "--doppler-range", "2.5e3", "--out", str(tmp_path / "a")]) == 0
-    rows = list(csv.DictReader(open(tmp_path / "a" / "if_acquisition.csv")))
+    with open(tmp_path / "a" / "if_acquisition.csv") as fh:
+        rows = list(csv.DictReader(fh))
     assert rows[0]["detected"] == "true" and abs(float(rows[0]["doppler_hz"]) - 800.0) < 50
     x[:2 * 3000].tofile(tmp_path / "short.dat")  # 0.75 ms
     assert main(["acquire", str(tmp_path / "short.dat"), "--fs", "4e6", "--format", "iq_int8",
@@ -216,7 +217,8 @@ def _blockage_file(tmp_path, start_s, end_s, duration="30"):
 def _pvt_rows(path):
     import io
 
-    lines = [ln for ln in open(path) if not ln.startswith("#")]
+    with open(path) as fh:
+        lines = [ln for ln in fh if not ln.startswith("#")]
     return list(csv.DictReader(io.StringIO("".join(lines))))
 
 
@@ -310,7 +312,8 @@ def test_cold_start_with_ephemeris_time_hint_and_position(tmp_path, capsys):
             "--start-week", str(week), "--start-sow", str(sow), "--ephemeris", str(rnx),
             "--no-progress", "--out", str(tmp_path / "run")]
     assert main([*args, "--approx-pos", "40,116,100"]) == 0
-    rows = list(csv.DictReader(open(tmp_path / "run" / "default_channels.csv")))
+    with open(tmp_path / "run" / "default_channels.csv") as fh:
+        rows = list(csv.DictReader(fh))
     assert {int(r["prn"]) for r in rows} == set(truth)
     capsys.readouterr()
     assert main(args) == 2  # --ephemeris without --approx-pos is deep-mode only

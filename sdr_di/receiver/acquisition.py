@@ -520,9 +520,9 @@ def _note_shared_doppler(found: dict[int, AcquisitionResult], n_min: int,
     for prns in groups:
         if len(prns) >= max(2, n_min):
             for p in prns:
-                found[p].notes = found[p].notes + (
-                    f"same Doppler as {len(prns) - 1} other PRNs: a line or artefact more "
-                    "likely than satellites",)
+                note = (f"same Doppler as {len(prns) - 1} other PRNs: a line or artefact "
+                        "more likely than satellites")
+                found[p].notes = (*found[p].notes, note)
 
 
 def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: float, u: int,

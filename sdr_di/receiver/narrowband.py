@@ -38,6 +38,7 @@ Cost: one forward and one inverse FFT of the block (about 0.1 s for 40 ms at 25 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -119,7 +120,7 @@ def remove_dc_and_lines(x: np.ndarray, sampling_rate_hz: float, *, pfa: float = 
     n_seg = max(1, nb // seg)
     edges = np.linspace(0, nb, n_seg + 1).astype(np.int64)
     ref = np.empty(nb)
-    for a, b in zip(edges[:-1], edges[1:]):
+    for a, b in itertools.pairwise(edges):
         ref[a:b] = np.median(p[a:b]) / math.log(2.0)
     thr = math.log(nb / pfa)
     mask = p > thr * np.maximum(ref, np.finfo(float).tiny)

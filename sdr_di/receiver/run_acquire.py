@@ -45,7 +45,7 @@ from .acquisition import (
 )
 from .ifreader import IfSource
 
-__all__ = ["AcquisitionReport", "run_acquisition", "CSV_COLUMNS"]
+__all__ = ["CSV_COLUMNS", "AcquisitionReport", "run_acquisition"]
 
 CSV_COLUMNS = ("prn", "detected", "doppler_hz", "code_phase_chips", "code_phase_samples",
                "cn0_dbhz", "metric", "threshold", "pfa", "coherent_ms", "noncoherent",

@@ -29,6 +29,7 @@ Sample 0 is at receiver-clock time ``(week, sow)`` of the scenario start.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from typing import Iterator
 
@@ -321,7 +322,7 @@ def broadcast_nav_bits(nav, eph: Ephemeris, week: int, sow_start: float, duratio
     for i, (a, rec) in enumerate(records):
         b = records[i + 1][0] if i + 1 < len(records) else t_end
         parts.append(nav_bits(rec, week, a, b - a, iono=iono))
-    for p0, p1 in zip(parts, parts[1:]):
+    for p0, p1 in itertools.pairwise(parts):
         if abs(p0.t_end - p1.t0) > 1e-9:  # the switch falls on a subframe edge of both
             raise RuntimeError(f"C{eph.prn:02d}: message parts do not join at {p1.t0}")
     bits = parts[0] if len(parts) == 1 else dataclasses.replace(
