@@ -473,7 +473,7 @@ class DeepReceiver:
         loop = IntegrationLoop(
             imu=imu, t_if=t_if, i_start=i_h, k_start=k_grid0, n_per=n_per, fs=fs, stop=stop,
             margin=2 * n1 + 16, ins=ins, clock_bias_m=clk_b, clock_drift_mps=clk_d, kf=kf,
-            process=process, meas=meas, sow_of_sample=clock.sow,
+            process=process, set_geometry=meas.set_geometry, sow_of_sample=clock.sow,
             output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
             progress=progress, profile=prof)
         adapt0 = kf.adaptation_time_s

@@ -90,7 +90,8 @@ class Measurements:
     R : (m, m) array
         Its noise covariance, or None with ``z``.
     geometry : tuple
-        Arguments of the filter's measurement model's ``set_geometry`` for this update.
+        Arguments of the loop's ``set_geometry`` for this update (the filter's measurement
+        model at this epoch; deep: the INS position and the lines of sight of ``used``).
     used : (n_ch,) bool array
         Channels in the measurement vector.
     """
@@ -161,8 +162,11 @@ class IntegrationLoop:
         Integration filter (:func:`~sdr_di.filters.make_filter`, 17 states).
     process : InsErrorModel
         Its process model.
-    meas : measurement model
-        Its measurement model (geometry set from :attr:`Measurements.geometry`).
+    set_geometry : callable
+        ``set_geometry(*Measurements.geometry)`` sets the filter's measurement model for an
+        update, after the predict (deep and tight:
+        :meth:`~sdr_di.integration.measurements.RangeRateMeasurementModel.set_geometry`;
+        loose: :meth:`~sdr_di.integration.measurements.LooseMeasurementModel.set_epoch`).
     sow_of_sample : callable
         ``sow_of_sample(k)``: receiver-clock seconds of week of IF sample ``k``.
     output_every : int
@@ -178,7 +182,7 @@ class IntegrationLoop:
 
     def __init__(self, *, imu, t_if: np.ndarray, i_start: int, k_start: int, n_per: int,
                  fs: float, stop: int, margin: int, ins, clock_bias_m: float,
-                 clock_drift_mps: float, kf, process, meas,
+                 clock_drift_mps: float, kf, process, set_geometry: Callable[..., None],
                  sow_of_sample: Callable[[int], float], output_every: int, truth=None,
                  progress: Callable[[float, int, int], None] | None = None,
                  profile: dict | None = None) -> None:
@@ -187,7 +191,7 @@ class IntegrationLoop:
         self.T = n_per * (1.0 / imu.rate_hz)     # filter interval [s]
         self.ins = ins
         self.clock_bias_m, self.clock_drift_mps = clock_bias_m, clock_drift_mps
-        self.kf, self.process, self.meas = kf, process, meas
+        self.kf, self.process, self.set_geometry = kf, process, set_geometry
         self.sow_of_sample = sow_of_sample
         self.output_every = output_every
         self.truth = truth if (truth is not None and len(truth.t) == len(imu.t)
@@ -256,7 +260,7 @@ class IntegrationLoop:
         self.process.set_interval(iv.nav0, iv.nav1, iv.f_mean, iv.w_mean)
         kf.predict(self.T)
         if m.n_used:
-            self.meas.set_geometry(*m.geometry)
+            self.set_geometry(*m.geometry)
             kf.update(m.z, m.R)
             self._nis[0] += kf.nis / m.z.size
             self._nis[1] += 1
