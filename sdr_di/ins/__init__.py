@@ -4,6 +4,8 @@
 ``imu``            IMU record (:class:`ImuData`) and error model (:class:`ImuErrorModel`:
                    scale factor, bias, random walks; generator and filter ``Q`` alike)
 ``rotation``       quaternion / rotation-vector helpers
+``truth``          reference trajectory record (:class:`Truth`: PVA, IMU signals, ECEF
+                   interpolation), as generated and as read back
 ``mechanization``  :class:`StrapdownINS` (200 Hz update with coning and sculling), ``navigate``
 """
 

@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import ImuDataError
 from ..frames import euler_to_C_b_n
 from ..ins.imu import ImuData
-from ..sim.trajectory import Truth
+from ..ins.truth import Truth
 from .atomic import OutputSet, atomic_open
 
 IMU_COLUMNS = ("t", "gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")

@@ -1,9 +1,8 @@
 """Accuracy of a receiver's solution file against the generator's truth file.
 
 Errors are solution minus truth at the solution epochs (BDT of the fix), truth interpolated
-with the truth record's ``ecef_at`` (:func:`~sdr_di.io.imu_files.read_truth`); position error
-is the ECEF 3-D error [m], velocity error the ENU 3-D error [m/s]. RMSE = sqrt(mean ||e||^2)
-(DESIGN section 6).
+with :meth:`~sdr_di.ins.truth.Truth.ecef_at`; position error is the ECEF 3-D error [m],
+velocity error the ENU 3-D error [m/s]. RMSE = sqrt(mean ||e||^2) (DESIGN section 6).
 """
 
 from __future__ import annotations
