@@ -441,7 +441,8 @@ class DeepReceiver:
 
         Hand-over: channels (:meth:`_handover_channels`), INS alignment (:meth:`_align_ins`),
         clock from the fix, integration filter (:meth:`_make_filter`), pre-filters from the
-        scalar loops (:meth:`VectorTracking.start`). Then the mode-independent
+        scalar loops (:meth:`~sdr_di.deep.vector_tracking.VectorTracking.start`). Then the
+        mode-independent
         :class:`~sdr_di.integration.loop.IntegrationLoop` runs with
         :class:`~sdr_di.deep.vector_tracking.VectorTracking` as its measurement source.
         """
@@ -469,7 +470,7 @@ class DeepReceiver:
                                   handover=(k_h / fs, sol.week, sol.sow),
                                   spacing_chips=self.scalar.config.spacing_chips)
         tracking.start(rx, ins, clk_b, k_grid0)
-        n1 = round(fs * 1e-3)
+        n1 = round(fs * 1e-3)            # an interval needs its last epochs' samples past k1
         loop = IntegrationLoop(
             imu=imu, t_if=t_if, i_start=i_h, k_start=k_grid0, n_per=n_per, fs=fs, stop=stop,
             margin=2 * n1 + 16, ins=ins, clock_bias_m=clk_b, clock_drift_mps=clk_d, kf=kf,

@@ -5,6 +5,8 @@
 ``noise``         simulated GNSS solution noise with scheduled variance windows
 ``metrics``       attitude / velocity / position errors, RMSE = sqrt(mean ||e||^2), max
 ``loose``         closed-loop loosely coupled run (``sdr-di lc``)
+``loop``          the integration loop every coupling mode on IF data shares (INS, filter,
+                  feedback, rows); a mode supplies its measurement source
 
 The process model is :class:`sdr_di.ins.error_model.InsErrorModel`.
 """
