@@ -469,11 +469,11 @@ def _cmd_lc(args: argparse.Namespace) -> int:
 
     from .errors import FilterError, ImuDataError, ScenarioError
     from .filters import FILTER_NAMES
+    from .ins.imu import ImuErrorModel
     from .integration.loose import load_lc_scenario, make_inputs, min_lc_duration_s, run_loose
     from .integration.noise import NoiseWindow
     from .io.atomic import check_output_dir, ensure_output_dir
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
-    from .ins.imu import ImuErrorModel
 
     sc, st = load_lc_scenario(args.scenario or DEFAULT_SCENARIO)
     name = (args.filter or st.filter).strip().lower()

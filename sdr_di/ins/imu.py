@@ -126,7 +126,7 @@ class ImuErrorModel:
             raise ValueError(f"ImuErrorModel.draw must be 'gaussian' or 'fixed', got {self.draw!r}")
 
     @classmethod
-    def from_spec(cls, spec, draw: str = "gaussian") -> "ImuErrorModel":
+    def from_spec(cls, spec, draw: str = "gaussian") -> ImuErrorModel:
         """Build from a scenario ``ImuSpec`` (:mod:`sdr_di.scenario.schema`; same units)."""
         return cls(
             accel_scale_factor_ppm=spec.accel_scale_factor_ppm,
@@ -139,7 +139,7 @@ class ImuErrorModel:
         )
 
     @classmethod
-    def perfect(cls) -> "ImuErrorModel":
+    def perfect(cls) -> ImuErrorModel:
         """The error-free IMU."""
         return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
@@ -197,9 +197,9 @@ class ImuErrorModel:
         if not isinstance(rng, np.random.Generator):
             raise TypeError("ImuErrorModel.apply needs a numpy.random.Generator")
         if self.draw == "gaussian":
-            const = lambda sigma: sigma * rng.standard_normal(3)  # noqa: E731
+            const = lambda sigma: sigma * rng.standard_normal(3)
         else:
-            const = lambda sigma: np.full(3, float(sigma))  # noqa: E731
+            const = lambda sigma: np.full(3, float(sigma))
         s_a = const(self.accel_scale_factor_ppm * 1e-6)
         s_g = const(self.gyro_scale_factor_ppm * 1e-6)
         b_a = const(self.accel_bias_si)
