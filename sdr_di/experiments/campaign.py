@@ -32,6 +32,8 @@ import dataclasses
 import logging
 import os
 import shutil
+import signal
+import threading
 import time
 import uuid
 from collections.abc import Callable, Mapping, Sequence
@@ -49,6 +51,28 @@ from .registry import Experiment, get_experiment, parse_params
 __all__ = ["CampaignResult", "run_campaign", "run_seed"]
 
 log = logging.getLogger(__name__)
+
+
+@contextlib.contextmanager
+def _quiet_on_sigint():
+    """While runs are collected, Ctrl-C first silences Dask's and tornado's loggers, then
+    raises KeyboardInterrupt: the interrupted client's callbacks on the event-loop thread
+    (``sync``'s cancel) otherwise log a traceback, racing the CLI's own one-line message.
+    Only in the main thread (elsewhere signals cannot be handled)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):
+        for name in ("distributed", "tornado", "asyncio"):
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def run_seed(base_seed: int, index: int) -> int:
@@ -250,7 +274,8 @@ def run_campaign(experiment: str | Experiment, params: Mapping | None = None, ru
         write_json(out / "campaign.json", {**config, "status": "running",
                                            "scheduler": address})
         try:
-            _collect(client, exp, params, seeds, runs_dir, records, on_record)
+            with _quiet_on_sigint():
+                _collect(client, exp, params, seeds, runs_dir, records, on_record)
         except BaseException as exc:
             # keep what arrived: the run records are on disk; say the campaign did not finish
             status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "crashed"
