@@ -269,7 +269,11 @@ class ScalarReceiver:
                                                 **self._assisted_windows(aided, assist))))
         k_long = self.long_noncoherent
         missed = [p for p in prns if not res[p].detected]
-        if listed and k_long and missed and k_long > res[missed[0]].noncoherent:
+        # whole coherent blocks the file holds from here: a short file gives no longer search
+        n_block = round(int(self.acq_kwargs.get("coherent_ms", 1)) * source.sampling_rate_hz
+                        * 1e-3)
+        avail = (source.n_samples - sample) // max(1, n_block)
+        if listed and k_long and missed and min(k_long, avail) > res[missed[0]].noncoherent:
             # half the Doppler step: the worst straddle loss drops from 0.9 to 0.2 dB, worth
             # the second FFT per bin at the sensitivity the long search is for
             fine = {"noncoherent": k_long, "doppler_step_hz": 0.5 * self._doppler_step()}
@@ -304,7 +308,7 @@ class ScalarReceiver:
         few Hz, and at the C/N0 it is for, below about 35 dB-Hz, a 10 Hz FLL on 1 ms prompts
         only adds noise: at 32 dB-Hz it walked well-acquired channels 20-50 Hz off until
         pull-in timed out); the configured schedule otherwise."""
-        long = self.long_noncoherent is not None and r.noncoherent >= self.long_noncoherent
+        long = r.noncoherent > int(self.acq_kwargs.get("noncoherent", 40))
         return self.config.pull_in_fll_min_bw_hz if long and r.doppler_refined else None
 
     def _doppler_step(self) -> float:
