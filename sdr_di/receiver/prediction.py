@@ -38,6 +38,12 @@ __all__ = ["FixPredictor", "SignalPrediction", "visible_satellites"]
 _RATE_DT_S = 0.01
 
 
+def _doppler(pc0: float, pc1: float, carrier_hz: float) -> float:
+    """Carrier Doppler [Hz] from two carrier phase-ranges [m] ``_RATE_DT_S`` apart (positive
+    when the range shrinks)."""
+    return -(carrier_hz / C_LIGHT) * float(pc1 - pc0) / _RATE_DT_S
+
+
 @dataclasses.dataclass(frozen=True)
 class SignalPrediction:
     """Predicted signal of one satellite at one IF sample.
@@ -109,7 +115,7 @@ class FixPredictor:
         p0, pc = pred.P[0, 0], pred.Pc[0]
         if not math.isfinite(p0):
             return None
-        doppler = -(self.carrier_hz / C_LIGHT) * float(pc[1] - pc[0]) / _RATE_DT_S
+        doppler = _doppler(pc[0], pc[1], self.carrier_hz)
         sow_tx = sow_nom - p0 / C_LIGHT
         w = math.floor(sow_tx / SECONDS_PER_WEEK)
         return SignalPrediction(t_tx_week=int(week + w), t_tx_sow=sow_tx - w * SECONDS_PER_WEEK,
@@ -155,5 +161,5 @@ def visible_satellites(nav, week: int, sow: float, r_e, *, mask_deg: float = 5.0
         el, _ = elevation_azimuth(r, pred.r_sat[0, 0])
         if np.degrees(float(el)) < mask_deg:
             continue
-        out[int(prn)] = -(F_B3I / C_LIGHT) * float(pred.Pc[0, 1] - pred.Pc[0, 0]) / _RATE_DT_S
+        out[int(prn)] = _doppler(pred.Pc[0, 0], pred.Pc[0, 1], F_B3I)
     return dict(sorted(out.items()))
