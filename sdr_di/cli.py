@@ -26,7 +26,7 @@ class _ArgumentParser(argparse.ArgumentParser):
     :func:`main` like every other bad input. Sub-parsers inherit the class.
     """
 
-    def error(self, message: str):  # noqa: D102 - argparse API
+    def error(self, message: str):
         sub = self.prog.split(" ", 1)[1] if " " in self.prog else ""
         where = f"{sub}: " if sub else ""
         raise UsageError(f"{where}{message} (see {self.prog} --help)")
@@ -470,7 +470,12 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     from .errors import FilterError, ImuDataError, ScenarioError
     from .filters import FILTER_NAMES
     from .ins.imu import ImuErrorModel
-    from .integration.loose import load_lc_scenario, make_inputs, min_lc_duration_s, run_loose
+    from .integration.loose import (
+        load_lc_scenario,
+        make_inputs,
+        min_lc_duration_s,
+        run_loose,
+    )
     from .integration.noise import NoiseWindow
     from .io.atomic import check_output_dir, ensure_output_dir
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
@@ -613,7 +618,12 @@ def _quiet_after_interrupt() -> None:
     import logging
     import warnings
 
-    for name in ("distributed", "tornado", "asyncio"):
+    families = ("distributed", "tornado", "asyncio")
+    # children too: one with a level of its own (Dask sets tornado.application's) ignores
+    # its parent's (the same rule as experiments.campaign.quiet_loggers, kept here so that
+    # an interrupt during start-up does not import Dask)
+    for name in [*families, *(n for n in list(logging.root.manager.loggerDict)
+                              if n.split(".", 1)[0] in families)]:
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
     warnings.filterwarnings("ignore")
 

@@ -53,6 +53,16 @@ __all__ = ["CampaignResult", "run_campaign", "run_seed"]
 log = logging.getLogger(__name__)
 
 
+def quiet_loggers(families: Sequence[str]) -> None:
+    """Silence every logger of the given families, children included: a child with a level
+    of its own ignores its parent's (Dask's configuration sets ``tornado.application`` to
+    ERROR, so silencing ``tornado`` alone left its tracebacks)."""
+    names = [n for n in list(logging.root.manager.loggerDict)
+             if n.split(".", 1)[0] in families]
+    for name in (*families, *names):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
 @contextlib.contextmanager
 def _quiet_on_sigint():
     """While runs are collected, Ctrl-C first silences Dask's and tornado's loggers, then
@@ -64,8 +74,7 @@ def _quiet_on_sigint():
         return
 
     def interrupt(signum, frame):
-        for name in ("distributed", "tornado", "asyncio"):
-            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+        quiet_loggers(("distributed", "tornado", "asyncio"))
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGINT, interrupt)
