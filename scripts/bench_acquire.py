@@ -24,7 +24,6 @@ input blocks is shared by the PRNs of one call, so the per-PRN cost falls with m
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import resource
 import shutil
@@ -47,7 +46,7 @@ def _cpu() -> float:
 
 def run(args: argparse.Namespace) -> None:
     from sdr_di.cli import main as cli
-    from sdr_di.receiver.acquisition import acquire
+    from sdr_di.receiver.acquisition import acquire, doppler_offsets
     from sdr_di.receiver.run_scalar import open_source, sidecar_assistance
     from sdr_di.receiver.scalar import ScalarReceiver
 
@@ -75,7 +74,7 @@ def run(args: argparse.Namespace) -> None:
             for _ in range(args.repeat):
                 t0, c0 = time.perf_counter(), _cpu()
                 if assisted:  # one call, each PRN around its own Doppler (shared bins)
-                    win = rx._assisted_windows(prns, {p: aid.get(p) or 0.0 for p in prns})
+                    win = rx._assisted_windows(prns, {p: aid.get(p) or 0.0 for p in prns}, fs)
                     acquire(x, fs, src.if_hz, prns=prns, noncoherent=k, doppler_step_hz=step,
                             **win)
                 else:
@@ -84,7 +83,7 @@ def run(args: argparse.Namespace) -> None:
                             **win)
                 w, c = time.perf_counter() - t0, _cpu() - c0
                 best = (w, c) if best is None or w < best[0] else best
-            bins = 2 * math.ceil(win["doppler_range_hz"] / step - 1e-9) + 1
+            bins = doppler_offsets(win["doppler_range_hz"], step).size
             w, c = best
             print(f"{name:>14} {k:>5} x 1 {bins:5d} {w:7.2f} {c:6.2f} {w / len(prns):10.3f} "
                   f"{c / len(prns):9.3f}")

@@ -126,7 +126,8 @@ from .correlator import (
 from .narrowband import remove_dc_and_lines
 
 __all__ = ["AcquisitionResult", "acquire", "acquire_source", "acquisition_upsampling",
-           "check_search", "detection_cn0_dbhz", "detection_threshold"]
+           "check_search", "default_doppler_step_hz", "detection_cn0_dbhz",
+           "detection_threshold", "doppler_offsets"]
 
 #: Refined Dopplers closer than this are "the same Doppler" for the artefact note [Hz].
 _SHARED_DOPPLER_HZ = 10.0
@@ -257,6 +258,20 @@ def detection_cn0_dbhz(threshold: float, noncoherent: int, coherent_ms: int = 1,
 
     snr_db = optimize.brentq(miss, -60.0, 60.0, xtol=1e-4)
     return snr_db - 10.0 * math.log10(int(coherent_ms) * 1e-3)
+
+
+def default_doppler_step_hz(coherent_ms: int, sampling_rate_hz: float) -> float:
+    """Default Doppler bin spacing [Hz]: ``1 / (2 T_c)`` with ``T_c`` the coherent block of
+    ``round(M fs / 1000)`` samples (500 Hz for 1 ms; module notes)."""
+    fs = float(sampling_rate_hz)
+    return 1.0 / (2.0 * (round(int(coherent_ms) * fs * 1e-3) / fs))
+
+
+def doppler_offsets(doppler_range_hz: float, step_hz: float) -> np.ndarray:
+    """Doppler bins of a search relative to its centre [Hz]: ``step * (-n..n)`` with ``n``
+    the fewest bins that cover ``+-doppler_range_hz``."""
+    n_half = math.ceil(doppler_range_hz / step_hz - 1e-9)
+    return step_hz * np.arange(-n_half, n_half + 1)
 
 
 def acquisition_upsampling(sampling_rate_hz: float) -> int:
@@ -406,9 +421,8 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
     n_c = u * n_c0
     workers = workers or os.cpu_count() or 1
     t_c = n_c / fs_g
-    step = float(doppler_step_hz) if doppler_step_hz else 1.0 / (2.0 * t_c)
-    n_half = math.ceil(doppler_range_hz / step - 1e-9)
-    offsets = step * np.arange(-n_half, n_half + 1)
+    step = float(doppler_step_hz) if doppler_step_hz else default_doppler_step_hz(m_ms, fs)
+    offsets = doppler_offsets(doppler_range_hz, step)
     n_bins = offsets.size
     centres = {p: float(doppler_center_hz) for p in prn_list}
     for p, c in (doppler_centers or {}).items():

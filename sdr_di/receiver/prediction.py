@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from ..constants import C_LIGHT, F_B3I, SECONDS_PER_WEEK
-from .pvt import PvtEngine, _lookup_eph
+from .pvt import PvtEngine, lookup_ephemeris
 from .range_model import predict_ranges
 
 __all__ = ["FixPredictor", "SignalPrediction", "visible_satellites"]
@@ -101,7 +101,7 @@ class FixPredictor:
         if not 0.0 <= dt <= self.max_age_s:
             return None
         week, sow_nom = rx_time.time_at(int(sample))
-        eph = _lookup_eph(eng.ephemerides, int(prn), week, sow_nom)
+        eph = lookup_ephemeris(eng.ephemerides, int(prn), week, sow_nom)
         if eph is None:
             return None
         v = np.asarray(fix.v_e, float)

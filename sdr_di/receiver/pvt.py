@@ -303,7 +303,10 @@ class SatelliteStates:
     missing: tuple[int, ...]
 
 
-def _lookup_eph(ephemerides: Any, prn: int, week: int, sow: float) -> Ephemeris | None:
+def lookup_ephemeris(ephemerides: Any, prn: int, week: int, sow: float) -> Ephemeris | None:
+    """The healthy, finite record of ``prn`` in force at BDT (``week``, ``sow``) [s] from a
+    ``{prn: Ephemeris}`` mapping or an object with ``select`` (e.g.
+    :class:`~sdr_di.receiver.navdata.NavDataInForce`); None when there is none."""
     if hasattr(ephemerides, "select"):
         try:
             return ephemerides.select(prn, week, sow)
@@ -339,7 +342,7 @@ def satellite_states(obs: Observables, ephemerides: Mapping[int, Ephemeris] | An
     missing = []
     for i in range(n):
         prn, wk, t_sv = int(obs.prn[i]), int(obs.t_tx_week[i]), float(obs.t_tx_sow[i])
-        eph = _lookup_eph(ephemerides, prn, wk, t_sv)
+        eph = lookup_ephemeris(ephemerides, prn, wk, t_sv)
         if eph is None:
             missing.append(prn)
             continue

@@ -41,7 +41,9 @@ from ..io.atomic import atomic_open, ensure_output_dir
 from .acquisition import (
     AcquisitionResult,
     acquire_source,
+    default_doppler_step_hz,
     detection_cn0_dbhz,
+    doppler_offsets,
 )
 from .ifreader import IfSource
 
@@ -128,8 +130,8 @@ def run_acquisition(source: IfSource, out_dir: str | Path, *, prns=None, coheren
     out_dir = ensure_output_dir(out_dir)  # after the search: a refused file leaves nothing
     k_used = results[0].noncoherent if results else int(noncoherent)
     fs = source.sampling_rate_hz
-    step = 1.0 / (2.0 * coherent_ms * 1e-3)
-    n_half = math.ceil(doppler_range_hz / step - 1e-9)
+    step = default_doppler_step_hz(coherent_ms, fs)
+    bins = doppler_center_hz + doppler_offsets(doppler_range_hz, step)
     thr = next((r.threshold for r in results if math.isfinite(r.threshold)), math.nan)
     path = out_dir / f"{stem}_acquisition.csv"
     with atomic_open(path, "w") as fh:
@@ -142,7 +144,7 @@ def run_acquisition(source: IfSource, out_dir: str | Path, *, prns=None, coheren
         results=results, coherent_ms=int(coherent_ms), noncoherent=k_used,
         requested_noncoherent=int(noncoherent),
         searched_s=k_used * round(coherent_ms * fs * 1e-3) / fs, file_s=source.duration_s,
-        doppler_bins_hz=(doppler_center_hz - n_half * step, doppler_center_hz + n_half * step,
+        doppler_bins_hz=(float(bins[0]), float(bins[-1]),
                          step),
         cn0_pd90_dbhz=(detection_cn0_dbhz(thr, k_used, coherent_ms) if math.isfinite(thr)
                        else math.nan),

@@ -80,7 +80,12 @@ import numpy as np
 from ..constants import CODE_LENGTH_B3I
 from ..orbits.ephemeris import Ephemeris
 from ._numba_correlate_bits import correlate_epl_bits, mean_power
-from .acquisition import AcquisitionResult, acquire_source, acquisition_upsampling
+from .acquisition import (
+    AcquisitionResult,
+    acquire_source,
+    acquisition_upsampling,
+    default_doppler_step_hz,
+)
 from .channel import Channel
 from .correlator import (
     CARRIER_BLOCK,
@@ -259,6 +264,7 @@ class ScalarReceiver:
         """Step 1 of the module notes: one cold search shared by the PRNs without a predicted
         Doppler, a narrow search around each predicted Doppler, then, for the PRNs of a list
         (``listed``) still not found, the long non-coherent search."""
+        fs = source.sampling_rate_hz
         res: dict[int, AcquisitionResult] = {}
         cold = [p for p in prns if assist.get(p) is None]
         if cold:
@@ -266,38 +272,41 @@ class ScalarReceiver:
         aided = [p for p in prns if p not in res]
         if aided:
             res.update(zip(aided, self._acquire(source, sample, aided,
-                                                **self._assisted_windows(aided, assist))))
+                                                **self._assisted_windows(aided, assist, fs))))
         k_long = self.long_noncoherent
         missed = [p for p in prns if not res[p].detected]
         # whole coherent blocks the file holds from here: a short file gives no longer search
-        n_block = round(int(self.acq_kwargs.get("coherent_ms", 1)) * source.sampling_rate_hz
-                        * 1e-3)
+        n_block = round(int(self.acq_kwargs.get("coherent_ms", 1)) * fs * 1e-3)
         avail = (source.n_samples - sample) // max(1, n_block)
         if listed and k_long and missed and min(k_long, avail) > res[missed[0]].noncoherent:
             # half the Doppler step: the worst straddle loss drops from 0.9 to 0.2 dB, worth
             # the second FFT per bin at the sensitivity the long search is for
-            fine = {"noncoherent": k_long, "doppler_step_hz": 0.5 * self._doppler_step()}
+            fine = {"noncoherent": k_long,
+                    "doppler_step_hz": 0.5 * self._doppler_step(fs)}
             cold = [p for p in missed if assist.get(p) is None]
             if cold:
                 res.update(zip(cold, self._acquire(source, sample, cold, **fine)))
             aided = [p for p in missed if assist.get(p) is not None]
             if aided:
                 res.update(zip(aided, self._acquire(source, sample, aided, **fine,
-                                                    **self._assisted_windows(aided, assist))))
+                                                    **self._assisted_windows(aided, assist,
+                                                                             fs))))
         return [res[p] for p in prns]
 
-    def _assisted_windows(self, prns: list[int], assist: dict[int, float | None]) -> dict:
-        """One search of several PRNs, each over its :meth:`_assisted_window` (the widest
-        half-width for all; the centres on the cold grid's lattice share their bins)."""
-        wins = {p: self._assisted_window(assist[p]) for p in prns}
+    def _assisted_windows(self, prns: list[int], assist: dict[int, float | None],
+                          fs: float) -> dict:
+        """One search of several PRNs at ``fs`` [Hz], each over its :meth:`_assisted_window`
+        (the widest half-width for all; the centres on the cold grid's lattice share their
+        bins)."""
+        wins = {p: self._assisted_window(assist[p], fs) for p in prns}
         return {"doppler_centers": {p: w["doppler_center_hz"] for p, w in wins.items()},
                 "doppler_range_hz": max(w["doppler_range_hz"] for w in wins.values())}
 
-    def _assisted_window(self, doppler_hz: float) -> dict:
+    def _assisted_window(self, doppler_hz: float, fs: float) -> dict:
         """Doppler search around a predicted Doppler: the bins of the cold search's grid
         (multiples of its step) that cover ``+-assist_doppler_range_hz`` around it, so that an
         assisted search refines from the same bins as a cold one would."""
-        step = self._doppler_step()
+        step = self._doppler_step(fs)
         centre = round(doppler_hz / step) * step
         return {"doppler_center_hz": centre,
                 "doppler_range_hz": self.assist_doppler_range_hz + abs(doppler_hz - centre)}
@@ -311,11 +320,12 @@ class ScalarReceiver:
         long = r.noncoherent > int(self.acq_kwargs.get("noncoherent", 40))
         return self.config.pull_in_fll_min_bw_hz if long and r.doppler_refined else None
 
-    def _doppler_step(self) -> float:
-        """Doppler bin spacing of the searches [Hz] (the acquisition default, 1 / (2 M))."""
+    def _doppler_step(self, fs: float) -> float:
+        """Doppler bin spacing of the searches at ``fs`` [Hz] (the acquisition default,
+        :func:`~sdr_di.receiver.acquisition.default_doppler_step_hz`, unless configured)."""
         step = self.acq_kwargs.get("doppler_step_hz")
         return float(step) if step else \
-            1.0 / (2.0 * int(self.acq_kwargs.get("coherent_ms", 1)) * 1e-3)
+            default_doppler_step_hz(int(self.acq_kwargs.get("coherent_ms", 1)), fs)
 
     def _acq_len(self, fs: float) -> int:
         return int(self.acq_kwargs.get("noncoherent", 20)) * \
