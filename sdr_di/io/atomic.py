@@ -199,3 +199,32 @@ class OutputSet:
                 part.unlink(missing_ok=True)
             except OSError:
                 pass
+
+
+class FinalizingWriter:
+    """The life cycle every output writer shares: :meth:`close` publishes the file under its
+    final name, :meth:`abort` discards it; used as a context manager it closes on success
+    and aborts on an exception. Subclasses implement both and keep ``self._closed``."""
+
+    _closed: bool = False
+
+    def close(self):
+        raise NotImplementedError
+
+    def abort(self) -> None:
+        raise NotImplementedError
+
+    @property
+    def closed(self) -> bool:
+        """True after :meth:`close` or :meth:`abort`."""
+        return self._closed
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+        return False

@@ -72,7 +72,7 @@ from ..errors import OutputError
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from ..orbits.rinex_nav import _URA_BOUNDS_M, _toc_datetime  # the reader's own conventions
 from ..timebase import bdt_to_datetime
-from .atomic import atomic_open
+from .atomic import FinalizingWriter, atomic_open
 
 __all__ = [
     "LLI_HALF_CYCLE",
@@ -212,7 +212,7 @@ def _sat_line(s: SatObservation) -> str:
     return "".join(out) + "\n"
 
 
-class RinexObsWriter:
+class RinexObsWriter(FinalizingWriter):
     """Streaming RINEX 3.05 observation file writer (BDS B3I, BDT).
 
     Parameters
@@ -477,20 +477,6 @@ class RinexObsWriter:
             pass
         _unlink(self._body_path)
 
-    @property
-    def closed(self) -> bool:
-        """True after :meth:`close` or :meth:`abort`."""
-        return self._closed
-
-    def __enter__(self) -> RinexObsWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-        return False
 
 
 def _unlink(path: Path) -> None:
@@ -559,7 +545,7 @@ def format_nav_record(eph: Ephemeris, t_tx_sow: float | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-class RinexNavWriter:
+class RinexNavWriter(FinalizingWriter):
     """RINEX 3.05 BDS navigation file of the decoded ephemerides and Klobuchar set.
 
     Records are collected with :meth:`add` / :meth:`update` (each distinct record once, in
@@ -650,15 +636,6 @@ class RinexNavWriter:
         """Discard the records (nothing was written to disk)."""
         self._closed = True
 
-    def __enter__(self) -> RinexNavWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-        return False
 
 
 # --- both files of a run --------------------------------------------------------------------

@@ -38,7 +38,7 @@ import numpy as np
 from ..constants import SECONDS_PER_WEEK
 from ..errors import OutputError, SdrDiError
 from ..timebase import bdt_minus_utc, bdt_to_datetime
-from .atomic import atomic_open
+from .atomic import FinalizingWriter, atomic_open
 
 __all__ = [
     "CSV_COLUMNS",
@@ -148,7 +148,7 @@ _CSV_HEADER = (
 )
 
 
-class _StreamWriter:
+class _StreamWriter(FinalizingWriter):
     """Streaming text writer on top of :func:`atomic_open` with output-rate decimation."""
 
     def __init__(self, path: str | Path, rate_hz: float | None):
@@ -250,20 +250,6 @@ class _StreamWriter:
         self.abort()
         raise OutputError(f"{self.path}: write failed ({exc.strerror or exc})") from None
 
-    @property
-    def closed(self) -> bool:
-        """True after :meth:`close` or :meth:`abort`."""
-        return self._closed
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-        return False
 
 
 class SolutionCsvWriter(_StreamWriter):
