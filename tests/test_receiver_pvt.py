@@ -311,6 +311,56 @@ def test_default_weights_formal_covariance_consistent(world):
     assert np.mean(mah) == pytest.approx(4.0, abs=0.8)
 
 
+def test_velocity_formal_covariance_consistent(world):
+    """Rate noise drawn with the weight model's sigmas (0.05 m/s / sin(el) at 45 dB-Hz):
+    the Mahalanobis distance of (v, d) under ``cov_v`` averages 4 (chi-square, 4 dof)."""
+    cfg = pvt.PvtConfig()
+    syn = world.synth(round(10.0 * world.fs))
+    ref = pvt.solve(syn.obs_exact, world.eph, world.iono, config=cfg)
+    assert ref.cov_v.shape == (4, 4) and np.all(np.isfinite(ref.cov_v))
+    order = [int(np.flatnonzero(syn.obs_exact.prn == p)[0]) for p in ref.prns]
+    sig = np.empty(7)
+    sig[order] = 0.05 / np.sin(ref.elevation)
+    rng = np.random.default_rng(11)
+    sat = pvt.satellite_states(syn.obs_exact, world.eph)
+    _, v_true = world.truth(ref)
+    mah = []
+    for _ in range(300):
+        obs = dataclasses.replace(syn.obs_exact, pseudorange_rate_mps=(
+            syn.obs_exact.pseudorange_rate_mps + sig * rng.standard_normal(7)))
+        sol = pvt.solve_velocity(obs, world.eph, ref, world.iono, cfg, sat=sat)
+        x = np.r_[sol.v_e - v_true, sol.clock_drift_mps]
+        mah.append(x @ np.linalg.solve(sol.cov_v, x))
+    assert np.mean(mah) == pytest.approx(4.0, abs=0.8)
+
+
+@pytest.mark.parametrize("t_s", EPOCHS_S)
+def test_modelled_observables_are_the_generator_observables(world, t_s):
+    """The PVT's models run forwards from the true state and clock give the exact
+    pseudoranges and rates (the tight coupling's predictions)."""
+    b0, drift = 2.5e-4, 1.0e-7
+    syn = world.synth(round(t_s * world.fs), b0=b0, drift=drift)
+    obs = syn.obs_exact
+    sat = pvt.satellite_states(obs, world.eph)
+    r, v = world.gen.path(np.array([syn.t_true]))
+    idx = np.arange(obs.n)
+    P, D, U, el = pvt.modelled_observables(sat, idx, r[0], v[0], C_LIGHT * syn.bias_s,
+                                           C_LIGHT * drift, world.sc.sow + syn.t_true,
+                                           world.iono)
+    np.testing.assert_allclose(P, obs.pseudorange_m, atol=0.01)
+    np.testing.assert_allclose(D, obs.pseudorange_rate_mps, atol=1e-3)
+    np.testing.assert_allclose(np.linalg.norm(U, axis=1), 1.0)
+    assert np.all(el > 0)
+    # and it is the model the WLS solves: at the fix, measured minus modelled = residuals
+    sol = pvt.solve(obs, world.eph, world.iono)
+    k = [int(np.flatnonzero(obs.prn == p)[0]) for p in sol.prns]
+    P2, D2, _, _ = pvt.modelled_observables(sat, k, sol.r_e, sol.v_e, sol.clock_bias_m,
+                                            sol.clock_drift_mps, sol.sow, world.iono)
+    np.testing.assert_allclose(obs.pseudorange_m[k] - P2, sol.residuals, atol=1e-6)
+    np.testing.assert_allclose(obs.pseudorange_rate_mps[k] - D2, sol.rate_residuals,
+                               atol=1e-6)
+
+
 def test_cn0_lowers_weight(world):
     """A 20 dB weaker satellite with a 30 m error moves the fix much less when weighted."""
     syn = world.synth(round(10.0 * world.fs))

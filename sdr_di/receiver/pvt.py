@@ -34,7 +34,11 @@ with ``sigma_0`` = ``sigma_pr_m`` (1 m) for pseudoranges and ``sigma_rate_mps`` 
 for rates, ``CN0_ref`` = 45 dB-Hz (code/frequency discriminator noise variance is inversely
 proportional to C/N0; residual atmosphere and multipath grow like 1/sin el). An unknown
 C/N0 counts as the reference. ``weighting="equal"`` uses ``sigma_0`` for every satellite.
-The reported ``cov`` is the formal covariance (H^T W H)^-1 with these sigmas.
+The reported ``cov`` is the formal covariance (H^T W H)^-1 with these sigmas, and ``cov_v``
+the velocity solution's (J^T W J)^-1 (J the Jacobian of the rate model below at the
+solution, sigma_0 = ``sigma_rate_mps``). Both are formal: they hold what the weight model
+assumes (white, independent errors of the given sigmas), not the tracking loops' actual
+noise; the loose coupling takes them as its ``R`` (docs/coupling.md).
 
 Velocity model (pseudorange rate ``D = -lambda * doppler`` per receiver-clock second)::
 
@@ -47,6 +51,9 @@ shortening of the transmit interval by the range rate (``dt_tx/dt_rx = 1 - tau_d
 carrier-phase sign of the ionosphere and the time derivative of the atmospheric models
 (central difference over +-0.5 s) are all modelled, so generator-consistent Doppler gives
 the truth velocity to well below 1 mm/s.
+
+The same models run forwards (a receiver state in, pseudoranges and rates out) are
+:func:`modelled_observables`: the tight coupling's predicted observables.
 
 DOPs come from the unweighted geometry matrix in ENU with rows ``[-e_ENU, 1]``:
 ``Q = (H^T H)^-1``, GDOP = sqrt(tr Q), PDOP = sqrt(Q_EE + Q_NN + Q_UU), HDOP = sqrt(Q_EE +
@@ -92,6 +99,7 @@ __all__ = [
     "SatelliteStates",
     "atmosphere_delays",
     "compute_dops",
+    "modelled_observables",
     "sagnac_rotation",
     "satellite_states",
     "solve",
@@ -232,6 +240,9 @@ class PvtSolution:
         Pseudorange-rate residuals [m/s] (NaN where not used; empty until solved).
     cov : ndarray (4, 4)
         Formal covariance of (x, y, z, b), ECEF [m^2].
+    cov_v : ndarray (4, 4)
+        Formal covariance of the velocity solution (v_x, v_y, v_z, d), ECEF [m^2/s^2] (NaN
+        until solved).
     iterations : int
         Gauss-Newton iterations (both phases).
     message : str
@@ -258,6 +269,7 @@ class PvtSolution:
     residuals: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     rate_residuals: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     cov: np.ndarray = dataclasses.field(default_factory=lambda: np.full((4, 4), np.nan))
+    cov_v: np.ndarray = dataclasses.field(default_factory=lambda: np.full((4, 4), np.nan))
     velocity_status: PvtStatus = PvtStatus.NOT_COMPUTED
     iterations: int = 0
     message: str = ""
@@ -404,6 +416,19 @@ def atmosphere_delays(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
     else:
         ion = np.zeros_like(el)
     return el, az, np.broadcast_to(tropo, el.shape), np.broadcast_to(ion, el.shape)
+
+
+def _atmosphere_rate(r_rx: np.ndarray, v_rx: np.ndarray, r_sat_rot: np.ndarray,
+                     v_sat_rot: np.ndarray, t_sow: float, iono: Klobuchar | None,
+                     cfg: PvtConfig) -> np.ndarray:
+    """``d(T - I)/dt`` [m/s] of each satellite: central difference (+-0.5 s) of the models
+    along the satellite and receiver motion (the carrier sign of the ionosphere)."""
+    h = _ATM_RATE_DT_S
+    _, _, tp, ip = atmosphere_delays(r_rx + v_rx * h, r_sat_rot + v_sat_rot * h, t_sow + h,
+                                     iono, cfg)
+    _, _, tm, im = atmosphere_delays(r_rx - v_rx * h, r_sat_rot - v_sat_rot * h, t_sow - h,
+                                     iono, cfg)
+    return ((tp - ip) - (tm - im)) / (2.0 * h)
 
 
 def _sigma2(sigma0: float, el: np.ndarray | None, cn0: np.ndarray, cfg: PvtConfig) -> np.ndarray:
@@ -673,11 +698,7 @@ def solve_velocity(obs: Observables, ephemerides: Mapping[int, Ephemeris] | Any,
     v = np.zeros(3)
     cd = 0.0
     for _ in range(4):
-        # d(T - I)/dt by central difference of the models along the satellite and receiver motion
-        h = _ATM_RATE_DT_S
-        _, _, tp, ip = atmosphere_delays(r + v * h, r_rot + v_rot * h, t_rx + h, iono, cfg)
-        _, _, tm, im = atmosphere_delays(r - v * h, r_rot - v_rot * h, t_rx - h, iono, cfg)
-        atm_rate = ((tp - ip) - (tm - im)) / (2.0 * h)
+        atm_rate = _atmosphere_rate(r, v, r_rot, v_rot, t_rx, iono, cfg)
         num = (A - e @ v) / kfac + cd - c_ddt + atm_rate
         scale = 1.0 + cd / C_LIGHT
         f = num / scale
@@ -691,15 +712,73 @@ def solve_velocity(obs: Observables, ephemerides: Mapping[int, Ephemeris] | Any,
         if np.linalg.norm(dx) < 1e-7:
             break
     num = (A - e @ v) / kfac + cd - c_ddt + atm_rate
-    res = D - num / (1.0 + cd / C_LIGHT)
+    scale = 1.0 + cd / C_LIGHT
+    res = D - num / scale
     rate_res[good] = res
+    J = np.hstack([-e / (kfac * scale)[:, None],
+                   (1.0 / scale - num / (C_LIGHT * scale * scale))[:, None]])
+    cov_v = np.linalg.inv(J.T @ (J * w[:, None]))
     llh = solution.llh
     v_n = C_e_n(llh[0], llh[1]) @ v
     vstat = PvtStatus.FIX
     if idx.size > 4 and float(np.sqrt(np.mean(res * res))) > cfg.max_rate_residual_rms_mps:
         vstat = PvtStatus.LARGE_RESIDUALS
     return dataclasses.replace(solution, v_e=v, v_n=v_n, clock_drift_mps=float(cd),
-                               rate_residuals=rate_res, velocity_status=vstat)
+                               rate_residuals=rate_res, cov_v=cov_v, velocity_status=vstat)
+
+
+def modelled_observables(sat: SatelliteStates, idx: np.ndarray, r_rx: np.ndarray,
+                         v_rx: np.ndarray, clock_bias_m: float, clock_drift_mps: float,
+                         t_sow: float, iono: Klobuchar | None,
+                         config: PvtConfig | None = None):
+    """Pseudoranges and rates the PVT's models give for a receiver state (module notes).
+
+    The position and velocity models of :func:`solve_position` / :func:`solve_velocity` run
+    forwards: satellite states at the observed transmit times, Sagnac rotation with the
+    geometric travel time, satellite clock and its drift, Saastamoinen and B3I Klobuchar
+    delays and their rates. At a WLS solution's state they reproduce the measured
+    observables up to the solution's residuals.
+
+    Parameters
+    ----------
+    sat : SatelliteStates
+        :func:`satellite_states` of the epoch's observables.
+    idx : (n,) int array
+        The satellites (indices into ``sat``) to model.
+    r_rx, v_rx : (3,) arrays
+        Receiver ECEF position [m] and velocity [m/s] at the reception instant.
+    clock_bias_m, clock_drift_mps : float
+        Receiver clock bias [m] and drift [m/s] (receiver clock minus BDT, times c).
+    t_sow : float
+        BDT of the reception instant (receiver time minus clock bias / c) [s of week].
+    iono : Klobuchar or None
+        Ionosphere coefficients in force.
+    config : PvtConfig, optional
+        Model switches (ionosphere, troposphere).
+
+    Returns
+    -------
+    P : (n,) pseudoranges [m];  D : (n,) pseudorange rates [m/s per receiver-clock second];
+    U : (n, 3) unit line-of-sight vectors receiver -> satellite, ECEF;  el : (n,) elevations
+    [rad].
+    """
+    cfg = config or PvtConfig()
+    idx = np.asarray(idx, np.int64)
+    r = np.asarray(r_rx, float)
+    v = np.asarray(v_rx, float)
+    cb, cd = float(clock_bias_m), float(clock_drift_mps)
+    r_rot, rho, theta = sagnac_rotation(sat.r_e[idx], r)
+    el, _, tr, io = atmosphere_delays(r, r_rot, t_sow, iono, cfg)
+    P = rho + cb - C_LIGHT * sat.dt_sv[idx] + tr + io
+    v_rot = _rot_z(sat.v_e[idx], theta)
+    g_rot = OMEGA_E * _drot_z(sat.r_e[idx], theta)
+    U = (r_rot - r) / rho[:, None]
+    A = np.einsum("ij,ij->i", U, v_rot)
+    G = np.einsum("ij,ij->i", U, g_rot)
+    kfac = 1.0 + (A - G) / C_LIGHT
+    num = ((A - U @ v) / kfac + cd - C_LIGHT * sat.ddt_sv[idx]
+           + _atmosphere_rate(r, v, r_rot, v_rot, t_sow, iono, cfg))
+    return P, num / (1.0 + cd / C_LIGHT), U, el
 
 
 def solve(obs: Observables, ephemerides: Mapping[int, Ephemeris] | Any,
@@ -756,6 +835,8 @@ class PvtEngine:
         self.navdata = NavDataInForce(None)
         self.config = config or PvtConfig()
         self.last_fix: PvtSolution | None = None
+        #: Observables of the last :meth:`process` call (None before the first).
+        self.last_observables: Observables | None = None
 
     def process(self, channels: list[ChannelObservationLike],
                 sample_index: int | None = None) -> PvtSolution:
@@ -765,6 +846,7 @@ class PvtEngine:
         blockage) still give a row: status ``too_few_satellites`` at the receiver time.
         """
         obs = self.builder(channels, sample_index)
+        self.last_observables = obs
         sol = solve(obs, self.ephemerides, self.iono, self.last_fix, self.config)
         if sol.valid:
             self.last_fix = sol
