@@ -86,14 +86,16 @@ class Measurements:
     ----------
     z : (m,) array
         Measurement vector (deep and tight: ``[delta_rho_1..N, delta_rho_dot_1..N]`` [m,
-        m/s], paper 004 eq 7-9), or None when no channel is usable.
+        m/s], paper 004 eq 7-9), or None: no update in this interval (deep: no channel
+        usable; loose and tight: no GNSS epoch in it, or none usable).
     R : (m, m) array
         Its noise covariance, or None with ``z``.
     geometry : tuple
         Arguments of the loop's ``set_geometry`` for this update (the filter's measurement
         model at this epoch; deep: the INS position and the lines of sight of ``used``).
     used : (n_ch,) bool array
-        Channels in the measurement vector.
+        Channels in the measurement vector (loose and tight: of the latest GNSS epoch, also
+        on the intervals between epochs).
     """
 
     z: np.ndarray | None
@@ -254,12 +256,12 @@ class IntegrationLoop:
 
     def filter_step(self, iv: Interval, m: Measurements) -> None:
         """Process model over the interval, predict, and update with ``m`` when it has a
-        measurement (paper 004 eq 13-25); accumulates the NIS per measurement."""
+        measurement ``z`` (paper 004 eq 13-25); accumulates the NIS per measurement."""
         ta = time.perf_counter()
         kf = self.kf
         self.process.set_interval(iv.nav0, iv.nav1, iv.f_mean, iv.w_mean)
         kf.predict(self.T)
-        if m.n_used:
+        if m.z is not None:
             self.set_geometry(*m.geometry)
             kf.update(m.z, m.R)
             self._nis[0] += kf.nis / m.z.size
