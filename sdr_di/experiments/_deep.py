@@ -178,8 +178,14 @@ class DeepRun:
     acq_after_handover: int
 
 
-def run_deep_variant(inputs: Inputs, filter_name: str, **config: Any) -> DeepRun:
-    """Run :class:`~sdr_di.deep.DeepReceiver` with ``filter_name`` on ``inputs``.
+def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
+                     **config: Any) -> DeepRun:
+    """Run :class:`~sdr_di.deep.DeepReceiver` with ``filter_name`` in ``mode`` on ``inputs``.
+
+    ``mode`` (``"loose"``, ``"tight"``, ``"deep"``) is the receiver's coupling
+    (``DeepConfig.mode``); ``"deep"`` is the configuration's default and is not passed, so
+    the call also works with a receiver that predates the modes. ``config`` are further
+    :class:`~sdr_di.deep.DeepConfig` fields.
 
     Exceptions of the package (:class:`~sdr_di.errors.SdrDiError`) and numerical failures
     (``ValueError``, ``FloatingPointError``, ``numpy.linalg.LinAlgError``) are returned as
@@ -188,6 +194,8 @@ def run_deep_variant(inputs: Inputs, filter_name: str, **config: Any) -> DeepRun
     from ..deep import DeepConfig, DeepReceiver
     from ..errors import SdrDiError
 
+    if mode != "deep":
+        config["mode"] = mode
     scalar = CountingScalarReceiver(log=False)
     try:
         rx = DeepReceiver(DeepConfig(filter=filter_name, **config), scalar=scalar)

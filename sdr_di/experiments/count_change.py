@@ -5,9 +5,13 @@ blockage schedule that makes the number of visible satellites follow ``counts`` 
 ``7,6,5,4,5,6,7``): from ``t_start_s`` on, segment ``i`` lasts ``segment_s`` (the last one to
 the end of the file) and shows the ``counts[i]`` satellites of highest elevation at the start;
 the others are blocked (``[[outage]] blockage = true`` per PRN, so a satellite leaves and
-comes back as a whole signal, as behind a building). Then the deep receiver runs on the same
-files once per filter (``filters``, default ``ekf,rae-aukf,ff-aukf``): the filters differ
-only in how they cope with the changing measurement dimension ``N_k``.
+comes back as a whole signal, as behind a building). Then the receiver runs on the same
+files once per filter (``filters``, default ``ekf,rae-aukf,ff-aukf``) and coupling mode
+(``modes``, default ``deep``; ``loose``, ``tight``: :mod:`.variants` for the labels,
+``ekf@tight``): the variants differ only in how they cope with the changing measurement
+dimension ``N_k``. A schedule below 4 (``counts = "7,5,3,2,3,5,7"``) separates the
+couplings: with 3 satellites the WLS fix of ``loose`` is gone (no update, the INS coasts)
+while ``tight`` and ``deep`` keep updating with the ranges they have (``f.seg<i>.updating``).
 
 ``t_start_s`` must be after the deep receiver's hand-over (about 12 s of file for the default
 scenario: scalar acquisition, tracking and the first decoded D1 subframe); a run whose
@@ -29,6 +33,9 @@ Figures (per filter ``f``):
     (``t_start_s`` to the end).
 ``f.seg<i>.{...}_{rmse,max}``
     The same over count segment ``i`` (its count is the figure ``seg<i>.count``).
+``f.seg<i>.updating``
+    Fraction of the segment's output rows at which the filter had measurements
+    (``n_used > 0``).
 ``f.count_match``
     Fraction of output rows in the schedule where the filter's measurement vector held
     exactly the scheduled count of channels (the deep loop's channel management following
@@ -59,17 +66,16 @@ from ._deep import (
     has_mean,
     parse_list,
     ranked_prns,
-    record_run,
-    run_deep_variant,
     segment_metrics,
     with_outages,
 )
-from .filter_figures import (
-    QUANTITIES,
-    STATS,
-    filter_list,
-    filter_names_in,
-    rmse_bar_plot,
+from .filter_figures import QUANTITIES, STATS, rmse_bar_plot
+from .variants import (
+    loop_config,
+    plot_error_norms,
+    run_variants,
+    variant_list,
+    variant_rows,
 )
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run",
@@ -84,6 +90,7 @@ DESCRIPTION = ("visible-satellite count following a schedule (7-6-5-4-5-6-7, pap
 default_params: dict = {
     "scenario": None,
     "filters": "ekf,rae-aukf,ff-aukf",
+    "modes": "deep",
     "counts": "7,6,5,4,5,6,7",
     "t_start_s": 15.0,
     "segment_s": 10.0,
@@ -104,7 +111,7 @@ def _duration(params: dict, n_seg: int) -> float:
 
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
-    filter_list(NAME, params["filters"])
+    variant_list(NAME, params["filters"], params["modes"])
     counts = parse_list(f"{NAME}: counts", params["counts"], int)
     if min(counts) < 1:
         raise ExperimentError(f"{NAME}: counts={params['counts']!r}: every count must be >= 1")
@@ -207,32 +214,33 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     for i, (t0, t1, c) in enumerate(segs):
         fig[f"seg{i}.count"] = c
         fig[f"seg{i}.t0_s"] = t0
-    series = {}
-    cfg = {"filter_rate_hz": float(params["filter_rate_hz"]),
-           "output_rate_hz": float(params["output_rate_hz"])}
+    cfg = loop_config(params)
+
+    def seg_figures(name: str, res) -> dict:
+        out: dict = {}
+        through = bool(fig[f"{name}.completed"]) and res.handover_s < t_start
+        for i, (t0, t1, _) in enumerate(segs):
+            m = segment_metrics(res, t0, t1, f"{name}.seg{i}.")
+            out.update(m)
+            through = through and all(math.isfinite(v) for v in m.values())
+            sel = (res.t >= t0) & (res.t < t1)
+            out[f"{name}.seg{i}.updating"] = (float(np.mean(res.n_used[sel] > 0))
+                                              if sel.any() else math.nan)
+        out[f"{name}.through_all"] = int(through)
+        sched = _scheduled_count(res.t, segs, len(res.prns))
+        inside = res.t >= t_start
+        out[f"{name}.count_match"] = (float(np.mean(res.n_used[inside] == sched[inside]))
+                                      if inside.any() else math.nan)
+        return out
+
     with generated_inputs(sc) as inp:
         fig["sampling_rate_hz"] = float(inp.source.sampling_rate_hz)
-        for name in filter_list(NAME, params["filters"]):
-            res = record_run(fig, name, run_deep_variant(inp, name, **cfg))
-            if res is None:
-                fig[f"{name}.through_all"] = 0
-                for q, _ in QUANTITIES:
-                    for s in STATS:
-                        fig[f"{name}.{q}_{s}"] = math.nan
-                continue
-            fig.update(segment_metrics(res, t_start, None, f"{name}."))
-            through = bool(fig[f"{name}.completed"]) and res.handover_s < t_start
-            for i, (t0, t1, _) in enumerate(segs):
-                m = segment_metrics(res, t0, t1, f"{name}.seg{i}.")
-                fig.update(m)
-                through = through and all(math.isfinite(v) for v in m.values())
-            fig[f"{name}.through_all"] = int(through)
-            sched = _scheduled_count(res.t, segs, len(res.prns))
-            inside = res.t >= t_start
-            fig[f"{name}.count_match"] = (float(np.mean(res.n_used[inside] == sched[inside]))
-                                          if inside.any() else math.nan)
-            _write_csv(Path(out_dir) / f"errors_{name}.csv", res, sched)
-            series[name] = res
+        series = run_variants(
+            inp, variant_list(NAME, params["filters"], params["modes"]), cfg, fig, out_dir,
+            window=(t_start, None), figures=seg_figures,
+            failed=lambda name: {f"{name}.through_all": 0},
+            csv_extra=lambda res: {"scheduled_count": _scheduled_count(res.t, segs,
+                                                                       len(res.prns))})
     if params["plots"] and series:
         note = plotting.matplotlib_missing()
         if note is None:
@@ -242,25 +250,11 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     return fig
 
 
-def _write_csv(path: Path, res, sched: np.ndarray) -> None:
-    from ..io.atomic import atomic_open
-
-    cols = ("t_s,n_used,scheduled_count,att_err_e_deg,att_err_n_deg,att_err_u_deg,"
-            "vel_err_e,vel_err_n,vel_err_u,pos_err_e_m,pos_err_n_m,pos_err_u_m")
-    data = np.column_stack([res.t, res.n_used, sched, res.att_err, res.vel_err, res.pos_err])
-    with atomic_open(path, "w") as fh:
-        fh.write(cols + "\n")
-        np.savetxt(fh, data, delimiter=",", fmt="%.10g")
-
-
 def _plot_run(out_dir: Path, series: dict, segs: list, n_all: int, seed: int) -> None:
     spans = [(t0, t1) for t0, t1, c in segs if c < n_all]
-    t_by = {n: r.t for n, r in series.items()}
-    panels = [(label, {n: np.linalg.norm(getattr(r, f"{q[:3]}_err"), axis=1)
-                       for n, r in series.items()}) for q, label in QUANTITIES]
-    plotting.time_series(out_dir / "error_norms.png", t_by, panels,
-                         title=f"count-change: error norms (seed {seed}; shaded: fewer "
-                         "satellites)", spans=spans)
+    plot_error_norms(out_dir / "error_norms.png", series,
+                     f"count-change: error norms (seed {seed}; shaded: fewer satellites)",
+                     spans)
     t_any = next(iter(series.values())).t
     t_by = {"scheduled": t_any, **{n: r.t for n, r in series.items()}}
     counts = {"scheduled": _scheduled_count(t_any, segs, n_all),
@@ -273,28 +267,19 @@ def _plot_run(out_dir: Path, series: dict, segs: list, n_all: int, seed: int) ->
 def tables(stats: dict) -> dict[str, list[dict]]:
     """``filters``: one row per filter (overall figures, flags); ``segments``: one row per
     filter and count segment (mean over runs)."""
-    rows, seg_rows = [], []
     n_seg = sum(1 for k in stats if k.startswith("seg") and k.endswith(".count"))
-    for name in filter_names_in(stats):
-        row: dict = {"filter": name}
-        for key in ("completed", "through_all", "handover_s", "count_match",
-                    "acq_after_handover") + tuple(f"{q}_{s}" for q, _ in QUANTITIES
-                                                  for s in STATS):
-            st = stats.get(f"{name}.{key}")
-            if has_mean(st):
-                row[key] = st["mean"]
-                if st["n"] > 1 and key.endswith(("rmse", "max")):
-                    row[key + "_std"] = st["std"]
-        rows.append(row)
-        for i in range(n_seg):
-            c = stats.get(f"seg{i}.count")
-            srow: dict = {"filter": name, "segment": i,
-                          "count": c["mean"] if has_mean(c) else ""}
-            for q, _ in QUANTITIES:
-                for s in STATS:
-                    st = stats.get(f"{name}.seg{i}.{q}_{s}")
-                    srow[f"{q}_{s}"] = st["mean"] if has_mean(st) else math.nan
-            seg_rows.append(srow)
+    rows = variant_rows(stats, ("completed", "through_all", "handover_s", "count_match",
+                                "acq_after_handover")
+                        + tuple(f"{q}_{s}" for q, _ in QUANTITIES for s in STATS),
+                        std=lambda k: k.endswith(("rmse", "max")))
+    seg_rows = []
+    for i in range(n_seg):
+        c = stats.get(f"seg{i}.count")
+        seg_rows += variant_rows(stats, tuple(f"{q}_{s}" for q, _ in QUANTITIES for s in STATS)
+                                 + ("updating",), infix=f"seg{i}.", std=lambda k: False,
+                                 segment=i, count=c["mean"] if has_mean(c) else "")
+    order = [r["filter"] for r in rows]
+    seg_rows.sort(key=lambda r: order.index(r["filter"]))
     return {"filters": rows, "segments": seg_rows}
 
 

@@ -15,7 +15,8 @@ import numpy as np
 from ..errors import ExperimentError
 from ..filters import FILTER_NAMES
 
-__all__ = ["QUANTITIES", "STATS", "filter_list", "filter_names_in", "rmse_bar_plot"]
+__all__ = ["QUANTITIES", "STATS", "filter_list", "filter_names_in", "parse_filter_spec",
+           "rmse_bar_plot"]
 
 #: (figure stem, axis label) of the error norms every filter comparison reports.
 QUANTITIES = (("att_deg", "attitude [deg]"), ("vel_mps", "velocity [m/s]"),
@@ -25,24 +26,67 @@ STATS = ("rmse", "max")
 
 
 def filter_list(exp: str, text: str) -> list[str]:
-    """Filter names of a ``filters`` parameter (``all`` or a comma list)."""
+    """Filter names of a ``filters`` parameter (``all`` or a comma list).
+
+    An entry may carry filter options after colons (``ff-aukf:q_states=nominal``,
+    :func:`parse_filter_spec`); the entries are returned as given (lower case).
+    """
     if str(text).strip().lower() == "all":
         return list(FILTER_NAMES)
     names = [n.strip().lower() for n in str(text).split(",") if n.strip()]
-    bad = [n for n in names if n not in FILTER_NAMES]
+    bad = [n for n in names if n.partition(":")[0] not in FILTER_NAMES]
     if bad or not names:
         raise ExperimentError(f"{exp}: filters={text!r}: unknown filter(s) "
                               f"{', '.join(bad) or '(none given)'}; valid: all or "
                               f"{', '.join(FILTER_NAMES)}")
+    for n in names:
+        parse_filter_spec(exp, n)
     return names
 
 
+def _option_value(text: str):
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+def parse_filter_spec(exp: str, spec: str) -> tuple[str, dict]:
+    """``"ff-aukf:q_states=nominal:window=25"`` -> ``("ff-aukf", {"q_states": "nominal",
+    "window": 25})``: the filter name and its options (numbers read as int or float).
+
+    Raises
+    ------
+    ExperimentError
+        Unknown filter, an option without ``=``, or a ``.``/``@``/``,`` in the spec (these
+        separate figure names, modes and list entries).
+    """
+    if any(c in str(spec) for c in ".@,"):
+        raise ExperimentError(f"{exp}: filter {spec!r}: '.', '@' and ',' are not allowed in "
+                              "a filter entry (they separate figure names, modes, entries)")
+    name, *opts = str(spec).strip().lower().split(":")
+    if name not in FILTER_NAMES:
+        raise ExperimentError(f"{exp}: filter {spec!r}: unknown filter {name!r}; valid: "
+                              f"{', '.join(FILTER_NAMES)}")
+    options = {}
+    for o in opts:
+        key, eq, val = o.partition("=")
+        if not eq or not key or not val:
+            raise ExperimentError(f"{exp}: filter {spec!r}: option {o!r} is not key=value")
+        options[key] = _option_value(val)
+    return name, options
+
+
 def filter_names_in(stats: dict) -> list[str]:
-    """Filter names that prefix figure keys (``"ff-aukf.pos_m_rmse"``), in order."""
+    """Variant labels that prefix figure keys (``"ff-aukf.pos_m_rmse"``,
+    ``"ekf@tight.pos_m_rmse"``, ``"ff-aukf:q_states=nominal.pos_m_rmse"``), in order."""
     seen = []
     for key in stats:
         name, dot, _ = key.partition(".")
-        if dot and name in FILTER_NAMES and name not in seen:
+        base = name.partition("@")[0].partition(":")[0]
+        if dot and base in FILTER_NAMES and name not in seen:
             seen.append(name)
     return seen
 

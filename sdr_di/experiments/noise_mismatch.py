@@ -37,6 +37,7 @@ from .filter_figures import (
     filter_names_in,
     rmse_bar_plot,
 )
+from .variants import nan_figures, plot_error_norms, variant_rows
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run", "tables"]
 
@@ -80,7 +81,9 @@ def check_params(params: dict) -> None:
     if params["case"] not in SCENARIOS:
         raise ExperimentError(f"noise-mismatch: case={params['case']!r}: expected 'q' "
                               "(wrong Q, paper 000) or 'r' (wrong R, paper 003)")
-    filter_list(NAME, params["filters"])
+    if any(":" in f for f in filter_list(NAME, params["filters"])):
+        raise ExperimentError(f"noise-mismatch: filters={params['filters']!r}: filter options "
+                              "are not taken by the loosely coupled run")
     _window(params["r_window"])
     for key in ("duration_s", "q_scale", "r_scale"):
         v = params[key]
@@ -125,11 +128,9 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
         try:
             res = run_loose(truth, imu, model, st.replace(filter=name), seed=int(seed))
         except SdrDiError as exc:
-            for q, _ in QUANTITIES:
-                for s in STATS:
-                    fig[f"{name}.{q}_{s}"] = math.nan
-                    if spans:
-                        fig[f"{name}.win_{q}_{s}"] = math.nan
+            fig.update(nan_figures(name))
+            if spans:
+                fig.update(nan_figures(f"{name}.win_"))
             fig[f"{name}.error"] = f"{type(exc).__name__}: {exc}"
             continue
         m = res.metrics()
@@ -153,12 +154,9 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     if params["plots"] and series:
         note = plotting.matplotlib_missing()
         if note is None:
-            panels = [(label, {n: np.linalg.norm(getattr(r, f"{q[:3]}_err"), axis=1)
-                               for n, r in series.items()}) for q, label in QUANTITIES]
-            plotting.time_series(Path(out_dir) / "error_norms.png",
-                                 {n: r.t for n, r in series.items()}, panels,
-                                 title=f"noise-mismatch case {params['case']}: error norms "
-                                 f"(seed {seed})", spans=spans)
+            plot_error_norms(Path(out_dir) / "error_norms.png", series,
+                             f"noise-mismatch case {params['case']}: error norms (seed {seed})",
+                             spans)
         else:
             fig["plots_note"] = note
     return fig
@@ -166,17 +164,10 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
 
 def tables(stats: dict) -> dict[str, list[dict]]:
     """Table ``filters``: one row per filter, mean (and std over runs) of every figure."""
-    rows = []
-    for name in filter_names_in(stats):
-        row: dict = {"filter": name}
-        for key, st in stats.items():
-            if key.startswith(name + ".") and isinstance(st, dict):
-                fig = key[len(name) + 1:]
-                row[fig] = st["mean"]
-                if st["n"] > 1:
-                    row[fig + "_std"] = st["std"]
-        rows.append(row)
-    return {"filters": rows}
+    keys = list(dict.fromkeys(k.partition(".")[2] for k, st in stats.items()
+                              if k.partition(".")[0] in filter_names_in(stats)
+                              and isinstance(st, dict) and "mean" in st))
+    return {"filters": variant_rows(stats, keys)}
 
 
 def plots(results: list[dict], out_dir: Path) -> list[Path]:

@@ -4,11 +4,15 @@ One run generates the scenario once (default ``signals/default.toml``) with one 
 of every satellite (``[[outage]] prn = "all", blockage = true``) per entry of ``outages``
 (default ``5,10`` s): the first starts at ``t_first_s`` (after the hand-over, about 12 s of
 file for the default scenario), each is followed by ``gap_s`` of open sky, and the file ends
-``gap_s`` after the last one. Then the deep receiver runs on the same files once per filter
-(``filters``, default ``ff-aukf``). During a blockage the INS coasts (no channel passes the
+``gap_s`` after the last one. Then the receiver runs on the same files once per filter
+(``filters``, default ``ff-aukf``) and coupling mode (``modes``, default ``deep``; ``loose``
+and ``tight`` are labelled ``f@loose``, ``f@tight``, :mod:`.variants`). In deep mode, during a blockage the INS coasts (no channel passes the
 C/N0 test, the filter only predicts) and the NCOs stay driven by the INS prediction; when the
 signal returns a channel rejoins the measurement vector as soon as its C/N0 estimate and
-pre-filter innovations pass again, without an acquisition search.
+pre-filter innovations pass again, without an acquisition search. In loose and tight mode
+the scalar loops lose the signal and must find it again (the scalar receiver's recovery
+from a total blockage) before the filter gets a fix or a range; ``first_good_s`` compares
+the modes on that.
 
 Figures per outage ``k``: ``o<k>.start_s``, ``o<k>.duration_s``; per filter ``f`` and
 outage ``k``:
@@ -28,6 +32,10 @@ outage ``k``:
     ``1 / output_rate_hz``).
 ``f.o<k>.n_rejoined``, ``f.o<k>.all_rejoined``
     Channels back within ``rejoin_limit_s``; 1 when all are.
+``f.o<k>.first_good_s``
+    Time to the first good solution after the tunnel: from the signal's return to the first
+    output row with measurements (``n_used > 0``) and a position error norm below
+    ``good_pos_m`` (default 5 m) [s] (NaN: none before the next blockage or the end).
 ``f.o<k>.{pos_m,vel_mps,att_deg}_{rmse,max}_after``
     Error RMSE and max from the signal's return to the next blockage (or the end).
 ``f.o<k>.used_after``
@@ -59,21 +67,20 @@ from ._deep import (
     generated_inputs,
     has_mean,
     parse_list,
-    record_run,
-    run_deep_variant,
     segment_metrics,
     with_outages,
 )
-from .filter_figures import (
-    QUANTITIES,
-    STATS,
-    filter_list,
-    filter_names_in,
-    rmse_bar_plot,
+from .filter_figures import QUANTITIES, STATS, rmse_bar_plot
+from .variants import (
+    loop_config,
+    plot_error_norms,
+    run_variants,
+    variant_list,
+    variant_rows,
 )
 
-__all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "outage_windows", "plots",
-           "rejoin_times", "run", "tables"]
+__all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "first_good_s",
+           "outage_windows", "plots", "rejoin_times", "run", "tables"]
 
 NAME = "outage"
 DESCRIPTION = ("every satellite blocked for 5 s and 10 s (tunnel) after the hand-over; INS "
@@ -82,10 +89,12 @@ DESCRIPTION = ("every satellite blocked for 5 s and 10 s (tunnel) after the hand
 default_params: dict = {
     "scenario": None,
     "filters": "ff-aukf",
+    "modes": "deep",
     "outages": "5,10",
     "t_first_s": 15.0,
     "gap_s": 15.0,
     "rejoin_limit_s": 1.0,
+    "good_pos_m": 5.0,
     "sampling_rate_hz": None,
     "cn0_dbhz": None,
     "filter_rate_hz": 50.0,
@@ -96,11 +105,12 @@ default_params: dict = {
 
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
-    filter_list(NAME, params["filters"])
+    variant_list(NAME, params["filters"], params["modes"])
     d = parse_list(f"{NAME}: outages", params["outages"], float)
     if min(d) <= 0:
         raise ExperimentError(f"{NAME}: outages={params['outages']!r}: durations must be > 0")
-    for key in ("t_first_s", "gap_s", "rejoin_limit_s", "filter_rate_hz", "output_rate_hz"):
+    for key in ("t_first_s", "gap_s", "rejoin_limit_s", "good_pos_m", "filter_rate_hz",
+                "output_rate_hz"):
         check_number(NAME, params, key)
     for key in ("sampling_rate_hz", "cn0_dbhz"):
         check_number(NAME, params, key, allow_none=True)
@@ -167,21 +177,14 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     for k, (t0, t1) in enumerate(wins):
         fig[f"o{k}.start_s"] = t0
         fig[f"o{k}.duration_s"] = t1 - t0
-    series = {}
-    cfg = {"filter_rate_hz": float(params["filter_rate_hz"]),
-           "output_rate_hz": float(params["output_rate_hz"])}
     with generated_inputs(sc) as inp:
         fig["sampling_rate_hz"] = float(inp.source.sampling_rate_hz)
-        for name in filter_list(NAME, params["filters"]):
-            res = record_run(fig, name, run_deep_variant(inp, name, **cfg))
-            if res is None:
-                for k in range(len(wins)):
-                    fig[f"{name}.o{k}.all_rejoined"] = 0
-                continue
-            fig.update(segment_metrics(res, None, None, f"{name}."))
-            fig.update(_outage_figures(name, res, wins, duration, limit))
-            _write_csv(Path(out_dir) / f"errors_{name}.csv", res)
-            series[name] = res
+        series = run_variants(
+            inp, variant_list(NAME, params["filters"], params["modes"]), loop_config(params),
+            fig, out_dir,
+            figures=lambda name, res: _outage_figures(name, res, wins, duration, limit,
+                                                      float(params["good_pos_m"])),
+            failed=lambda name: {f"{name}.o{k}.all_rejoined": 0 for k in range(len(wins))})
     if params["plots"] and series:
         note = plotting.matplotlib_missing()
         if note is None:
@@ -191,7 +194,18 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     return fig
 
 
-def _outage_figures(name: str, res, wins: list, duration: float, limit: float) -> dict:
+def first_good_s(t: np.ndarray, n_used: np.ndarray, pos_err_m: np.ndarray, t_back: float,
+                 t_next: float, good_pos_m: float) -> float:
+    """Time from the signal's return ``t_back`` to the first output row (before ``t_next``)
+    with measurements (``n_used > 0``) and a position error norm below ``good_pos_m`` [s];
+    NaN when there is none."""
+    sel = (t >= t_back) & (t < t_next) & (n_used > 0) & (pos_err_m < good_pos_m)
+    hit = np.flatnonzero(sel)
+    return float(t[hit[0]] - t_back) if hit.size else math.nan
+
+
+def _outage_figures(name: str, res, wins: list, duration: float, limit: float,
+                    good_pos_m: float) -> dict:
     fig: dict = {}
     t = res.t
     pos = np.linalg.norm(res.pos_err, axis=1)
@@ -219,31 +233,16 @@ def _outage_figures(name: str, res, wins: list, duration: float, limit: float) -
         for q, _ in QUANTITIES:
             for s in STATS:
                 fig[p + f"{q}_{s}_after"] = after[f"{q}_{s}"]
+        fig[p + "first_good_s"] = first_good_s(t, np.asarray(res.n_used), pos, t1, t_next,
+                                               good_pos_m)
         sel = (t >= t1 + limit) & (t < t_next)
         fig[p + "used_after"] = float(res.used[sel].mean()) if sel.any() else math.nan
     return fig
 
 
-def _write_csv(path: Path, res) -> None:
-    from ..io.atomic import atomic_open
-
-    ch = [f"used_C{p:02d}" for p in res.prns] + [f"cn0_C{p:02d}" for p in res.prns]
-    cols = ["t_s", "n_used", *ch, "att_err_e_deg", "att_err_n_deg", "att_err_u_deg",
-            "vel_err_e", "vel_err_n", "vel_err_u", "pos_err_e_m", "pos_err_n_m", "pos_err_u_m"]
-    data = np.column_stack([res.t, res.n_used, res.used.astype(int), res.cn0_dbhz,
-                            res.att_err, res.vel_err, res.pos_err])
-    with atomic_open(path, "w") as fh:
-        fh.write(",".join(cols) + "\n")
-        np.savetxt(fh, data, delimiter=",", fmt="%.10g")
-
-
 def _plot_run(out_dir: Path, series: dict, wins: list, seed: int) -> None:
-    t_by = {n: r.t for n, r in series.items()}
-    panels = [(label, {n: np.linalg.norm(getattr(r, f"{q[:3]}_err"), axis=1)
-                       for n, r in series.items()}) for q, label in QUANTITIES]
-    plotting.time_series(out_dir / "error_norms.png", t_by, panels,
-                         title=f"outage: error norms (seed {seed}; shaded: all satellites "
-                         "blocked)", spans=wins)
+    plot_error_norms(out_dir / "error_norms.png", series,
+                     f"outage: error norms (seed {seed}; shaded: all satellites blocked)", wins)
     for n, r in series.items():
         labels = [f"C{p:02d}" for p in r.prns]
         plotting.time_series(
@@ -259,21 +258,17 @@ def tables(stats: dict) -> dict[str, list[dict]]:
     n_out = sum(1 for k in stats if k.startswith("o") and k.endswith(".duration_s"))
     keys = ("pos_m_start", "pos_m_max", "pos_growth_m", "vel_mps_max", "att_deg_max",
             "all_left", "rejoin_s_max", "rejoin_s_mean", "n_rejoined", "all_rejoined",
-            "pos_m_rmse_after", "pos_m_max_after", "vel_mps_rmse_after", "att_deg_rmse_after",
-            "used_after")
-    for name in filter_names_in(stats):
-        acq = stats.get(f"{name}.acq_after_handover")
-        for k in range(n_out):
-            d = stats.get(f"o{k}.duration_s")
-            row: dict = {"filter": name, "outage": k,
-                         "duration_s": d["mean"] if has_mean(d) else "",
-                         "acq_after_handover": acq["mean"] if has_mean(acq) else ""}
-            for key in keys:
-                st = stats.get(f"{name}.o{k}.{key}")
-                row[key] = st["mean"] if has_mean(st) else math.nan
-                if has_mean(st) and st["n"] > 1:
-                    row[key + "_std"] = st["std"]
+            "first_good_s", "pos_m_rmse_after", "pos_m_max_after", "vel_mps_rmse_after",
+            "att_deg_rmse_after", "used_after")
+    for k in range(n_out):
+        d = stats.get(f"o{k}.duration_s")
+        for row in variant_rows(stats, keys, infix=f"o{k}.", outage=k,
+                                duration_s=d["mean"] if has_mean(d) else ""):
+            acq = stats.get(f"{row['filter']}.acq_after_handover")
+            row["acq_after_handover"] = acq["mean"] if has_mean(acq) else ""
             rows.append(row)
+    order = list(dict.fromkeys(r["filter"] for r in rows))
+    rows.sort(key=lambda r: order.index(r["filter"]))
     return {"outages": rows}
 
 

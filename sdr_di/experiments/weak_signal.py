@@ -1,9 +1,9 @@
 """``weak-signal``: C/N0 swept from 40 down to 15 dB-Hz; the lowest C/N0 each receiver mode
-(scalar, deep) holds with all channels and a position error below 10 m.
+(scalar, loose, tight, deep) holds with all channels and a position error below 10 m.
 
-**Strong start, then the tested level.** Both modes need a strong signal to start
-(acquisition, tracking, bit/frame synchronization, decoding and, for deep, the hand-over to
-the vector loop about 12 s into the default scenario). Each level ``L`` is therefore one
+**Strong start, then the tested level.** Every mode needs a strong signal to start
+(acquisition, tracking, bit/frame synchronization, decoding and, for the integration loop,
+the hand-over about 12 s into the default scenario). Each level ``L`` is therefore one
 generated file in which every satellite has ``cn0_start`` (default 40 dB-Hz) until
 ``t_step_s`` (default 15 s) and ``L`` from then to the end (``hold_s`` later): a C/N0 step
 made with the scenario schema's existing attenuation window (``[[outage]] prn = "all",
@@ -19,21 +19,24 @@ drops by exactly that many dB). No new scenario key was needed.
   the deep receiver's start-up (decoded records first, then the navigation file: without it
   the scalar PVT waits ~30 s for every ephemeris to be decoded). A channel is *kept* at an
   epoch when it is in ``TRACK`` with code lock and used in the position fix.
-* ``deep``: :class:`~sdr_di.deep.DeepReceiver` (``filter``, default ``ff-aukf``; 10 Hz rows).
-  A channel is *kept* when it is in the measurement vector. ``deep_cn0_min_dbhz`` (default
-  ``none``: the :class:`~sdr_di.deep.DeepConfig` default) is the loop's channel C/N0 gate.
+* ``loose``, ``tight``, ``deep``: :class:`~sdr_di.deep.DeepReceiver` in that coupling
+  (``DeepConfig.mode``; ``filter``, default ``ff-aukf``; 10 Hz rows). A channel is *kept*
+  when it is in the filter's measurement vector (loose: in the WLS fix fed to the filter).
+  ``deep_cn0_min_dbhz`` (default ``none``: the :class:`~sdr_di.deep.DeepConfig` default) is
+  the loop's channel C/N0 gate.
 
 **Pass at a level**: over the evaluation window (``settle_s`` after the step to the end) every
 channel is kept in at least ``keep_fraction`` (default 0.95) of the epochs, the last epoch has
 every channel, every scalar epoch has a valid fix, and the max position error norm is below
-``pos_limit_m`` (10 m). A deep run must also have handed over before the step.
+``pos_limit_m`` (10 m). A loop run must also have handed over before the step.
 **Threshold of a mode** = the lowest level at which it passes and passes at every higher
 level of the sweep (NaN when it fails at the highest).
 
 Figures: per level ``L`` and mode ``m``: ``L<L>.<m>.pass``, ``.keep_min`` (lowest per-channel
 kept fraction), ``.all_kept_last``, ``.pos_m_max``, ``.pos_m_rmse``, ``.fix_fraction``
-(scalar), ``.handover_s`` (deep), ``.error`` (when it raised); per mode
-``<m>.threshold_dbhz``; ``deep_gain_db`` = scalar threshold - deep threshold.
+(scalar), ``.handover_s`` (loop modes), ``.error`` (when it raised); per mode
+``<m>.threshold_dbhz`` (the C/N0 at which the mode loses its solution is one sweep step
+below it); ``<m>_gain_db`` = scalar threshold - the mode's threshold.
 
 Files: ``sweep_levels.csv`` (one row per level and mode, with errors) and ``sweep.png``
 (kept fraction and max position error against C/N0 per mode).
@@ -58,7 +61,9 @@ from ._deep import (
     run_deep_variant,
     with_outages,
 )
-from .filter_figures import filter_list
+from .filter_figures import filter_list, parse_filter_spec
+from .variants import MODES as LOOP_MODES
+from .variants import loop_config, mode_list
 
 __all__ = [
     "DESCRIPTION",
@@ -76,10 +81,11 @@ __all__ = [
 
 NAME = "weak-signal"
 DESCRIPTION = ("C/N0 step from 40 dB-Hz to each level of a 40..15 dB-Hz sweep after the "
-               "start-up; lowest level each mode (scalar, deep) holds with all channels and "
-               "position error < 10 m")
+               "start-up; lowest level each mode (scalar, loose, tight, deep) holds with all "
+               "channels and position error < 10 m")
 
-MODES = ("scalar", "deep")
+#: ``scalar`` (the scalar receiver's own PVT) and the integration loop's couplings.
+MODES = ("scalar", *LOOP_MODES)
 
 default_params: dict = {
     "scenario": None,
@@ -112,12 +118,7 @@ def levels(params: dict) -> list[float]:
 
 
 def _modes(text: str) -> list[str]:
-    names = [m.strip().lower() for m in str(text).split(",") if m.strip()]
-    bad = [m for m in names if m not in MODES]
-    if bad or not names:
-        raise ExperimentError(f"{NAME}: modes={text!r}: expected a comma list of "
-                              f"{', '.join(MODES)}")
-    return list(dict.fromkeys(names))
+    return mode_list(NAME, text, MODES)
 
 
 def check_params(params: dict) -> None:
@@ -259,9 +260,10 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
                  "filter": params["filter"]}
     rows = []
     passed: dict[str, dict[float, bool]] = {m: {} for m in modes}
-    cfg = {"filter_rate_hz": float(params["filter_rate_hz"]), "output_rate_hz": 10.0}
-    if params["deep_cn0_min_dbhz"] is not None:
-        cfg["cn0_min_dbhz"] = float(params["deep_cn0_min_dbhz"])
+    cfg = loop_config(params, output_rate_hz=10.0)
+    filt, opts = parse_filter_spec(NAME, params["filter"])
+    if opts:
+        cfg["filter_options"] = opts
     base = base_scenario({**params, "cn0_dbhz": c0}, seed, duration)
     for lv in levels(params):
         sc = base
@@ -281,7 +283,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
                     except Exception as exc:  # noqa: BLE001 - a crash at a level is its failure
                         j = {"pass": 0, "error": f"{type(exc).__name__}: {exc}"}
                 else:
-                    dr = run_deep_variant(inp, params["filter"], **cfg)
+                    dr = run_deep_variant(inp, filt, mode=mode, **cfg)
                     if dr.result is None:
                         j = {"pass": 0, "error": dr.error}
                     else:
@@ -300,8 +302,10 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
                 rows.append({"cn0_dbhz": lv, "mode": mode, **j})
     for mode in modes:
         fig[f"{mode}.threshold_dbhz"] = threshold(passed[mode])
-    if "scalar" in modes and "deep" in modes:
-        fig["deep_gain_db"] = fig["scalar.threshold_dbhz"] - fig["deep.threshold_dbhz"]
+    for mode in modes:
+        if mode != "scalar" and "scalar" in modes:
+            fig[f"{mode}_gain_db"] = (fig["scalar.threshold_dbhz"]
+                                      - fig[f"{mode}.threshold_dbhz"])
     _write_csv(Path(out_dir) / "sweep_levels.csv", rows)
     if params["plots"]:
         note = plotting.matplotlib_missing()
