@@ -15,13 +15,22 @@ Paper 004 Fig. 1, federated architecture. Data flow of :meth:`DeepReceiver.run`:
     the pre-filters shifted by the correction's projection on each channel (their NCOs move
     by it in the next interval).
 
+Modes (``DeepConfig.mode``, ``sdr-di run --mode``): ``"deep"`` (above), ``"loose"`` and
+``"tight"`` (docs/coupling.md). All three share the scalar start-up, the hand-over rule and
+time, the INS alignment, the filter and its ``Q``/``P0``, and the integration loop; loose and
+tight take their measurements from the scalar receiver, which keeps tracking after the
+hand-over without any feedback from the filter: its WLS fixes (loose,
+:mod:`~sdr_di.integration.loose_fixes`) or its pseudoranges and rates (tight,
+:mod:`~sdr_di.integration.tight_ranges`), every ``1 / gnss_rate_hz`` s
+(:mod:`~sdr_di.integration.gnss_epochs`). So the three report over the same time window.
+
 Code: :meth:`DeepReceiver._vector_loop` hands over and runs the mode-independent
 :class:`~sdr_di.integration.loop.IntegrationLoop` (INS propagation, filter predict/update,
 closed-loop feedback, solution rows) with deep mode's measurement source,
 :class:`~sdr_di.deep.vector_tracking.VectorTracking` (NCO commands, correlation,
 pre-filters and channel management, the NCO and pre-filter share of the feedback,
-navigation data taken up). A loose or tight mode is another measurement source, without
-the NCO feedback.
+navigation data taken up). :meth:`DeepReceiver._scalar_coupled_loop` runs the same loop
+with the loose or tight source, without the NCO feedback.
 
 Decisions
 ---------
@@ -79,6 +88,12 @@ Decisions
   ionosphere model is taken up at the end of the interval in which it was decoded
   (:func:`_take_up_model_change`: the state moves by the least-squares projection of the
   range-model step, the pre-filters by the rest; reasons in docs/deep.md).
+* **GNSS rate** of loose and tight (``gnss_rate_hz``, default 5 Hz): the scalar receiver's
+  output epochs are every 0.1 s in every mode (the hand-over rule is evaluated on them, so
+  all modes hand over at the same sample); loose and tight take every ``10 / gnss_rate_hz``-th
+  from the hand-over on, so the rate must be 10 Hz divided by a whole number. Scalar
+  pseudoranges come from a carrier-aided DLL whose errors are correlated over a fraction
+  of a second: fed at 50 Hz as white noise they make the filter overconfident.
 * **Process noise** from the IMU spec (random walks; bias random walk reaching the spec in
   ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`ClockModel`).
 """
@@ -99,8 +114,12 @@ from ..frames import ecef_to_llh, radii_of_curvature
 from ..ins.error_model import ClockModel, InsErrorModel, process_noise
 from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
+from ..integration.gnss_epochs import GnssEpochRecorder
 from ..integration.loop import IntegrationLoop
-from ..integration.measurements import RangeRateMeasurementModel
+from ..integration.loose_fixes import LooseFixSource
+from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
+from ..integration.tight_ranges import TightRangeSource
+from ..receiver.prediction import FixPredictor
 from ..integration.metrics import summarize
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataInForce, NavDataWarning
@@ -113,7 +132,13 @@ from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
 from .vector_tracking import SampleClock, VectorTracking, _Chan
 
-__all__ = ["DeepConfig", "DeepReceiver", "DeepResult", "HandoverError"]
+__all__ = ["MODES", "DeepConfig", "DeepReceiver", "DeepResult", "HandoverError",
+           "IntegrationConfig"]
+
+#: Coupling modes of :class:`DeepReceiver` (module notes).
+MODES = ("deep", "loose", "tight")
+#: Interval of the scalar start-up's output epochs (the hand-over rule runs on them) [s].
+_EPOCH_S = 0.1
 
 _CLOCKS = {"tcxo": ClockModel(h0=2e-19, h_2=2e-20), "ocxo": ClockModel(h0=8e-20, h_2=4e-23)}
 
@@ -124,10 +149,17 @@ class HandoverError(SdrDiError):
 
 @dataclasses.dataclass
 class DeepConfig:
-    """Settings of the deep receiver (module notes give the reasons for the defaults).
+    """Settings of the receiver in any coupling mode (module notes give the reasons for the
+    defaults; :data:`IntegrationConfig` is the same class).
 
     Attributes
     ----------
+    mode : str
+        ``"deep"`` (the filter closes the tracking loops), ``"loose"`` (WLS fixes) or
+        ``"tight"`` (pseudoranges and rates): :data:`MODES`.
+    gnss_rate_hz : float
+        Measurement rate of loose and tight [Hz] (module notes): 10 Hz divided by a whole
+        number, at most the filter rate; unused in deep mode.
     filter : str
         Integration filter (registry name, :data:`sdr_di.filters.FILTER_NAMES`).
     filter_rate_hz : float
@@ -191,7 +223,17 @@ class DeepConfig:
     coherent_ms: int = 20
     iono_wait_s: float = 30.0
 
+    mode: str = "deep"
+    gnss_rate_hz: float = 5.0
+
     def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        g = self.gnss_rate_hz
+        m = 1.0 / (_EPOCH_S * g) if isinstance(g, (int, float)) and g > 0 else math.nan
+        if not (math.isfinite(m) and m >= 1.0 - 1e-9 and abs(m - round(m)) < 1e-9):
+            raise ValueError(f"gnss_rate_hz must be 10 Hz divided by a whole number (10, 5, "
+                             f"2.5, 2, 1, ...), got {g!r}")
         if self.clock not in _CLOCKS:
             raise ValueError(f"clock must be one of {', '.join(_CLOCKS)}, got {self.clock!r}")
         if self.align not in ("truth", "gnss"):
@@ -203,22 +245,38 @@ class DeepConfig:
         v = self.iono_wait_s
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ValueError(f"iono_wait_s must be >= 0, got {v!r}")
+        if self.mode != "deep" and self.gnss_rate_hz > self.filter_rate_hz + 1e-9:
+            raise ValueError(f"gnss_rate_hz {self.gnss_rate_hz:g} must not exceed the filter "
+                             f"rate {self.filter_rate_hz:g} Hz")
+
+    @property
+    def gnss_every(self) -> int:
+        """Scalar output epochs (0.1 s) per loose/tight measurement epoch."""
+        return max(1, round(1.0 / (_EPOCH_S * self.gnss_rate_hz)))
+
+
+#: The receiver's settings under a mode-neutral name (the class keeps its first name).
+IntegrationConfig = DeepConfig
 
 
 @dataclasses.dataclass
 class DeepResult:
-    """Output of a deep run (solution rows at the output rate, after feedback).
+    """Output of a run in any mode (solution rows at the output rate, after feedback).
 
     Attributes
     ----------
     t : (n,) seconds since the IF file start (receiver clock)
     week, sow : BDT of each row (receiver time minus clock bias)
     llh : (n, 3) rad, rad, m;  v_n : (n, 3) ENU m/s;  att : (n, 3) pitch, roll, yaw [rad]
-    clock_bias_m, clock_drift_mps : (n,)
-    n_used : (n,) channels in the measurement vector
+    clock_bias_m, clock_drift_mps : (n,) the filter's clock states (loose: the latest WLS
+        fix's clock, :mod:`~sdr_di.integration.loose_fixes`)
+    n_used : (n,) channels in the measurement vector (loose, tight: of the latest GNSS
+        epoch; loose: the fix's satellites, 0 without a fix)
+    mode : str, the coupling mode
     att_err, vel_err, pos_err : (n, 3) errors vs the reference [deg, m/s, m ENU] (NaN
         without a reference)
-    prns : handed-over PRNs;  used : (n, n_ch) bool, channel in the measurement vector
+    prns : handed-over PRNs (loose, tight: then any acquired later);  used : (n, n_ch)
+        bool, channel in the measurement vector
     cn0_dbhz : (n, n_ch)
     nis : (n,) integration-filter normalized innovation squared per measurement, averaged
         over the filter epochs since the previous row (about 1 when ``R`` is consistent)
@@ -253,6 +311,7 @@ class DeepResult:
     profile: dict
     nav_change: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, int))
     navigation: dict = dataclasses.field(default_factory=dict)
+    mode: str = "deep"
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
@@ -391,14 +450,34 @@ class DeepReceiver:
         navdata = NavDataInForce(nav)
         engine.navdata = navdata
         hand: dict = {}
+        recorder = GnssEpochRecorder(engine, navdata)
+        n_epoch = [0]
+        next_progress = [0.0]
 
-        def on_epoch(sample, obs, ephs):
-            if not obs:            # nothing tracked at this epoch: no fix, keep going
-                return False
+        def take_up(sample, ephs):
             navdata.offer_decoded(ephs, rx.klobuchar, sample / fs)
             if navdata.iono_source != "broadcast":
                 _offer_subframe_klobuchar(rx, navdata, sample / fs)
             engine.ephemerides, engine.iono = navdata, navdata.klobuchar
+
+        def after_handover(sample, obs, ephs):
+            """Loose and tight: the scalar receiver keeps running; every gnss_every-th
+            epoch is a measurement epoch (module notes)."""
+            n_epoch[0] += 1
+            take_up(sample, ephs)
+            if n_epoch[0] % cfg.gnss_every == 0:
+                recorder.record(sample, obs)
+            if progress is not None and sample / fs >= next_progress[0]:
+                progress(sample / fs, len(obs), len(obs))
+                next_progress[0] = sample / fs + 1.0
+            return False
+
+        def on_epoch(sample, obs, ephs):
+            if "sample" in hand:
+                return after_handover(sample, obs, ephs)
+            if not obs:            # nothing tracked at this epoch: no fix, keep going
+                return False
+            take_up(sample, ephs)
             sol = engine.process(obs)
             if not sol.valid or not sol.velocity_valid:
                 return False
@@ -418,11 +497,20 @@ class DeepReceiver:
                         f"data, none decoded after {since_fix:.1f} s): no ionosphere model "
                         "until subframe 1 is decoded", NavDataWarning, stacklevel=3)
                 hand.update(sample=sample, sol=sol, prns=[o.prn for o in ok])
-                return True
+                if cfg.mode == "deep":
+                    return True        # the vector loop takes over from the channels
+                # loose/tight: the loop's grid starts where deep's would (the channels'
+                # next code epochs); the fix of the hand-over epoch is the first measurement
+                hand["next_start"] = max(int(rx.channels[p].next_start) for p in hand["prns"])
+                recorder.record(sample, obs)
+                # lost channels are searched around, and timed from, the last fix
+                rx.predictor = FixPredictor(engine, fs, source.carrier_hz)
+                return False
             return False
 
         t0 = time.perf_counter()
-        rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=0.1, stop_sample=stop)
+        rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=_EPOCH_S,
+               stop_sample=stop)
         t_scalar = time.perf_counter() - t0
         if "sample" not in hand:
             found = [c.prn for c in rx.channels.values() if c.n_acquisitions > 0]
@@ -431,6 +519,9 @@ class DeepReceiver:
                 ("no satellite found" if not found else
                  f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
                  "ephemeris and a valid fix"))
+        if cfg.mode != "deep":
+            return self._scalar_coupled_loop(source, imu, off, n_per, stop, rx, engine,
+                                             hand, recorder.epochs, truth, t_scalar, t_all)
         return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
                                  hand, truth, progress, t_scalar, t_all)
 
@@ -482,25 +573,75 @@ class DeepReceiver:
             loop.run(tracking)
         finally:
             tracking.close()
+        return self._result(loop, clock, tuple(c.prn for c in chans), kf, adapt0, k_grid0,
+                            prof, t_all, tracking.nav_log.summary(loop.k0 / fs))
+
+    def _result(self, loop: IntegrationLoop, clock: SampleClock, prns: tuple, kf,
+                adapt0: float, k_grid0: int, prof: dict, t_all: float,
+                navigation: dict) -> DeepResult:
+        """The loop's rows and the run's profile as a :class:`DeepResult` (every mode)."""
+        fs = loop.fs
         k0 = loop.k0
         prof["total"] = time.perf_counter() - t_all
         prof["processed_s"] = k0 / fs
         prof["deep_s"] = (k0 - k_grid0) / fs
-        prof["loop"] = sum(prof[k] for k in ("read", "nco", "correlate", "prefilter", "filter",
-                                             "ins", "output"))
+        prof["loop"] = sum(prof.get(k, 0.0) for k in (
+            "read", "nco", "correlate", "prefilter", "measure", "filter", "ins", "output"))
         prof["realtime_factor"] = prof["processed_s"] / prof["total"] if prof["total"] else 0.0
         self.profile = prof
-
-        n_ch = len(chans)
-        col = loop.columns(n_ch)
+        col = loop.columns(len(prns))
         return DeepResult(
             t=col["t"], week=clock.week, sow=col["sow"], llh=col["llh"], v_n=col["v"],
             att=col["att"], clock_bias_m=col["b"], clock_drift_mps=col["d"], n_used=col["n"],
             att_err=col["ae"], vel_err=col["ve"], pos_err=col["pe"],
-            prns=tuple(c.prn for c in chans), used=col["used"], cn0_dbhz=col["cn0"],
+            prns=prns, used=col["used"], cn0_dbhz=col["cn0"],
             nis=col["nis"], handover_s=k_grid0 / fs, filter_name=kf.name,
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
-            nav_change=col["nav"], navigation=tracking.nav_log.summary(k0 / fs))
+            nav_change=col["nav"], navigation=navigation, mode=self.config.mode)
+
+    # ------------------------------------------------------------------------------------
+    def _scalar_coupled_loop(self, source, imu, off, n_per, stop, rx, engine, hand, epochs,
+                             truth, t_scalar, t_all) -> DeepResult:
+        """Loose or tight mode after the scalar receiver's whole run (module notes).
+
+        Same hand-over grid point, INS alignment, clock and filter as :meth:`_vector_loop`;
+        the loop's measurement source is :class:`~sdr_di.integration.loose_fixes.
+        LooseFixSource` or :class:`~sdr_di.integration.tight_ranges.TightRangeSource` over
+        the recorded epochs.
+        """
+        cfg = self.config
+        fs = source.sampling_rate_hz
+        sol = hand["sol"]
+        k_h = int(hand["sample"])
+        clock = SampleClock.of(engine.builder.rx_time, fs)
+        t_if = imu.t + off
+        i_h = max(int(np.searchsorted(t_if, max(k_h, hand["next_start"]) / fs)), 1)
+        T = n_per / imu.rate_hz
+        k_grid0 = round(t_if[i_h] * fs)
+        ins, llh_fix, att_sig = self._align_ins(imu, truth, sol, t_if, i_h, k_h / fs)
+        clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
+        clk_d = float(sol.clock_drift_mps)
+        loose = cfg.mode == "loose"
+        model = LooseMeasurementModel() if loose else RangeRateMeasurementModel()
+        kf, process, meas = self._make_filter(T, sol, llh_fix, att_sig, model)
+        later = sorted({int(p) for ep in epochs for p in ep.obs.prn} - set(hand["prns"]))
+        prns = tuple(hand["prns"]) + tuple(later)
+        prof = {"scalar": t_scalar, "measure": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
+        imu_epoch = (clock.week, clock.sow(0) + off)     # BDT of IMU t = 0 (module notes)
+        src_cls = LooseFixSource if loose else TightRangeSource
+        src = src_cls(epochs, prns, imu.t, imu_epoch, fs, prof)
+        n1 = round(fs * 1e-3)            # deep's margin, so that the windows are the same
+        loop = IntegrationLoop(
+            imu=imu, t_if=t_if, i_start=i_h, k_start=k_grid0, n_per=n_per, fs=fs, stop=stop,
+            margin=2 * n1 + 16, ins=ins, clock_bias_m=clk_b, clock_drift_mps=clk_d, kf=kf,
+            process=process, set_geometry=meas.set_epoch if loose else meas.set_geometry,
+            sow_of_sample=clock.sow,
+            output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
+            profile=prof)
+        adapt0 = kf.adaptation_time_s
+        loop.run(src)
+        return self._result(loop, clock, prns, kf, adapt0, k_grid0, prof, t_all,
+                            src.navigation)
 
     # ------------------------------------------------------------------------------------
     def _handover_channels(self, rx: ScalarReceiver, navdata: NavDataInForce, hand: dict,
@@ -566,7 +707,7 @@ class DeepReceiver:
             att_sig = np.radians([3.0, 3.0, 5.0])
         return ins, llh_fix, att_sig
 
-    def _make_filter(self, T: float, sol, llh_fix, att_sig):
+    def _make_filter(self, T: float, sol, llh_fix, att_sig, meas=None):
         """Integration filter of the configured name over interval ``T`` [s].
 
         ``Q`` from the IMU spec and the clock model (:func:`~sdr_di.ins.error_model.
@@ -574,9 +715,13 @@ class DeepReceiver:
         position sigma (at least 1 m; 1.5x for height and clock bias), the bias specs and
         0.1 m/s of clock drift.
 
+        ``meas``: the filter's measurement model (default
+        :class:`~sdr_di.integration.measurements.RangeRateMeasurementModel`; loose:
+        :class:`~sdr_di.integration.measurements.LooseMeasurementModel`).
+
         Returns
         -------
-        kf, process (InsErrorModel), meas (RangeRateMeasurementModel, the filter's)
+        kf, process (InsErrorModel), meas (the filter's measurement model)
         """
         cfg = self.config
         gb, ab = cfg.imu.gyro_bias_si, cfg.imu.accel_bias_si
@@ -595,7 +740,7 @@ class DeepReceiver:
                    (1.5 * s_pos) ** 2, [gb ** 2] * 3, [ab ** 2] * 3, (1.5 * s_pos) ** 2,
                    0.1 ** 2]
         process = InsErrorModel(_CLOCKS[cfg.clock])
-        meas = RangeRateMeasurementModel()
+        meas = RangeRateMeasurementModel() if meas is None else meas
         kf = make_filter(cfg.filter, process, meas, np.zeros(17), np.diag(p0), Q0, None, dt=T,
                          **cfg.filter_options)
         return kf, process, meas

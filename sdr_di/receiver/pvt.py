@@ -99,6 +99,7 @@ __all__ = [
     "SatelliteStates",
     "atmosphere_delays",
     "compute_dops",
+    "measurement_variances",
     "modelled_observables",
     "sagnac_rotation",
     "satellite_states",
@@ -440,6 +441,16 @@ def _sigma2(sigma0: float, el: np.ndarray | None, cn0: np.ndarray, cfg: PvtConfi
         s2 = s2 / np.maximum(np.sin(el), np.sin(_EL_FLOOR)) ** 2
     c = np.where(np.isfinite(cn0), cn0, cfg.cn0_ref_dbhz)
     return s2 * 10.0 ** ((cfg.cn0_ref_dbhz - c) / 10.0)
+
+
+def measurement_variances(el: np.ndarray, cn0_dbhz: np.ndarray,
+                          config: PvtConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pseudorange [m^2] and pseudorange-rate [(m/s)^2] variances of the weight model
+    (module notes) at elevations ``el`` [rad] and C/N0 ``cn0_dbhz`` (NaN: the reference)."""
+    cfg = config or PvtConfig()
+    el = np.asarray(el, float)
+    cn0 = np.asarray(cn0_dbhz, float)
+    return (_sigma2(cfg.sigma_pr_m, el, cn0, cfg), _sigma2(cfg.sigma_rate_mps, el, cn0, cfg))
 
 
 def compute_dops(r_rx: np.ndarray, r_sat_rot: np.ndarray) -> tuple[Dops, np.ndarray | None]:

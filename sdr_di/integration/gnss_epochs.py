@@ -1,0 +1,244 @@
+"""The scalar receiver's epochs as measurements of the loose and tight couplings.
+
+In loose and tight mode the scalar receiver keeps tracking after the hand-over; no filter
+output reaches its loops (no NCO feedback), so it runs over the whole file first and
+:class:`GnssEpochRecorder` keeps, at every measurement epoch (``gnss_rate_hz``), what the
+couplings need: the observables, the satellite states and ionosphere model in force, and
+the WLS fix (position, velocity and their formal covariances). :class:`ScalarEpochSource`
+then hands them to the integration loop (:class:`~sdr_di.integration.loop.IntegrationLoop`)
+interval by interval, in time order; its subclasses form ``z`` and ``R`` (loose:
+:mod:`~sdr_di.integration.loose_fixes`, tight: :mod:`~sdr_di.integration.tight_ranges`).
+
+Time: an epoch is taken at IF sample ``k`` (receiver clock). Its BDT is receiver time minus
+clock bias / c (loose: the fix's own bias; tight: the filter's clock state); the IMU samples
+are on BDT (``imu_epoch``: BDT of IMU ``t = 0``). An epoch belongs to the filter interval
+whose IMU times ``(t[i0], t[i1]]`` hold its BDT; the INS is interpolated linearly to that
+instant (over 20 ms, 0.2 mm of position and well below 1 mm/s of velocity at 3 m/s^2) and
+the measurement is applied at the interval's end, where the filter's error state is (it
+changes by far less than the measurement noise in 20 ms).
+
+Channel columns (``used``, ``cn0``): the PRNs the scalar receiver handed over, then any it
+acquired later, in that order. A row shows the latest measurement epoch's channels (loose:
+the satellites of the fix; tight: those in ``z``), also on the filter intervals between two
+epochs, when ``z`` is None and the filter only predicts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from ..constants import C_LIGHT, SECONDS_PER_WEEK
+from ..errors import SdrDiError
+from ..receiver.observables import Observables
+from ..receiver.pvt import PvtEngine, PvtSolution, SatelliteStates, satellite_states
+from .loop import IntegrationLoop, Interval, Measurements
+
+__all__ = ["GnssEpoch", "GnssEpochRecorder", "ScalarEpochSource"]
+
+
+@dataclasses.dataclass
+class GnssEpoch:
+    """One measurement epoch of the scalar receiver.
+
+    Attributes
+    ----------
+    sample : int
+        IF sample of the epoch.
+    obs : Observables
+        Observables of the usable channels (receiver time ``obs.week``, ``obs.sow``).
+    sat : SatelliteStates or None
+        Satellite states of ``obs`` with the ephemerides in force (None without observables).
+    iono : Klobuchar or None
+        Ionosphere coefficients in force.
+    sol : PvtSolution
+        The WLS fix of the epoch (``cov``, ``cov_v``: formal covariances).
+    nav : dict
+        ``{prn: (week, toe, aode, source)}`` of the ephemerides in force for ``obs``.
+    """
+
+    sample: int
+    obs: Observables
+    sat: SatelliteStates | None
+    iono: object
+    sol: PvtSolution
+    nav: dict
+
+
+class GnssEpochRecorder:
+    """Records the scalar receiver's epochs after the hand-over (module notes).
+
+    Parameters
+    ----------
+    engine : PvtEngine
+        The receiver's PVT (its ``ephemerides``/``iono`` set to the data in force by the
+        caller before :meth:`record`).
+    navdata : NavDataInForce
+        Navigation data in force.
+    """
+
+    def __init__(self, engine: PvtEngine, navdata) -> None:
+        self.engine, self.navdata = engine, navdata
+        self.epochs: list[GnssEpoch] = []
+
+    def record(self, sample: int, channels: list) -> GnssEpoch:
+        """PVT of the epoch at ``sample`` from the channel observations; kept and returned."""
+        sol = self.engine.process(channels, sample)
+        obs = self.engine.last_observables
+        sat = satellite_states(obs, self.navdata) if obs.n else None
+        nav = {}
+        for i, prn in enumerate(obs.prn):
+            if sat is not None and sat.ok[i]:
+                try:
+                    e, src = self.navdata.select_with_source(int(prn), int(obs.t_tx_week[i]),
+                                                             float(obs.t_tx_sow[i]))
+                except SdrDiError:
+                    continue
+                nav[int(prn)] = (int(e.week), float(e.toe), int(e.AODE), src)
+        ep = GnssEpoch(int(sample), obs, sat, self.navdata.klobuchar, sol, nav)
+        self.epochs.append(ep)
+        return ep
+
+
+class ScalarEpochSource:
+    """Measurement source of the loose and tight couplings (module notes); subclasses
+    implement :meth:`measurement`.
+
+    Parameters
+    ----------
+    epochs : list of GnssEpoch
+        The recorded epochs, in time order.
+    prns : sequence of int
+        Channel columns.
+    imu_t : (n,) array
+        IMU sample times [s].
+    imu_epoch : (int, float)
+        BDT (week, seconds of week) of IMU ``t = 0``.
+    fs : float
+        IF sampling rate [Hz].
+    profile : dict
+        Seconds per stage; this source adds ``measure``.
+    """
+
+    def __init__(self, epochs: list[GnssEpoch], prns, imu_t: np.ndarray, imu_epoch,
+                 fs: float, profile: dict) -> None:
+        self.epochs = epochs
+        self.prns = tuple(int(p) for p in prns)
+        self.col = {p: i for i, p in enumerate(self.prns)}
+        self.n_channels = len(self.prns)
+        self.imu_t = imu_t
+        self.imu_week, self.imu_sow = int(imu_epoch[0]), float(imu_epoch[1])
+        self.fs = fs
+        self.profile = profile
+        profile.setdefault("measure", 0.0)
+        self._next = 0
+        self._used = np.zeros(self.n_channels, bool)
+        self._cn0 = np.full(self.n_channels, math.nan)
+        self._nav_prev: dict = {}
+        self._iono_prev = None
+        self._flag = 0
+        self.last: GnssEpoch | None = None
+        self.navigation: dict = {"ephemerides": {}, "ionosphere": []}
+
+    # ------------------------------------------------------------------------------------
+    def imu_time(self, week: int, sow: float) -> float:
+        """IMU time [s] of BDT (``week``, ``sow``)."""
+        return (week - self.imu_week) * SECONDS_PER_WEEK + sow - self.imu_sow
+
+    def bdt_of(self, ep: GnssEpoch, clock_bias_m: float) -> tuple[int, float]:
+        """BDT of the epoch: receiver time minus ``clock_bias_m`` / c."""
+        return ep.obs.week, ep.obs.sow - clock_bias_m / C_LIGHT
+
+    def epoch_clock_bias(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> float:
+        """The clock bias [m] used to time-tag ``ep`` (default: the filter's clock
+        interpolated between the interval's ends)."""
+        a = (ep.sample - iv.k0) / max(iv.k1 - iv.k0, 1)
+        return loop.clock_bias_m + a * (iv.clock_bias_m - loop.clock_bias_m)
+
+    def ins_at(self, iv: Interval, t_imu: float) -> tuple[np.ndarray, np.ndarray]:
+        """INS position (rad, rad, m) and ENU velocity [m/s] at IMU time ``t_imu``, linear
+        between the interval's ends."""
+        t0, t1 = self.imu_t[iv.i0], self.imu_t[iv.i1]
+        a = min(max((t_imu - t0) / (t1 - t0), 0.0), 1.0)
+        n0, n1 = iv.nav0, iv.nav1
+        return n0.llh + a * (n1.llh - n0.llh), n0.v_n + a * (n1.v_n - n0.v_n)
+
+    def _take_epoch(self, loop: IntegrationLoop, iv: Interval) -> GnssEpoch | None:
+        """The latest epoch whose BDT falls in the interval's IMU span; earlier ones are
+        skipped (at most one per interval while ``gnss_rate_hz`` <= the filter rate)."""
+        t1 = self.imu_t[iv.i1]
+        found = None
+        while self._next < len(self.epochs):
+            ep = self.epochs[self._next]
+            t = self.imu_time(*self.bdt_of(ep, self.epoch_clock_bias(loop, iv, ep)))
+            if t > t1:
+                break
+            if t > self.imu_t[iv.i0]:
+                found = ep
+            self._next += 1
+        return found
+
+    # ---- MeasurementSource ------------------------------------------------------------
+    def measure(self, loop: IntegrationLoop, iv: Interval) -> Measurements:
+        """The interval's measurement (None ``z`` between epochs)."""
+        ta = time.perf_counter()
+        ep = self._take_epoch(loop, iv)
+        m = None
+        if ep is not None:
+            self.last = ep
+            self._note_navigation(ep, iv.k1 / self.fs)
+            m = self.measurement(loop, iv, ep)
+            self._used = m.used.copy()
+            self._cn0 = np.full(self.n_channels, math.nan)
+            for prn, c in zip(ep.obs.prn, ep.obs.cn0_dbhz):
+                if int(prn) in self.col:
+                    self._cn0[self.col[int(prn)]] = c
+        if m is None:
+            m = Measurements(z=None, R=None, geometry=(), used=self._used)
+        self.profile["measure"] += time.perf_counter() - ta
+        return m
+
+    def measurement(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> Measurements:
+        """``z``, ``R``, geometry and channels of epoch ``ep`` (subclasses)."""
+        raise NotImplementedError
+
+    def used_mask(self, prns) -> np.ndarray:
+        """Channel mask of ``prns``."""
+        used = np.zeros(self.n_channels, bool)
+        for p in prns:
+            if int(p) in self.col:
+                used[self.col[int(p)]] = True
+        return used
+
+    def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+        """No NCOs to drive: the scalar loops run on their own."""
+
+    def take_up_navigation_data(self, loop: IntegrationLoop, iv: Interval) -> None:
+        """Nothing to switch: each epoch carries the navigation data in force at it."""
+
+    def row(self) -> dict:
+        """``cn0`` of the latest epoch [dB-Hz] and the navigation-data flag since the last
+        row (1 an ephemeris changed, 2 the ionosphere model)."""
+        out = {"cn0": self._cn0.copy(), "nav": self._flag}
+        self._flag = 0
+        return out
+
+    def _note_navigation(self, ep: GnssEpoch, t_s: float) -> None:
+        for prn, rec in ep.nav.items():
+            prev = self._nav_prev.get(prn)
+            if prev != rec:
+                if prev is not None:
+                    self._flag |= 1
+                self._nav_prev[prn] = rec
+                self.navigation["ephemerides"].setdefault(f"C{prn:02d}", []).append(
+                    {"t_s": round(t_s, 3), "source": rec[3], "week": rec[0], "toe": rec[1],
+                     "aode": rec[2]})
+        if ep.iono is not self._iono_prev or not self.navigation["ionosphere"]:
+            if self.navigation["ionosphere"]:
+                self._flag |= 2
+            self._iono_prev = ep.iono
+            self.navigation["ionosphere"].append(
+                {"t_s": round(t_s, 3), "model": "klobuchar" if ep.iono is not None else "none"})
