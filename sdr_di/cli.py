@@ -247,10 +247,12 @@ def _add_run(sub) -> None:
         "beside X.bin) or, for a file sdr-di did not write, by --fs/--if/--format.",
     )
     p.add_argument("if_file", type=Path, help="IF samples (or its .json sidecar)")
-    p.add_argument("--mode", choices=("scalar", "deep"), default="scalar",
-                   help="receiver architecture: scalar tracking loops, or deep (INS-aided "
+    p.add_argument("--mode", choices=("scalar", "deep", "loose", "tight"), default="scalar",
+                   help="receiver architecture: scalar tracking loops; deep (INS-aided "
                    "vector tracking: scalar start-up, then every NCO commanded from the "
-                   "INS corrected by the integration filter)")
+                   "INS corrected by the integration filter); loose or tight (the scalar "
+                   "receiver's WLS fixes, or its pseudoranges and rates, into the "
+                   "integration filter; docs/coupling.md)")
     p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
                    help="comma-separated PRNs to search (default all 63)")
     p.add_argument("--out", type=Path, default=None,
@@ -265,7 +267,7 @@ def _add_run(sub) -> None:
                    "satellites visible from this approximate position [deg, deg, m] around "
                    "their predicted Doppler (a cold start with assistance data)")
     _add_file_options(p)
-    g = p.add_argument_group("deep mode")
+    g = p.add_argument_group("deep, loose and tight modes")
     g.add_argument("--filter", default=None,
                    help="integration filter (default ff-aukf; any of ekf, ukf, ckf, ff-aukf, "
                    "rae-aukf, ml-q-ukf, sage-husa-ukf, q-scaling-ekf, q-scaling-ukf, ml-r-ckf)")
@@ -286,6 +288,9 @@ def _add_run(sub) -> None:
                    "(default) or from the GNSS fix at the hand-over")
     g.add_argument("--duration", type=float, default=None, metavar="S",
                    help="process only the first S seconds")
+    g.add_argument("--gnss-rate", type=float, default=None, metavar="HZ",
+                   help="loose and tight: GNSS measurement rate [Hz], 10 divided by a whole "
+                   "number (default 5)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
 
@@ -295,23 +300,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .io.atomic import check_output_dir
     from .receiver.run_scalar import run_scalar
 
-    scalar_search = args.mode != "deep" and args.approx_pos is not None
+    scalar_search = args.mode == "scalar" and args.approx_pos is not None
     deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
                                                        "filter_rate", "align", "duration")
                  if getattr(args, n) is not None
                  and not (n == "ephemeris" and scalar_search)] \
         + (["--no-assist"] if args.no_assist else [])
-    if args.mode != "deep" and deep_opts:
-        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep"
+    if args.mode == "scalar" and deep_opts:
+        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep, loose or tight"
                          + (" (scalar mode takes --ephemeris with --approx-pos)"
                             if "--ephemeris" in deep_opts else ""))
-    if args.approx_pos is not None and (args.mode == "deep" or args.ephemeris is None):
+    if args.gnss_rate is not None and args.mode not in ("loose", "tight"):
+        raise UsageError("--gnss-rate: only with --mode loose or tight")
+    if args.approx_pos is not None and (args.mode != "scalar" or args.ephemeris is None):
         raise UsageError("--approx-pos: only in scalar mode, with --ephemeris")
     _check_run_options(args)
     prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_run"))
-    if args.mode == "deep":
+    if args.mode != "scalar":
         return _run_deep(args, source, out, prns)
     assist = not args.cold
     if scalar_search:
@@ -334,7 +341,7 @@ def _check_run_options(args: argparse.Namespace) -> None:
     import math
 
     for opt, v in (("--rate", args.rate), ("--filter-rate", args.filter_rate),
-                   ("--duration", args.duration)):
+                   ("--duration", args.duration), ("--gnss-rate", args.gnss_rate)):
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UsageError(f"{opt} must be a finite number > 0, got {v:g}")
     _check_file_options(args)
@@ -394,7 +401,10 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     from .deep.vector_loop import DeepConfig
 
     # the filter name is checked by the receiver before its start-up (make_filter)
-    kw = {"filter": (args.filter or "ff-aukf").strip().lower(), "output_rate_hz": args.rate}
+    kw = {"filter": (args.filter or "ff-aukf").strip().lower(), "output_rate_hz": args.rate,
+          "mode": args.mode}
+    if args.gnss_rate is not None:
+        kw["gnss_rate_hz"] = args.gnss_rate
     if args.filter_rate is not None:
         kw["filter_rate_hz"] = args.filter_rate
     if args.align is not None:
@@ -416,12 +426,17 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     prof = r.profile
     print(f"processed {prof['processed_s']:.1f} s in {res.wall_s:.1f} s "
           f"(x{prof['processed_s'] / max(res.wall_s, 1e-9):.2f} real time); hand-over to the "
-          f"vector loop at {r.handover_s:.2f} s with "
+          f"{'vector' if r.mode == 'deep' else r.mode} loop at {r.handover_s:.2f} s with "
           f"{', '.join(f'C{p:02d}' for p in r.prns)}")
     loop = max(prof["loop"], 1e-9)
-    print("vector loop time: " + ", ".join(
-        f"{k} {100 * prof[k] / loop:.0f}%" for k in ("correlate", "prefilter", "filter", "ins",
-                                                    "nco", "read")))
+    if r.mode == "deep":
+        print("vector loop time: " + ", ".join(
+            f"{k} {100 * prof[k] / loop:.0f}%" for k in ("correlate", "prefilter", "filter",
+                                                        "ins", "nco", "read")))
+    else:
+        print(f"scalar receiver {prof['scalar']:.1f} s; {r.mode} loop {prof['loop']:.1f} s: "
+              + ", ".join(f"{k} {100 * prof[k] / loop:.0f}%" for k in ("measure", "filter",
+                                                                     "ins")))
     m = res.metrics
     if m["n"] and m["pos_m_rmse"] == m["pos_m_rmse"]:
         print(f"errors vs reference ({m['n']} epochs after the hand-over): attitude RMSE "

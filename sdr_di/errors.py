@@ -86,6 +86,12 @@ class CovarianceError(FilterError):
             "eigenvalues instead of failing")
 
 
+class AssumptionsError(SdrDiError):
+    """Bad assumptions file or ``[assume]`` table (what the integration filter believes):
+    unknown table, key or preset, negative sigma or h-parameter, or assumptions given to a
+    command that cannot use them."""
+
+
 class ExperimentError(SdrDiError):
     """Unknown experiment name, unknown parameter or a parameter value of the wrong kind."""
 

@@ -1,4 +1,8 @@
-"""``sdr-di run --mode deep``: IF file + IMU file -> deep receiver -> solution files.
+"""``sdr-di run --mode deep|loose|tight``: IF file + IMU file -> receiver -> solution files.
+
+The mode is ``DeepConfig.mode`` (:mod:`~sdr_di.deep.vector_loop`): deep, or loose / tight on
+the scalar receiver's own fixes / observables (docs/coupling.md); every mode writes the same
+files under its own name (``MODE`` below: ``deep``, ``loose`` or ``tight``).
 
 Companion files default to the ones the IF file's sidecar names (``imu_file``,
 ``truth_file``, ``ephemeris_file``, relative to the sidecar): the IMU record (required), the
@@ -9,10 +13,13 @@ decoded records take precedence; ``assist=False`` uses decoded messages only).
 Outputs in ``out_dir`` (``STEM`` = IF file name without extension), written under temporary
 names and renamed when complete:
 
-``STEM_deep.csv``          one row per output epoch (``docs/deep.md``); ``nav_change``
+``STEM_MODE.csv``          one row per output epoch (``docs/deep.md``); ``nav_change``
                            marks the rows where the loop took up navigation data since
-                           the previous row: 1 an ephemeris, 2 the ionosphere model, 3 both
-``STEM_deep_summary.json`` filter, hand-over time, channels, error metrics vs the reference,
+                           the previous row: 1 an ephemeris, 2 the ionosphere model, 3 both;
+                           the clock columns hold the filter's clock states (loose: the
+                           latest WLS fix's clock, docs/coupling.md)
+``STEM_MODE_summary.json`` mode, filter, hand-over time, channels, error metrics vs the
+                           reference,
                            time shares of the loop stages, ``navigation`` (per satellite
                            the ephemeris source and toe over time, the ionosphere and
                            troposphere models and their sources) and ``warnings``
@@ -95,7 +102,7 @@ def write_deep_csv(path: Path, res: DeepResult) -> Path:
         if res.t.size else np.zeros(
         (0, len(DEEP_COLUMNS)))
     with atomic_open(path, "w") as fh:
-        fh.write(f"# sdr-di deep solution, filter {res.filter_name}, hand-over at "
+        fh.write(f"# sdr-di {res.mode} solution, filter {res.filter_name}, hand-over at "
                  f"{res.handover_s:.3f} s, channels {' '.join(f'C{p:02d}' for p in res.prns)}\n")
         fh.write(",".join(DEEP_COLUMNS) + "\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.12g")
@@ -137,8 +144,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
                                               if p is not None))
     imu_path = Path(imu_path) if imu_path is not None else comp["imu"]
     if imu_path is None:
-        raise ImuDataError(f"{source.path}: deep mode needs an IMU file (--imu); the sidecar "
-                           "names none")
+        raise ImuDataError(f"{source.path}: {cfg.mode} mode needs an IMU file (--imu); the "
+                           "sidecar names none")
     truth_path = Path(truth_path) if truth_path is not None else comp["truth"]
     if cfg.align == "truth" and truth_path is None:
         raise ImuDataError("align 'truth' needs a reference file (--truth); use --align gnss "
@@ -152,15 +159,16 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
             nav = load_nav(nav_path)
     out_dir = ensure_output_dir(out_dir)
     stem = stem or source.path.stem
-    files = {"solution": out_dir / f"{stem}_deep.csv",
-             "summary": out_dir / f"{stem}_deep_summary.json"}
+    files = {"solution": out_dir / f"{stem}_{cfg.mode}.csv",
+             "summary": out_dir / f"{stem}_{cfg.mode}_summary.json"}
     bar = None
     t_wall = time.perf_counter()
     cb = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=round(source.duration_s, 2), unit="s", desc=f"run deep {cfg.filter}",
+        bar = tqdm(total=round(source.duration_s, 2), unit="s",
+                   desc=f"run {cfg.mode} {cfg.filter}",
                    bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
                               "{postfix}]")
 
@@ -189,7 +197,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
     metrics = res.metrics()
     write_deep_csv(files["solution"], res)
     summary = {
-        "filter": res.filter_name, "handover_s": res.handover_s,
+        "mode": res.mode, "filter": res.filter_name, "handover_s": res.handover_s,
         "prns": list(res.prns), "rows": int(res.t.size),
         "channels_always_used": bool(res.used.all()) if res.used.size else False,
         "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],

@@ -173,6 +173,9 @@ class IfGenerator:
         self.codes = np.stack([b3i_code(s.prn) for s in sats]).astype(np.float32)
         self.nh = 1.0 - 2.0 * NH20_BITS.astype(np.float32)
         self.chunk_nodes = sig.chunk_ms
+        #: Truth oscillator path (:class:`~sdr_di.sim.oscillator.ClockTruth`, set by the
+        #: builder when the scenario has ``[oscillator]``); None: the ``[receiver_clock]`` line.
+        self.clock_truth = None
 
     # -- geometry on the node grid ------------------------------------------------------
     def node_times(self, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -180,7 +183,12 @@ class IfGenerator:
         s = j * self.node_dt
         ck = self.sc.clock
         t = (s - ck.bias_s) / (1.0 + ck.drift_s_s)
-        return s, t, ck.bias_s + ck.drift_s_s * t
+        if self.clock_truth is None:
+            return s, t, ck.bias_s + ck.drift_s_s * t
+        # truth oscillator (sim/oscillator.py): s = t + line(t) + x(t), one fixed-point step
+        # (x changes by < 1e-7 s/s, so the step leaves < 1e-13 s)
+        t = t - self.clock_truth.noise_at(t) / (1.0 + ck.drift_s_s)
+        return s, t, ck.bias_s + ck.drift_s_s * t + self.clock_truth.noise_at(t)
 
     def node_state(self, j0: int, n: int) -> dict[str, np.ndarray]:
         """Kernel inputs for node intervals ``j0 .. j0 + n - 1``."""
