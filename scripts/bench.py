@@ -4,8 +4,8 @@
 Usage::
 
     python scripts/bench.py generate [--durations 10 60] [--out DIR] [--keep]
-    python scripts/bench.py run [--durations 10 40] [--keep] [--if-file F] [--repeat N]
-        [--search assisted|cold|both]
+    python scripts/bench.py run [--durations 30] [--bits 8] [--keep] [--if-file F]
+        [--repeat N] [--search assisted|cold|both] [--gnss-sdr]
     python scripts/bench.py acquire [options of scripts/bench_acquire.py]
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
     python scripts/bench.py filters [options of scripts/bench_filters.py]
@@ -19,14 +19,18 @@ unless the cache is warm; a warm-up run of 0.2 s is made first.
 
 ``run``: runs the scalar receiver (``run_scalar``, the pipeline of ``sdr-di run --mode
 scalar``: acquisition, tracking, decoding, PVT at 5 Hz, CSV/NMEA output) in a fresh process on
-a default-scenario file per duration (or ``--if-file``) and prints the process wall time, the
+a default-scenario file per duration (default 30 s, 8-bit: issue 17's target 2) or ``--if-file``,
+and prints the process wall time and CPU time, the
 real-time factor (file seconds per wall second of the whole process, and of the tracking loop
 alone), each stage's share of the wall time (``ScalarReceiver.profile``) and the peak RSS (10 s
 vs 40 s shows that memory does not grow with the file length). The machine's load average is
 printed: on a shared machine, repeat (``--repeat``) and report best and typical. Each file
 is run with the cold search of all 63 PRNs (``sdr-di run --cold``, the receiver before the
 assisted search) and the assisted one (``sdr-di run``: the sidecar's satellites around their
-Doppler).
+Doppler). A closing line per file gives target 2 (best assisted run: x real time against 3x,
+CPU seconds, stage shares); ``--gnss-sdr`` also runs GNSS-SDR 0.0.17 with the pinned
+``scripts/gnss_sdr_b3i.conf`` on the same file (its process wall and CPU time, the channels
+that started tracking) and prints the wall-time ratio against 0.5.
 
 ``acquire``: acquisition time per PRN at 25 MHz, normal (40 x 1 ms) and long (400 x 1 ms)
 searches, over +-5 kHz and +-1 kHz around a predicted Doppler.
@@ -45,12 +49,13 @@ import time
 from pathlib import Path
 
 
-def _run_generate(duration: float, out: Path) -> tuple[float, int]:
-    """Run one generation in a child process; return (wall s, peak RSS bytes of the child)."""
+def _run_generate(duration: float, out: Path, extra: tuple[str, ...] = ()) -> tuple[float, int]:
+    """Run one generation in a child process (``extra``: more ``sdr-di generate`` options);
+    return (wall s, peak RSS bytes of the child)."""
     code = (
         "import resource, sys; from sdr_di.cli import main; "
         f"rc = main(['generate', '--duration', '{duration}', '--out', r'{out}', "
-        f"'--name', 'bench', '--no-progress']); "
+        f"'--name', 'bench', '--no-progress'] + {list(extra)!r}); "
         "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss); sys.exit(rc)"
     )
     t0 = time.perf_counter()
@@ -121,14 +126,55 @@ def _run_receiver(path: Path, out: Path, search: str) -> dict:
     return r
 
 
+#: Issue 17's scalar target: file seconds per wall second of the whole process, and the
+#: largest fraction of GNSS-SDR's wall time on the same file.
+_RUN_TARGET_RT = 3.0
+_RUN_TARGET_GNSS_SDR = 0.5
+_GNSS_SDR_CONF = Path(__file__).resolve().parent / "gnss_sdr_b3i.conf"
+
+
+def _run_gnss_sdr(path: Path, work: Path) -> dict | None:
+    """GNSS-SDR's B3I receiver (``scripts/gnss_sdr_b3i.conf``, pinned for 0.0.17) on ``path``
+    (an ``iq_int8`` file with its sidecar), the sidecar's satellites one per channel; the
+    process wall and CPU time and the channels that started tracking. None when
+    ``gnss-sdr`` is not installed."""
+    import resource
+
+    exe = shutil.which("gnss-sdr")
+    if exe is None:
+        return None
+    meta = json.loads(Path(path).with_suffix(".json").read_text())
+    prns = [s["prn"] for s in meta["satellites"]]
+    work.mkdir(parents=True, exist_ok=True)
+    conf = (_GNSS_SDR_CONF.read_text().replace("@FILE@", str(Path(path).resolve()))
+            .replace("@N_CH@", str(len(prns)))
+            .replace("@CHANNELS@", "\n".join(f"Channel{i}.satellite={p}"
+                                             for i, p in enumerate(prns))))
+    (work / "b3i.conf").write_text(conf)
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    res = subprocess.run([exe, "--config_file=b3i.conf", f"--log_dir={work}"], cwd=work,
+                         check=False, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    ver = next((ln.split()[2] for ln in res.stdout.splitlines()
+                if ln.startswith("Initializing GNSS-SDR")), "?")
+    return {"wall_s": wall, "version": ver, "rc": res.returncode,
+            "cpu_s": (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime),
+            "tracked": res.stdout.count("Tracking of Beidou B3I signal started"),
+            "n_sat": len(prns)}
+
+
 def bench_run(args: argparse.Namespace) -> None:
     """Scalar receiver real-time factor, per-stage shares and peak memory on default-scenario
-    files (generated for each duration, or ``--if-file``)."""
+    files (generated for each duration, or ``--if-file``); issue 17's target 2 per file, with
+    GNSS-SDR's time on the same file when ``--gnss-sdr``."""
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sdr-di-bench-"))
     try:
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
         print(f"machine: {os.cpu_count()} cores, load average {load:.2f} at start; scalar "
-              "receiver, default scenario, 7 satellites, 25 MHz, 4-bit iq_int8, PVT at 5 Hz")
+              f"receiver, default scenario, 7 satellites, 25 MHz, {args.bits}-bit iq_int8, "
+              "PVT at 5 Hz")
         print("x real time: file seconds per wall second of the whole process (imports, "
               "acquisition, tracking, PVT, output); tracking: of the tracking loop alone; "
               "CPU s: the process's user + system time (all threads; on a shared machine the "
@@ -143,9 +189,10 @@ def bench_run(args: argparse.Namespace) -> None:
             files = []
             for d in args.durations:
                 sub = out / f"d{d:g}"
-                _run_generate(d, sub)
+                _run_generate(d, sub, ("--bits", str(args.bits)))
                 files.append(sub / "bench.bin")
         searches = ("cold", "assisted") if args.search == "both" else (args.search,)
+        best: dict[Path, dict] = {}
         for f, search in ((f, s) for f in files for s in searches):
             for _ in range(args.repeat):
                 r = _run_receiver(f, out / "run", search)
@@ -157,8 +204,27 @@ def bench_run(args: argparse.Namespace) -> None:
                       f"{p['realtime_factor']:8.2f} "
                       + " ".join(f"{v:6.1f}%" for v in shares)
                       + f" {100.0 - sum(shares):5.1f}% {r['maxrss'] / 2**20:12.1f}")
+                if search == "assisted" and (f not in best or wall < best[f]["wall"]):
+                    best[f] = {"wall": wall, "cpu": r["cpu_s"], "d": d, "shares": shares}
         print("stage shares: % of the process wall time (other: imports, numba cache loading, "
               "setup, output files)")
+        for f, b in best.items():
+            print(f"target 2 (scalar, sdr-di run, best of {args.repeat}): {b['d']:.0f} s file "
+                  f"in {b['wall']:.2f} s wall = {b['d'] / b['wall']:.2f}x real time (target >= "
+                  f"{_RUN_TARGET_RT:g}x), CPU {b['cpu']:.1f} s = {b['d'] / b['cpu']:.2f} file "
+                  "s per CPU s; shares " + ", ".join(
+                      f"{s} {v:.0f}%" for s, v in zip(_STAGES, b["shares"])))
+            if args.gnss_sdr:
+                g = _run_gnss_sdr(f, out / "gnss-sdr")
+                if g is None:
+                    print("  GNSS-SDR: not installed (apt-get install gnss-sdr)")
+                    continue
+                print(f"  GNSS-SDR {g['version']} (scripts/gnss_sdr_b3i.conf) on the same file: "
+                      f"{g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, {g['tracked']} of "
+                      f"{g['n_sat']} channels tracking, exit {g['rc']}; sdr-di / GNSS-SDR wall "
+                      f"= {b['wall'] / g['wall_s']:.2f} (target <= {_RUN_TARGET_GNSS_SDR:g})")
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+        print(f"load average {load:.2f} at the end")
     finally:
         if not args.keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -174,7 +240,12 @@ def main(argv: list[str] | None = None) -> None:
     g.add_argument("--keep", action="store_true", help="keep the generated files")
     g.set_defaults(func=bench_generate)
     r = sub.add_parser("run", help="scalar receiver real-time factor and memory")
-    r.add_argument("--durations", type=float, nargs="+", default=[10.0, 40.0])
+    r.add_argument("--durations", type=float, nargs="+", default=[30.0],
+                   help="generated file lengths [s] (default 30: issue 17's target 2)")
+    r.add_argument("--bits", type=int, default=8,
+                   help="quantization bits of the generated iq_int8 files (default 8)")
+    r.add_argument("--gnss-sdr", action="store_true",
+                   help="also time GNSS-SDR (scripts/gnss_sdr_b3i.conf) on each file")
     r.add_argument("--out", default=None, help="work directory (default: a temp dir)")
     r.add_argument("--keep", action="store_true", help="keep the files")
     r.add_argument("--if-file", default=None,

@@ -113,7 +113,8 @@ def _run_sums(lo, hi, br, bi, k, th0, dc, off, ae, ap, al):
     return s1, s2, s3, s4, s5, s6
 
 
-@njit(cache=True, parallel=True, fastmath={"reassoc", "contract"}, boundscheck=False)
+@njit(cache=True, nogil=True, parallel=True, fastmath={"reassoc", "contract"},
+      boundscheck=False)
 def correlate_epl_bits(
     xs,  # int8/int16/float32/float64 (n * n_comp,): stored samples, I/Q interleaved when n_comp == 2
     n_comp,  # int: 2 (complex, interleaved I, Q) or 1 (real)
@@ -270,7 +271,7 @@ def pack_bit_windows(neg, out):
             out[c, j] = w
 
 
-@njit(cache=True, fastmath={"reassoc", "contract"}, boundscheck=False)
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"}, boundscheck=False)
 def mean_power(xs, n_comp):
     """Mean ``|x|^2`` per sample of stored samples (I/Q interleaved when ``n_comp == 2``).
 

@@ -214,6 +214,10 @@ class IfSource:
         self.start_sow = None if start_sow is None else float(start_sow)
         self.carrier_hz = float(carrier_hz)
         self.meta = meta
+        #: Read the next chunk in a background thread (:meth:`read_stored` notes).
+        self.read_ahead = True
+        self._pool = None
+        self._ahead: tuple | None = None
 
         try:
             size = self.path.stat().st_size
@@ -411,7 +415,7 @@ class IfSource:
             layouts unpacked), ``int16`` (``iq_int16``, ``real_int16``) or ``float32``
             (``gr_complex``, and every format when the spectrum is inverted: then the
             :meth:`read` values, corrected); I and Q interleaved for I/Q formats. A fresh
-            array.
+            array (or a slice of a fresh read-ahead buffer that nothing else refers to).
         n_comp : int
             2 for I/Q formats, 1 for real ones.
 
@@ -419,6 +423,16 @@ class IfSource:
         ------
         ValueError
             Range outside the file.
+
+        Notes
+        -----
+        **Read-ahead** (:attr:`read_ahead`, default True): after each call, a background
+        thread reads the next ``1.5 n`` samples from ``n / 2`` before this call's end, the
+        range the receivers' sequential chunk reads ask for next (they re-read an overlap of
+        up to two coherent blocks). A later call inside that range is served from it, so
+        the file read overlaps the caller's correlation (the read releases the GIL, as do
+        the correlator kernels); any other call reads synchronously and drops it. The values
+        are the same either way.
         """
         n_comp = 2 if self.format.is_complex else 1
         if self.spectrum_inverted:
@@ -428,11 +442,21 @@ class IfSource:
         if start_sample < 0 or n < 0 or start_sample + n > self._n:
             raise ValueError(f"IF file {self.path}: samples [{start_sample}, {start_sample + n})"
                              f" outside [0, {self._n})")
+        out = self._take_ahead(start_sample, n, n_comp)
+        if out is None:
+            out = self._read_stored_now(start_sample, n, n_comp)
+        if self.read_ahead and n > 0 and start_sample + n < self._n:
+            a0 = start_sample + n - n // 2
+            self._schedule_ahead(a0, min(n + n // 2, self._n - a0), n_comp)
+        return out, n_comp
+
+    def _read_stored_now(self, start_sample: int, n: int, n_comp: int) -> np.ndarray:
+        """:meth:`read_stored` of a checked range, read now (a fresh array)."""
         fmt = self.format
         if n == 0:
             dt = np.float32 if fmt.name == "gr_complex" else \
                 np.int8 if self._tables is not None else fmt.dtype
-            return np.empty(0, dt), n_comp
+            return np.empty(0, dt)
         # one read() into a fresh array: cheaper than mapping the range and copying it
         # (no page faults on a new mapping per chunk)
         bps = fmt.bytes_per_sample
@@ -451,7 +475,38 @@ class IfSource:
                 out = out.astype(out.dtype.newbyteorder("="))
         if out.size != n * n_comp:
             raise SampleFormatError(f"IF file {self.path}: short read at sample {start_sample}")
-        return out, n_comp
+        return out
+
+    def _schedule_ahead(self, start_sample: int, n: int, n_comp: int) -> None:
+        """Start reading ``[start_sample, start_sample + n)`` in the background."""
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="if-read-ahead")
+        self._ahead = (start_sample, n, self._pool.submit(self._read_stored_now, start_sample,
+                                                          n, n_comp))
+
+    def _take_ahead(self, start_sample: int, n: int, n_comp: int) -> np.ndarray | None:
+        """The requested range from the pending read-ahead, or None (which is dropped)."""
+        ahead, self._ahead = self._ahead, None
+        if ahead is None:
+            return None
+        a0, m, fut = ahead
+        if not (a0 <= start_sample and start_sample + n <= a0 + m):
+            fut.cancel()
+            return None
+        try:
+            buf = fut.result()
+        except Exception:  # noqa: BLE001 - read again in the caller's thread, which raises
+            return None
+        i = (start_sample - a0) * n_comp
+        return buf[i:i + n * n_comp]
+
+    def __getstate__(self) -> dict:
+        st = dict(self.__dict__)
+        st["_pool"] = None
+        st["_ahead"] = None
+        return st
 
     def chunks(self, n_per_chunk: int, start: int = 0,
                stop: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
