@@ -291,6 +291,9 @@ def _add_run(sub) -> None:
     g.add_argument("--gnss-rate", type=float, default=None, metavar="HZ",
                    help="loose and tight: GNSS measurement rate [Hz], 10 divided by a whole "
                    "number (default 5)")
+    g.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
+                   help="what the integration filter believes: IMU spec, oscillator, R, P0, "
+                   "initial errors (docs/assumptions.md)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
 
@@ -302,7 +305,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     scalar_search = args.mode == "scalar" and args.approx_pos is not None
     deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
-                                                       "filter_rate", "align", "duration")
+                                                       "filter_rate", "align", "duration",
+                                                       "assume")
                  if getattr(args, n) is not None
                  and not (n == "ephemeris" and scalar_search)] \
         + (["--no-assist"] if args.no_assist else [])
@@ -413,6 +417,10 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
         cfg = DeepConfig(**kw)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
+    if args.assume is not None:  # --assume over DeepConfig's defaults (docs/assumptions.md)
+        from .integration.assumptions import apply_to_deep, load_assumptions
+
+        cfg = apply_to_deep(cfg, load_assumptions(args.assume))
     if args.duration is not None and not args.duration > 0:
         raise UsageError(f"--duration must be > 0, got {args.duration:g}")
     _check_deep_inputs(args, source, cfg)
@@ -475,11 +483,15 @@ def _add_lc(sub) -> None:
     p.add_argument("--imu", type=Path, default=None,
                    help="IMU file (sdr-di imu CSV) instead of simulating; needs --truth")
     p.add_argument("--truth", type=Path, default=None, help="truth file for --imu")
+    p.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
+                   help="what the filter believes (IMU spec, R, P0, initial errors; "
+                   "docs/assumptions.md); replaces the scenario's [assume] table")
     p.set_defaults(func=_cmd_lc)
 
 
 def _cmd_lc(args: argparse.Namespace) -> int:
     import dataclasses
+    import json
     import math
 
     from .errors import FilterError, ImuDataError, ScenarioError
@@ -491,11 +503,17 @@ def _cmd_lc(args: argparse.Namespace) -> int:
         min_lc_duration_s,
         run_loose,
     )
+    from .integration.assumptions import apply_to_lc, resolve_assumptions
+    from .integration.loose import lc_summary
     from .integration.noise import NoiseWindow
-    from .io.atomic import check_output_dir, ensure_output_dir
+    from .io.atomic import atomic_open, check_output_dir, ensure_output_dir
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
 
     sc, st = load_lc_scenario(args.scenario or DEFAULT_SCENARIO)
+    assumed = resolve_assumptions(sc, args.assume)  # checked before any work
+    filter_imu = None
+    if assumed is not None:
+        st, filter_imu = apply_to_lc(st, assumed)
     name = (args.filter or st.filter).strip().lower()
     if name not in FILTER_NAMES:
         raise FilterError(f"unknown filter {name!r}; valid names: {', '.join(FILTER_NAMES)}")
@@ -543,8 +561,13 @@ def _cmd_lc(args: argparse.Namespace) -> int:
                                 f"GNSS interval ({shortest:g} s): no filter update, no result")
         truth, imu, model = make_inputs(sc, st)
     out = ensure_output_dir(out)  # created only now that every input is checked
+    model = filter_imu or model  # the filter's IMU spec: assumed, else the truth's
     res = run_loose(truth, imu, model, st, seed=seed, duration_s=args.duration)
     csv = res.write_csv(out / f"{sc.name}_lc_{name}.csv")
+    summary = out / f"{sc.name}_lc_{name}_summary.json"
+    with atomic_open(summary, "w") as fh:
+        json.dump(lc_summary(sc, st, model, assumed, res, seed=seed), fh, indent=2)
+        fh.write("\n")
     head = (f"{'filter':14s} {'span_s':>11s} {'att_rmse_deg':>12s} {'att_max_deg':>11s} "
             f"{'vel_rmse':>9s} {'vel_max':>8s} {'pos_rmse_m':>10s} {'pos_max_m':>9s}")
     print(head)
@@ -556,6 +579,7 @@ def _cmd_lc(args: argparse.Namespace) -> int:
               f"{m['vel_mps_rmse']:9.4f} {m['vel_mps_max']:8.4f} {m['pos_m_rmse']:10.3f} "
               f"{m['pos_m_max']:9.3f}")
     print(f"errors    {csv}")
+    print(f"summary   {summary}")
     return 0
 
 

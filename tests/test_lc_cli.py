@@ -1,5 +1,7 @@
 """``sdr-di lc`` end to end: table, CSV, file input and every bad input (exit status 2)."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -42,7 +44,12 @@ def test_lc_prints_table_and_writes_csv(tmp_path, capsys):
     assert row[0] == "ukf" and row[1] == "all" and float(row[6]) < 5.0
     assert lines[2].split()[1] == "5-10"
     csv = tmp_path / "default_lc_ukf.csv"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["default_lc_ukf.csv"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["default_lc_ukf.csv",
+                                                          "default_lc_ukf_summary.json"]
+    summary = json.loads((tmp_path / "default_lc_ukf_summary.json").read_text())
+    assert summary["truth"]["gnss_noise"]["windows"] == [[5.0, 10.0, 16.0]]
+    assert summary["assumptions"]["imu"]["accel_bias_mg"] == 4.0  # truth = belief here
+    assert summary["assumptions"]["given"] is None
     data = np.loadtxt(csv, delimiter=",", skiprows=2)
     assert data.shape == (20, 23)
     r_true = data[:, 17:23]

@@ -22,7 +22,10 @@ names and renamed when complete:
                            reference,
                            time shares of the loop stages, ``navigation`` (per satellite
                            the ephemeris source and toe over time, the ionosphere and
-                           troposphere models and their sources) and ``warnings``
+                           troposphere models and their sources), ``warnings``,
+                           ``truth`` (from the sidecar: scenario, receiver clock,
+                           oscillator, IMU spec) and ``assumptions`` (what the filter
+                           believed: :func:`~sdr_di.integration.assumptions.deep_beliefs`)
 
 Warnings of the run (:class:`~sdr_di.receiver.navdata.NavDataWarning`: no ionosphere model
 at the hand-over) are printed as one ``sdr-di: warning: ...`` line each on stderr and kept
@@ -42,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ImuDataError
+from ..integration.assumptions import deep_beliefs, sidecar_truth
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
@@ -207,6 +211,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
         "wall_s": wall,
         "navigation": res.navigation,
         "warnings": notes,
+        "truth": sidecar_truth(getattr(source, "meta", None)),
+        "assumptions": deep_beliefs(cfg),
     }
     with atomic_open(files["summary"], "w") as fh:
         json.dump(summary, fh, indent=2)

@@ -114,16 +114,18 @@ from ..frames import ecef_to_llh, radii_of_curvature
 from ..ins.error_model import ClockModel, InsErrorModel, process_noise
 from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
+from ..integration.assumptions import FixedNoiseSource
 from ..integration.gnss_epochs import GnssEpochRecorder
 from ..integration.loop import IntegrationLoop
 from ..integration.loose_fixes import LooseFixSource
 from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
-from ..integration.tight_ranges import TightRangeSource
-from ..receiver.prediction import FixPredictor
 from ..integration.metrics import summarize
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataInForce, NavDataWarning
 from ..receiver.observables import ReceiverTime
+from ..integration.tight_ranges import TightRangeSource
+from ..oscillator import CLOCK_PRESETS, OscillatorSpec
+from ..receiver.prediction import FixPredictor
 from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import ChannelState
@@ -140,7 +142,14 @@ MODES = ("deep", "loose", "tight")
 #: Interval of the scalar start-up's output epochs (the hand-over rule runs on them) [s].
 _EPOCH_S = 0.1
 
-_CLOCKS = {"tcxo": ClockModel(h0=2e-19, h_2=2e-20), "ocxo": ClockModel(h0=8e-20, h_2=4e-23)}
+
+
+def clock_model(clock: str | OscillatorSpec) -> ClockModel:
+    """The filter's two-state clock for ``DeepConfig.clock``: a preset name of
+    :data:`~sdr_di.oscillator.CLOCK_PRESETS` (the table the truth oscillator uses) or an
+    :class:`~sdr_di.oscillator.OscillatorSpec` (flicker mapped:
+    :meth:`ClockModel.from_oscillator`)."""
+    return ClockModel.from_oscillator(CLOCK_PRESETS[clock] if isinstance(clock, str) else clock)
 
 
 class HandoverError(SdrDiError):
@@ -183,10 +192,27 @@ class DeepConfig:
         IMU spec for ``Q`` and ``P0`` (random walks, biases; default paper 004 Table 4).
     bias_time_s : float
         Time for the bias random walk to reach the spec [s].
-    clock : str
-        Receiver oscillator model of the clock states' process noise (paper 004 eq 4):
-        ``"tcxo"`` (h0 = 2e-19 s, h-2 = 2e-20 1/s, the default) or ``"ocxo"`` (8e-20, 4e-23)
-        (Allan-variance coefficients of Brown & Hwang).
+    clock : str or OscillatorSpec
+        Receiver oscillator the clock states' process noise assumes (paper 004 eq 4): a
+        preset of :data:`~sdr_di.oscillator.CLOCK_PRESETS` (``"tcxo"``, the default,
+        ``"ocxo"``, ``"ideal"``; Brown & Hwang) or an ``OscillatorSpec``; its flicker term
+        is mapped into the two-state model (:func:`clock_model`).
+    noise_policy, sigma_range_m, sigma_rate_mps
+        The filter's ``R``: ``"cn0"`` (pre-filter variances, from C/N0) or ``"fixed"``
+        (these sigmas [m, m/s] on every range and range rate).
+    p0_vel_mps, p0_pos_m : tuple or None
+        ``P0`` sigmas (E, N, U) [m/s, m]; None: 0.1 m/s and the fix's position sigma (at
+        least 1 m). A given position sigma is floored by the fix's.
+    p0_clock : tuple or None
+        ``(clock bias [m], clock drift [m/s])`` sigmas of ``P0`` (None for either: the
+        fix's 1.5x position sigma and 0.1 m/s).
+    init_att_err_deg, init_vel_err_mps, init_pos_err_m : tuple
+        Errors injected into the INS at the alignment (E, N, U): attitude as a rotation
+        vector (computed = exp(-[phi x]) true; U = heading) [deg], velocity [m/s],
+        position [m] (docs/assumptions.md).
+    assumptions : dict or None
+        Record of the assumptions applied (:func:`~sdr_di.integration.assumptions.
+        apply_to_deep`), written into the run's summary.
     prefilter : dict
         Keyword arguments of :class:`~sdr_di.deep.prefilter.PreFilterBank`.
     filter_options : dict
@@ -215,14 +241,23 @@ class DeepConfig:
     nis_p_min: float = 1e-4
     imu: ImuErrorModel = dataclasses.field(default_factory=ImuErrorModel)
     bias_time_s: float = 3600.0
-    clock: str = "tcxo"
+    clock: str | OscillatorSpec = "tcxo"
+    noise_policy: str = "cn0"
+    sigma_range_m: float | None = None
+    sigma_rate_mps: float | None = None
+    p0_vel_mps: tuple | None = None
+    p0_pos_m: tuple | None = None
+    p0_clock: tuple | None = None
+    init_att_err_deg: tuple = (0.0, 0.0, 0.0)
+    init_vel_err_mps: tuple = (0.0, 0.0, 0.0)
+    init_pos_err_m: tuple = (0.0, 0.0, 0.0)
+    assumptions: dict | None = None
     prefilter: dict = dataclasses.field(default_factory=dict)
     filter_options: dict = dataclasses.field(default_factory=dict)
     p0_att_deg: tuple = (0.05, 0.05, 0.1)
     chunk_ms: int = 200
     coherent_ms: int = 20
     iono_wait_s: float = 30.0
-
     mode: str = "deep"
     gnss_rate_hz: float = 5.0
 
@@ -234,8 +269,13 @@ class DeepConfig:
         if not (math.isfinite(m) and m >= 1.0 - 1e-9 and abs(m - round(m)) < 1e-9):
             raise ValueError(f"gnss_rate_hz must be 10 Hz divided by a whole number (10, 5, "
                              f"2.5, 2, 1, ...), got {g!r}")
-        if self.clock not in _CLOCKS:
-            raise ValueError(f"clock must be one of {', '.join(_CLOCKS)}, got {self.clock!r}")
+        if not isinstance(self.clock, OscillatorSpec) and self.clock not in CLOCK_PRESETS:
+            raise ValueError(f"clock must be one of {', '.join(CLOCK_PRESETS)}, got "
+                             f"{self.clock!r}")
+        if self.noise_policy not in ("cn0", "fixed") or (self.noise_policy == "fixed" and not (
+                self.sigma_range_m and self.sigma_rate_mps)):
+            raise ValueError(f"noise_policy must be 'cn0' or 'fixed' (with sigma_range_m and "
+                             f"sigma_rate_mps > 0), got {self.noise_policy!r}")
         if self.align not in ("truth", "gnss"):
             raise ValueError(f"align must be 'truth' or 'gnss', got {self.align!r}")
         for name in ("filter_rate_hz", "output_rate_hz"):
@@ -570,7 +610,8 @@ class DeepReceiver:
             progress=progress, profile=prof)
         adapt0 = kf.adaptation_time_s
         try:
-            loop.run(tracking)
+            loop.run(tracking if cfg.noise_policy == "cn0" else FixedNoiseSource(
+                tracking, cfg.sigma_range_m, cfg.sigma_rate_mps))
         finally:
             tracking.close()
         return self._result(loop, clock, tuple(c.prn for c in chans), kf, adapt0, k_grid0,
@@ -639,7 +680,8 @@ class DeepReceiver:
             output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
             profile=prof)
         adapt0 = kf.adaptation_time_s
-        loop.run(src)
+        loop.run(src if loose or cfg.noise_policy == "cn0" else FixedNoiseSource(
+            src, cfg.sigma_range_m, cfg.sigma_rate_mps))
         return self._result(loop, clock, prns, kf, adapt0, k_grid0, prof, t_all,
                             src.navigation)
 
@@ -705,6 +747,7 @@ class DeepReceiver:
             ins = StrapdownINS(llh_fix, v, C_b_n=C0, t=float(imu.t[i_h]))
             ins.set_previous_increments(imu.f_b[i_h], imu.w_ib_b[i_h], dt_imu)
             att_sig = np.radians([3.0, 3.0, 5.0])
+        _inject_initial_errors(ins, cfg)
         return ins, llh_fix, att_sig
 
     def _make_filter(self, T: float, sol, llh_fix, att_sig, meas=None):
@@ -728,22 +771,44 @@ class DeepReceiver:
         Q0 = process_noise(T, gyro_random_walk_si=cfg.imu.gyro_random_walk_si,
                            accel_random_walk_si=cfg.imu.accel_random_walk_si,
                            gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=cfg.bias_time_s,
-                           clock=_CLOCKS[cfg.clock])
+                           clock=clock_model(cfg.clock))
         lat0, h0 = float(llh_fix[0]), float(llh_fix[2])
         R_M, R_N = (float(r) for r in radii_of_curvature(lat0))
         cov = np.asarray(sol.cov, float)
         s_pos = math.sqrt(max(np.trace(cov[:3, :3]) / 3.0, 0.25)) if np.all(
             np.isfinite(cov[:3, :3])) else 2.0
         s_pos = max(s_pos, 1.0)
-        p0 = np.r_[att_sig ** 2, [0.1 ** 2] * 3,
-                   (s_pos / (R_M + h0)) ** 2, (s_pos / ((R_N + h0) * math.cos(lat0))) ** 2,
-                   (1.5 * s_pos) ** 2, [gb ** 2] * 3, [ab ** 2] * 3, (1.5 * s_pos) ** 2,
-                   0.1 ** 2]
-        process = InsErrorModel(_CLOCKS[cfg.clock])
+        s_vel = np.full(3, 0.1) if cfg.p0_vel_mps is None else np.asarray(cfg.p0_vel_mps)
+        s_enu = np.array([s_pos, s_pos, 1.5 * s_pos]) if cfg.p0_pos_m is None else np.maximum(
+            np.asarray(cfg.p0_pos_m, float), [s_pos, s_pos, 1.5 * s_pos])
+        s_clk = [1.5 * s_pos, 0.1]
+        for i, v in enumerate(cfg.p0_clock or (None, None)):
+            if v is not None:
+                s_clk[i] = v
+        p0 = np.r_[att_sig ** 2, s_vel ** 2,
+                   (s_enu[1] / (R_M + h0)) ** 2, (s_enu[0] / ((R_N + h0) * math.cos(lat0))) ** 2,
+                   s_enu[2] ** 2, [gb ** 2] * 3, [ab ** 2] * 3, s_clk[0] ** 2, s_clk[1] ** 2]
+        process = InsErrorModel(clock_model(cfg.clock))
         meas = RangeRateMeasurementModel() if meas is None else meas
         kf = make_filter(cfg.filter, process, meas, np.zeros(17), np.diag(p0), Q0, None, dt=T,
                          **cfg.filter_options)
         return kf, process, meas
+
+
+def _inject_initial_errors(ins: StrapdownINS, cfg: DeepConfig) -> None:
+    """Add the configured initial errors to the aligned INS (errors = computed - true, as the
+    filter's states): attitude ``C_b_n <- exp(-[phi x]) C_b_n`` for the ENU rotation vector
+    ``phi``, velocity ``v_n += dv``, position ``+= (dE, dN, dU)`` [m] (the INS feedback
+    :meth:`~sdr_di.ins.mechanization.StrapdownINS.correct` with the errors negated)."""
+    phi = np.radians(np.asarray(cfg.init_att_err_deg, float))
+    dv = np.asarray(cfg.init_vel_err_mps, float)
+    dp = np.asarray(cfg.init_pos_err_m, float)
+    if not (np.any(phi) or np.any(dv) or np.any(dp)):
+        return
+    lat, h = float(ins.llh[0]), float(ins.llh[2])
+    R_M, R_N = (float(r) for r in radii_of_curvature(lat))
+    dllh = np.array([dp[1] / (R_M + h), dp[0] / ((R_N + h) * math.cos(lat)), dp[2]])
+    ins.correct(-phi, -dv, -dllh)
 
 
 def _offer_subframe_klobuchar(rx: ScalarReceiver, navdata: NavDataInForce, t_s: float) -> None:

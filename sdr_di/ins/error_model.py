@@ -59,8 +59,10 @@ Process noise (:func:`process_noise`, discrete, per interval ``h``), decisions d
   bias spec in ``bias_time_s`` (default 3600 s) is added so the bias covariance does not
   collapse: ``q = b_spec^2 h / bias_time_s``;
 * clock (eq 4): oscillator of Allan-variance coefficients ``h0``, ``h_-2`` (default TCXO
-  ``h0 = 2e-19``, ``h_-2 = 2e-20``; Brown and Hwang), ``S_b = c^2 h0 / 2`` [m^2/s],
-  ``S_d = 2 pi^2 c^2 h_-2`` [m^2/s^3], ``tau_clk = 3600`` s; discrete
+  ``h0 = 2e-19``, ``h_-2 = 2e-20``; Brown and Hwang; an oscillator with flicker noise
+  ``h_-1`` is mapped into these two by :meth:`ClockModel.from_oscillator`),
+  ``S_b = c^2 h0 / 2`` [m^2/s], ``S_d = 2 pi^2 c^2 h_-2`` [m^2/s^3], ``tau_clk = 3600`` s;
+  discrete
   ``[[S_b h + S_d h^3/3, S_d h^2/2], [S_d h^2/2, S_d h]]`` (the Markov damping is neglected
   in Q since ``h << tau_clk``).
 """
@@ -75,6 +77,7 @@ import numpy as np
 from ..constants import OMEGA_E
 from ..filters.models import ProcessModel, numerical_jacobian
 from ..frames import radii_of_curvature, skew
+from ..oscillator import two_state_coefficients
 from .gravity import normal_gravity
 
 __all__ = [
@@ -135,6 +138,15 @@ class ClockModel:
     h0: float = 2e-19
     h_2: float = 2e-20
     tau_s: float = 3600.0
+
+    @classmethod
+    def from_oscillator(cls, spec, tau_s: float = 3600.0) -> ClockModel:
+        """The two-state clock the filter uses for an oscillator
+        (:class:`~sdr_di.oscillator.OscillatorSpec`): its flicker term ``h_-1`` mapped into
+        ``h0`` and ``h_-2`` (:func:`~sdr_di.oscillator.two_state_coefficients`); the
+        g-sensitivity has no state and is not used."""
+        h0, h_2 = two_state_coefficients(spec.h0, spec.h_1, spec.h_2)
+        return cls(h0=h0, h_2=h_2, tau_s=tau_s)
 
     @property
     def S_b(self) -> float:

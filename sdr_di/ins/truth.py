@@ -42,6 +42,10 @@ class Truth:
         rotating ECEF frame, not inertial), instantaneous at ``t``.
     rate_hz : float
         Sample rate [Hz].
+    clock_bias_s, clock_drift_s_s : (n,) arrays or None
+        True receiver clock at ``t``: bias = receiver time - true time [s] and drift
+        (fractional frequency, average over ``(t_{k-1}, t_k]``) [s/s]
+        (:mod:`sdr_di.sim.oscillator`); None in a truth file without the clock columns.
     """
 
     t: np.ndarray
@@ -55,6 +59,8 @@ class Truth:
     v_e: np.ndarray
     a_e: np.ndarray
     rate_hz: float
+    clock_bias_s: np.ndarray | None = None
+    clock_drift_s_s: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)

@@ -20,6 +20,13 @@ Decisions
   layout as deep mode) but unobserved; their ``Q`` is tiny.
 * Filter ``R`` = ``r_scale`` x nominal GNSS variances; the true noise follows the schedule
   (``r_windows``: paper 003's 16 R during 500-700 s). The filter is never told the schedule.
+  An assumptions ``[measurement_noise] policy = "fixed"`` replaces the nominal variances by
+  its ``sigma_pos_h_m``, ``sigma_pos_v_m``, ``sigma_vel_mps`` (``assumed_r_sigmas``); the
+  simulated noise stays the ``[lc]`` one (truth).
+* What the filter believes (IMU spec, ``R``, ``P0``, initial errors) can be given apart from
+  the truth by an assumptions file (``--assume``) or the scenario's ``[assume]`` table
+  (:mod:`~sdr_di.integration.assumptions`; they override the ``[lc]`` keys of the same
+  meaning). Without them the filter's IMU spec is the scenario's ``[imu]`` (truth = belief).
 * ``P0`` = diag of the squared ``p0_sigma_*`` (default: the initial errors, floored) and of
   the bias specs; a non-positive-definite ``P0`` is rejected by the filter
   (:class:`~sdr_di.errors.FilterError`).
@@ -61,6 +68,7 @@ from .noise import GnssNoise, NoiseWindow
 __all__ = [
     "LcResult",
     "LcSettings",
+    "lc_summary",
     "load_lc_scenario",
     "make_inputs",
     "run_loose",
@@ -90,6 +98,9 @@ class LcSettings:
     imu_draw: str = "gaussian"
     filter_options: dict = dataclasses.field(default_factory=dict)
     options_by_filter: dict = dataclasses.field(default_factory=dict)
+    #: Fixed ``R`` sigmas (horizontal, vertical position [m], velocity [m/s]) the filter
+    #: assumes; None: the nominal variances of ``noise`` (module notes).
+    assumed_r_sigmas: tuple | None = None
 
     def replace(self, **kw) -> LcSettings:
         return dataclasses.replace(self, **kw)
@@ -322,7 +333,11 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     # keep Q positive definite on the IMU states even for a perfect IMU
     floor = np.r_[[1e-14] * 3, [1e-10] * 3, [0.0] * 3, [1e-20] * 3, [1e-16] * 3, 0.0, 0.0]
     Q0 = s.q_scale * (Q_model + np.diag(floor))
-    R0 = s.r_scale * s.noise.nominal_diag()
+    if s.assumed_r_sigmas is None:
+        R0 = s.r_scale * s.noise.nominal_diag()
+    else:
+        sh, sv, svel = s.assumed_r_sigmas
+        R0 = s.r_scale * np.array([svel**2] * 3 + [sh**2, sh**2, sv**2])
     lat0, h0 = float(truth.llh[0, 0]), float(truth.llh[0, 2])
     R_M, R_N = (float(r) for r in radii_of_curvature(lat0))
     att0 = np.array(s.init_att_err_arcmin) * ARCMIN
@@ -400,3 +415,43 @@ def run_loose_scenario(sc: Scenario, settings: LcSettings,
         sc = sc.with_overrides(duration_s=duration_s)
     truth, imu, model = make_inputs(sc, settings)
     return run_loose(truth, imu, model, settings, seed=sc.seed)
+
+
+def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, assumed,
+               res: LcResult, *, seed: int) -> dict:
+    """Summary of an ``lc`` run: metrics, the truth (scenario, IMU, GNSS noise) and what the
+    filter assumed (its IMU spec, ``R``, ``P0`` sigmas, initial errors, scales, and the
+    assumptions mapping given, if any)."""
+    from .assumptions import truth_record
+
+    def _f(v):
+        v = v.tolist() if isinstance(v, (np.ndarray, np.generic)) else v
+        if isinstance(v, list):
+            return [_f(a) for a in v]
+        return None if isinstance(v, float) and not math.isfinite(v) else v
+
+    noise = settings.noise
+    truth = truth_record(sc)
+    truth["seed"] = seed
+    truth["gnss_noise"] = {"sigma_pos_h_m": noise.sigma_h_m, "sigma_pos_v_m": noise.sigma_v_m,
+                           "sigma_vel_mps": noise.sigma_vel_mps,
+                           "windows": [dataclasses.astuple(w) for w in noise.windows]}
+    r = settings.assumed_r_sigmas
+    beliefs = {
+        "imu": dataclasses.asdict(filter_imu), "bias_time_s": settings.bias_time_s,
+        "bias_noise": settings.bias_noise, "q_scale": settings.q_scale,
+        "r_scale": settings.r_scale,
+        "measurement_noise": {"policy": "nominal" if r is None else "fixed",
+                              **({} if r is None else dict(zip(
+                                  ("sigma_pos_h_m", "sigma_pos_v_m", "sigma_vel_mps"), r)))},
+        "initial_errors": {"att_arcmin": list(settings.init_att_err_arcmin),
+                           "vel_mps": list(settings.init_vel_err_mps),
+                           "pos_m": list(settings.init_pos_err_m)},
+        "initial_covariance": {"att_arcmin": settings.p0_sigma_att_arcmin,
+                               "vel_mps": settings.p0_sigma_vel_mps,
+                               "pos_m": settings.p0_sigma_pos_m},
+        "given": None if assumed is None else assumed.record(),
+    }
+    return {"filter": res.filter_name,
+            "metrics": {k: _f(v) for k, v in res.metrics().items()},
+            "truth": truth, "assumptions": beliefs}

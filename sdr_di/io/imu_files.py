@@ -24,7 +24,16 @@ Truth file (``write_truth`` / ``read_truth``) columns:
 ``t`` [s]; ``lat, lon`` [deg]; ``h`` [m]; ``v_e, v_n, v_u`` [m/s] (ENU); ``pitch, roll,
 yaw`` [deg]; ``f_x, f_y, f_z`` [m/s^2] and ``w_x, w_y, w_z`` [rad/s] (body, interval
 averages as in the IMU file); ``x_e, y_e, z_e`` [m], ``vx_e, vy_e, vz_e`` [m/s],
-``ax_e, ay_e, az_e`` [m/s^2] (ECEF, instantaneous, for Hermite interpolation).
+``ax_e, ay_e, az_e`` [m/s^2] (ECEF, instantaneous, for Hermite interpolation); then, in
+files written since the truth oscillator (issue 14), ``clock_bias_s`` [s] and
+``clock_drift_s_s`` [s/s]: the true receiver clock (receiver time - true time, and its rate
+averaged over ``(t[k-1], t[k]]``). Readers accept both column sets (without the clock
+columns ``Truth.clock_bias_s`` is None).
+
+Time scale: ``t`` in both files is *true* time (BDT) since the scenario start, BDT =
+``(bdt_week_t0, bdt_sow_t0) + t``; the IF file's sample 0 is at *receiver* time
+``(week, sow)`` of the start, so IF time ``s`` and ``t`` differ by the clock bias:
+``s = t + clock_bias_s(t)``.
 
 Readers check the header, the column names and count on every line, NaN/inf, strictly
 increasing time, and the sample spacing (each ``dt`` within half a nominal interval of
@@ -51,6 +60,8 @@ TRUTH_COLUMNS = (
     "f_x", "f_y", "f_z", "w_x", "w_y", "w_z",
     "x_e", "y_e", "z_e", "vx_e", "vy_e", "vz_e", "ax_e", "ay_e", "az_e",
 )
+#: Truth columns with the receiver clock (written when ``Truth.clock_bias_s`` is set).
+TRUTH_CLOCK_COLUMNS = TRUTH_COLUMNS + ("clock_bias_s", "clock_drift_s_s")
 _FMT = "%.17g"
 _TRUE_KEYS = (("true_accel_bias_mps2", "accel_bias"), ("true_gyro_bias_rads", "gyro_bias"),
               ("true_accel_scale", "accel_scale"), ("true_gyro_scale", "gyro_scale"))
@@ -157,18 +168,26 @@ def write_truth(path: str | Path, truth: Truth, week: int | None = None,
         "sample: PVA and ECEF instantaneous at t; f_b, w_ib_b average over (t[k-1], t[k]]",
         "columns: t [s since scenario start], lat lon [deg], h [m], v_e v_n v_u [m/s], "
         "pitch roll yaw [deg], f_x f_y f_z [m/s^2], w_x w_y w_z [rad/s], "
-        "x_e y_e z_e [m], vx_e vy_e vz_e [m/s], ax_e ay_e az_e [m/s^2]",
+        "x_e y_e z_e [m], vx_e vy_e vz_e [m/s], ax_e ay_e az_e [m/s^2]"
+        + ("" if truth.clock_bias_s is None else
+           ", clock_bias_s [s] (receiver time - true time), clock_drift_s_s [s/s]"),
     ]
-    data = np.column_stack([
-        truth.t, np.degrees(truth.llh[:, :2]), truth.llh[:, 2], truth.v_n, np.degrees(truth.att),
-        truth.f_b, truth.w_ib_b, truth.r_e, truth.v_e, truth.a_e,
-    ])
-    _write(path, "truth", header, TRUTH_COLUMNS, data, output_set)
+    cols = [truth.t, np.degrees(truth.llh[:, :2]), truth.llh[:, 2], truth.v_n,
+            np.degrees(truth.att), truth.f_b, truth.w_ib_b, truth.r_e, truth.v_e, truth.a_e]
+    columns = TRUTH_COLUMNS
+    if truth.clock_bias_s is not None:
+        for name in ("clock_bias_s", "clock_drift_s_s"):
+            if np.shape(getattr(truth, name)) != np.shape(truth.t):
+                raise ValueError(f"truth: {name} must have shape {np.shape(truth.t)}")
+        cols += [truth.clock_bias_s, truth.clock_drift_s_s]
+        columns = TRUTH_CLOCK_COLUMNS
+    _write(path, "truth", header, columns, np.column_stack(cols), output_set)
     return path
 
 
 def _read(path: Path, kind: str, columns: tuple[str, ...],
-          rate_hz: float | None) -> tuple[dict[str, str], np.ndarray, float]:
+          rate_hz: float | None, alt_columns: tuple[str, ...] | None = None
+          ) -> tuple[dict[str, str], np.ndarray, float]:
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
@@ -187,6 +206,8 @@ def _read(path: Path, kind: str, columns: tuple[str, ...],
     if i >= len(lines):
         raise ImuDataError(f"{kind} file {path}: no column line (empty or header only)")
     names = tuple(c.strip() for c in lines[i].split(","))
+    if alt_columns is not None and names == alt_columns:
+        columns = alt_columns
     if names != columns:
         raise ImuDataError(f"{kind} file {path} line {i + 1}: expected columns "
                            f"{','.join(columns)}, got {lines[i]!r}")
@@ -301,7 +322,7 @@ def read_truth(path: str | Path) -> tuple[Truth, int | None, float | None]:
         As :func:`read_imu`.
     """
     path = Path(path)
-    meta, d, rate = _read(path, "truth", TRUTH_COLUMNS, None)
+    meta, d, rate = _read(path, "truth", TRUTH_COLUMNS, None, TRUTH_CLOCK_COLUMNS)
     week, sow = _epoch(meta, path, "truth")
     llh = np.column_stack([np.radians(d[:, 1:3]), d[:, 3]])
     att = np.radians(d[:, 7:10])
@@ -310,5 +331,7 @@ def read_truth(path: str | Path) -> tuple[Truth, int | None, float | None]:
         C_b_n=euler_to_C_b_n(att[:, 0], att[:, 1], att[:, 2]),
         f_b=d[:, 10:13].copy(), w_ib_b=d[:, 13:16].copy(), r_e=d[:, 16:19].copy(),
         v_e=d[:, 19:22].copy(), a_e=d[:, 22:25].copy(), rate_hz=rate,
+        clock_bias_s=d[:, 25].copy() if d.shape[1] > 25 else None,
+        clock_drift_s_s=d[:, 26].copy() if d.shape[1] > 26 else None,
     )
     return truth, week, sow

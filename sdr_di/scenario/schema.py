@@ -22,6 +22,7 @@ from typing import Any
 
 from ..constants import parse_prn
 from ..errors import ScenarioError
+from ..oscillator import OscillatorSpec, oscillator_from_table
 from ..timebase import datetime_to_bdt, utc_to_bdt
 
 #: Motion segment types and their required / optional keys (besides ``type``).
@@ -138,6 +139,12 @@ class Scenario:
     outages: tuple[Outage, ...]
     clock: ReceiverClock
     raw: dict[str, Any] = dataclasses.field(repr=False, compare=False)
+    #: Truth receiver oscillator (``[oscillator]``); None: the ``[receiver_clock]`` line only.
+    oscillator: OscillatorSpec | None = None
+    #: The ``[assume]`` table as given (what a filter believes; validated by its consumers,
+    #: :func:`sdr_di.integration.assumptions.parse_assumptions`); never part of ``raw``, the
+    #: hash or any generated file.
+    assume: dict[str, Any] | None = dataclasses.field(default=None, compare=False)
 
     @property
     def hash(self) -> str:
@@ -175,7 +182,8 @@ class Scenario:
                 value = str(Path(value).resolve())
             raw.setdefault(table, {})[name] = value
         base = self.source.parent if self.source is not None else Path.cwd()
-        return parse_scenario(raw, source=self.source, base_dir=base)
+        return dataclasses.replace(parse_scenario(raw, source=self.source, base_dir=base),
+                                   assume=self.assume)
 
 
 def load_scenario(path: str | Path) -> Scenario:
@@ -330,7 +338,7 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     if not isinstance(raw, dict):
         raise ScenarioError(f"{where}: expected TOML tables at the top level")
     known = {"scenario", "time", "start", "motion", "imu", "satellites", "signal", "outage",
-             "receiver_clock"}
+             "receiver_clock", "oscillator", "assume"}
     extra = sorted(set(raw) - known)
     if extra:
         raise ScenarioError(f"{where}: unknown table(s) {', '.join(map(repr, extra))}")
@@ -466,12 +474,22 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
                           ck.num("drift_s_s", 0.0, lo=-1e-4, hi=1e-4))
     ck.check_unknown()
 
-    raw_canon = json.loads(json.dumps(raw, default=str))
+    oscillator = None
+    if "oscillator" in raw:
+        oscillator = oscillator_from_table(raw["oscillator"], f"{where}: [oscillator]",
+                                           ScenarioError)
+    assume = raw.get("assume")
+    if assume is not None and not isinstance(assume, dict):
+        raise ScenarioError(f"{where}: [assume] must be a table")
+
+    raw_canon = json.loads(json.dumps({k: v for k, v in raw.items() if k != "assume"},
+                                      default=str))
     raw_canon.setdefault("satellites", {})["ephemeris"] = str(eph)
     return Scenario(
         name=name, source=source, week=week, sow=sow, duration_s=duration, seed=seed,
         lat=math.radians(lat), lon=math.radians(lon), height=h, v_n=v_n,
         att=tuple(math.radians(a) for a in att_deg),  # type: ignore[arg-type]
         motion=motion, imu=imu, satellites=satellites, signal=signal,
-        outages=tuple(outages), clock=clock, raw=raw_canon,
+        outages=tuple(outages), clock=clock, raw=raw_canon, oscillator=oscillator,
+        assume=assume,
     )

@@ -17,6 +17,7 @@ is refused by every reader (:func:`~sdr_di.io.sidecar.check_member`).
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import math
 from pathlib import Path
@@ -36,6 +37,7 @@ from ..signal.navmsg import broadcast_klobuchar
 from ..timebase import bdt_minus_utc, bdt_to_datetime
 from .geometry import ReceiverPath
 from .ifgen import IfGenerator, build_satellites
+from .oscillator import scenario_clock
 from .motion import segment_from_spec
 from .trajectory import generate_trajectory
 
@@ -88,6 +90,8 @@ def make_generator(sc: Scenario, truth=None) -> IfGenerator:
     iono, source = broadcast_iono(nav) if sc.signal.ionosphere == "klobuchar" else (None, "off")
     sats = build_satellites(sc, nav, path, iono)
     gen = IfGenerator(sc, sats, path, iono)
+    clock = scenario_clock(sc, truth)  # [receiver_clock] line + [oscillator] (truth)
+    gen.clock_truth = clock if clock.spec is not None else None
     gen.iono_source = source
     return gen
 
@@ -139,7 +143,10 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
         week, sow = sc.week, sc.sow
         bdt = bdt_to_datetime(week, sow)
         write_imu(paths["imu"], imu, week=week, sow=sow, output_set=files)
-        write_truth(paths["truth"], truth, week=week, sow=sow, output_set=files)
+        clock = gen.clock_truth or scenario_clock(sc, truth)
+        write_truth(paths["truth"], dataclasses.replace(
+            truth, clock_bias_s=clock.bias_s, clock_drift_s_s=clock.drift_s_s),
+            week=week, sow=sow, output_set=files)
         utc = bdt - _dt.timedelta(seconds=bdt_minus_utc(bdt))
         meta = {
             "if_file": paths["if"].name,
@@ -153,6 +160,8 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "duration_s": duration,
             "start": {"week": week, "sow": sow, "bdt": bdt.isoformat(), "utc": utc.isoformat()},
             "receiver_clock": {"bias_s": sc.clock.bias_s, "drift_s_s": sc.clock.drift_s_s},
+            "oscillator": None if sc.oscillator is None else sc.oscillator.as_dict(),
+            "imu": dataclasses.asdict(sc.imu),
             "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain},
             "ionosphere": "klobuchar" if gen.iono is not None else "none",
             "klobuchar_source": gen.iono_source,
