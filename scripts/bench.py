@@ -4,6 +4,7 @@
 Usage::
 
     python scripts/bench.py generate [--durations 10 60] [--out DIR] [--keep]
+        [--oscillator tcxo]
     python scripts/bench.py run [--durations 30] [--bits 8] [--keep] [--if-file F]
         [--repeat N] [--search assisted|cold|both] [--gnss-sdr]
     python scripts/bench.py acquire [options of scripts/bench_acquire.py]
@@ -15,7 +16,9 @@ Usage::
 for each duration in a fresh process, and prints wall time, samples per second, real-time
 factor (data seconds per wall second) and the process's peak resident memory, so 10 s vs 60 s
 shows whether memory grows with the file length. The first run also pays numba compilation
-unless the cache is warm; a warm-up run of 0.2 s is made first.
+unless the cache is warm; a warm-up run of 0.2 s is made first. ``--oscillator PRESET`` times
+each duration twice, without and with a truth ``[oscillator]`` of that preset (issue 14), and
+adds the child's CPU time (user + sys).
 
 ``run``: runs the scalar receiver (``run_scalar``, the pipeline of ``sdr-di run --mode
 scalar``: acquisition, tracking, decoding, PVT at 5 Hz, CSV/NMEA output) in a fresh process on
@@ -45,6 +48,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import resource
 import time
 from pathlib import Path
 
@@ -75,12 +79,26 @@ def bench_generate(args: argparse.Namespace) -> None:
               "4-bit iq_int8")
         print(f"{'duration s':>10} {'wall s':>8} {'Msamples/s':>11} {'x real time':>12} "
               f"{'peak RSS MiB':>13} {'file MiB':>9}")
+        variants = [("off", ())]
+        if args.oscillator:  # the default scenario plus a truth [oscillator] table
+            sc = out / "oscillator.toml"
+            default = Path(__file__).resolve().parents[1] / "signals" / "default.toml"
+            text = default.read_text().replace('ephemeris = "', 'ephemeris = "'
+                                               + str(default.parent) + "/")
+            sc.write_text(text + f'\n[oscillator]\npreset = "{args.oscillator}"\n')
+            variants.append((args.oscillator, ("--scenario", str(sc))))
         for d in args.durations:
-            wall, rss = _run_generate(d, out)
-            size = (out / "bench.bin").stat().st_size
-            n = d * 25e6
-            print(f"{d:10.1f} {wall:8.2f} {n / wall / 1e6:11.2f} {d / wall:12.2f} "
-                  f"{rss / 2**20:13.1f} {size / 2**20:9.1f}")
+            for label, extra in variants:
+                ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+                wall, rss = _run_generate(d, out, extra)
+                ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+                cpu = ru1.ru_utime + ru1.ru_stime - ru0.ru_utime - ru0.ru_stime
+                size = (out / "bench.bin").stat().st_size
+                n = d * 25e6
+                print(f"{d:10.1f} {wall:8.2f} {n / wall / 1e6:11.2f} {d / wall:12.2f} "
+                      f"{rss / 2**20:13.1f} {size / 2**20:9.1f}"
+                      + (f"  oscillator {label:5s} CPU {cpu:.2f} s" if args.oscillator
+                         else ""))
     finally:
         if not args.keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -238,6 +256,9 @@ def main(argv: list[str] | None = None) -> None:
     g.add_argument("--durations", type=float, nargs="+", default=[10.0, 60.0])
     g.add_argument("--out", default=None, help="output directory (default: a temp dir)")
     g.add_argument("--keep", action="store_true", help="keep the generated files")
+    g.add_argument("--oscillator", default=None, metavar="PRESET",
+                   help="also time each duration with a truth [oscillator] of this preset "
+                   "(tcxo, ocxo)")
     g.set_defaults(func=bench_generate)
     r = sub.add_parser("run", help="scalar receiver real-time factor and memory")
     r.add_argument("--durations", type=float, nargs="+", default=[30.0],
