@@ -152,6 +152,18 @@ CASES: list[tuple[str, list[str]]] = [
                                    "{d}/set/s.bin"]),
     ("run-deep-mixed-imu", ["run", "{d}/mixed_imu/s.bin", "--mode", "deep"]),
     ("run-deep-companion-missing", ["run", "{d}/noimu/s.bin", "--mode", "deep"]),
+    ("run-loose-companion-missing", ["run", "{d}/noimu/s.bin", "--mode", "loose"]),
+    ("run-tight-companion-missing", ["run", "{d}/noimu/s.bin", "--mode", "tight"]),
+    ("run-loose-no-imu", ["run", "{d}/set/no_imu_file.json", "--mode", "loose"]),
+    ("run-tight-no-imu", ["run", "{d}/set/no_imu_file.json", "--mode", "tight"]),
+    ("run-loose-imu-too-short", ["run", "{d}/set/s.bin", "--mode", "loose", "--imu",
+                                 "{d}/short_imu.csv", "--out", "{d}/o"]),
+    ("run-tight-imu-too-short", ["run", "{d}/set/s.bin", "--mode", "tight", "--imu",
+                                 "{d}/short_imu.csv", "--out", "{d}/o"]),
+    ("run-tight-gnss-rate-3", ["run", "{d}/set/s.bin", "--mode", "tight", "--gnss-rate", "3"]),
+    ("run-tight-gnss-rate-nan", ["run", "{d}/set/s.bin", "--mode", "tight", "--gnss-rate",
+                                 "nan"]),
+    ("run-scalar-gnss-rate", ["run", "{d}/set/s.bin", "--gnss-rate", "5"]),
     # -- acquire -----------------------------------------------------------------------------
     ("acquire-no-file", ["acquire"]),
     ("acquire-missing", ["acquire", "{d}/nope.bin"]),
@@ -282,6 +294,8 @@ def _sidecar_variants(set_dir: Path) -> None:
     put("week_huge.json", start={**meta["start"], "week": 123456})
     put("sow_neg.json", start={**meta["start"], "sow": -1.0})
     put("carrier_null.json", carrier_hz=None)
+    (set_dir / "no_imu_file.json").write_text(
+        json.dumps({k: v for k, v in meta.items() if k != "imu_file"}))
 
 
 def make_workdir(d: Path, generated: Path) -> None:
@@ -297,6 +311,10 @@ def make_workdir(d: Path, generated: Path) -> None:
     imu.write_text(imu.read_text().replace("# rate_hz: 200.0", "# rate_hz: 200.0\n# x: y"))
     shutil.copytree(generated, d / "noimu")
     (d / "noimu" / "s_imu.csv").unlink()
+    lines = (d / "set" / "s_imu.csv").read_text().splitlines(keepends=True)
+    rows = [ln for ln in lines if ln[:1].isdigit()]      # an IMU record shorter than the IF
+    (d / "short_imu.csv").write_text(
+        "".join(ln for ln in lines if not ln[:1].isdigit()) + "".join(rows[:2]))
     (d / "empty.bin").write_bytes(b"")
     (d / "afile").write_text("not a folder\n")
     (d / "bad.toml").write_text("[scenario\nname = 'x'\n")

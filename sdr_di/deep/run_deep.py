@@ -49,7 +49,7 @@ from ..integration.assumptions import deep_beliefs, sidecar_truth
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
-from .vector_loop import DeepConfig, DeepReceiver, DeepResult
+from .vector_loop import DeepConfig, DeepReceiver, DeepResult, check_imu_span
 
 __all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
 
@@ -161,6 +161,9 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
         nav_path = Path(nav_path) if nav_path is not None else comp["ephemeris"]
         if nav_path is not None:
             nav = load_nav(nav_path)
+    fs = source.sampling_rate_hz
+    check_imu_span(source, imu, source.n_samples if duration_s is None else min(
+        source.n_samples, round(duration_s * fs)))            # before any output or work
     out_dir = ensure_output_dir(out_dir)
     stem = stem or source.path.stem
     files = {"solution": out_dir / f"{stem}_{cfg.mode}.csv",

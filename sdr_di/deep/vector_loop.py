@@ -120,11 +120,11 @@ from ..integration.loop import IntegrationLoop
 from ..integration.loose_fixes import LooseFixSource
 from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
 from ..integration.metrics import summarize
+from ..integration.tight_ranges import TightRangeSource
+from ..oscillator import CLOCK_PRESETS, OscillatorSpec
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataInForce, NavDataWarning
 from ..receiver.observables import ReceiverTime
-from ..integration.tight_ranges import TightRangeSource
-from ..oscillator import CLOCK_PRESETS, OscillatorSpec
 from ..receiver.prediction import FixPredictor
 from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
@@ -135,7 +135,7 @@ from .navdecode import ChannelNavDecoder
 from .vector_tracking import SampleClock, VectorTracking, _Chan
 
 __all__ = ["MODES", "DeepConfig", "DeepReceiver", "DeepResult", "HandoverError",
-           "IntegrationConfig"]
+           "IntegrationConfig", "check_imu_span"]
 
 #: Coupling modes of :class:`DeepReceiver` (module notes).
 MODES = ("deep", "loose", "tight")
@@ -358,6 +358,26 @@ class DeepResult:
         return summarize(self.t, self.att_err, self.vel_err, self.pos_err, t0, t1)
 
 
+def check_imu_span(source: IfSource, imu, stop: int) -> float:
+    """IF-relative time of IMU ``t = 0`` [s], once the IMU record is checked to cover IF
+    samples ``[0, stop)`` (time tags consistent, record long enough).
+
+    Raises
+    ------
+    ImuDataError
+        Time tags missing or inconsistent, or the record shorter than the IF span.
+    """
+    off = _imu_offset_s(source, imu)
+    if_end = stop / source.sampling_rate_hz
+    dt_imu = 1.0 / imu.rate_hz
+    if imu.t[0] + off > dt_imu + 1e-6 or imu.t[-1] + off < if_end - dt_imu - 1e-6:
+        raise ImuDataError(
+            f"IMU record spans {imu.t[0] + off:.3f}..{imu.t[-1] + off:.3f} s of the IF "
+            f"file, which needs 0..{if_end:.3f} s (IMU/IF start times inconsistent or IMU "
+            "file too short)")
+    return off
+
+
 def _imu_offset_s(source: IfSource, imu) -> float:
     """IF-relative time of IMU ``t = 0`` [s]; checks the time tags."""
     if source.start_week is None or source.start_sow is None:
@@ -459,15 +479,7 @@ class DeepReceiver:
         fs = source.sampling_rate_hz
         stop = source.n_samples if duration_s is None else min(
             source.n_samples, round(duration_s * fs))
-        # ---- IMU / IF time consistency
-        off = _imu_offset_s(source, imu)
-        if_end = stop / fs
-        dt_imu = 1.0 / imu.rate_hz
-        if imu.t[0] + off > dt_imu + 1e-6 or imu.t[-1] + off < if_end - dt_imu - 1e-6:
-            raise ImuDataError(
-                f"IMU record spans {imu.t[0] + off:.3f}..{imu.t[-1] + off:.3f} s of the IF "
-                f"file, which needs 0..{if_end:.3f} s (IMU/IF start times inconsistent or IMU "
-                "file too short)")
+        off = check_imu_span(source, imu, stop)
         n_per = imu.rate_hz / cfg.filter_rate_hz
         if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
             raise ValueError(f"filter rate {cfg.filter_rate_hz} Hz must divide the IMU rate "
