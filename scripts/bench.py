@@ -7,6 +7,7 @@ Usage::
         [--oscillator tcxo]
     python scripts/bench.py run [--durations 30] [--bits 8] [--keep] [--if-file F]
         [--repeat N] [--search assisted|cold|both] [--gnss-sdr]
+        [--mode scalar|deep|loose|tight|all] [--filter ekf]
     python scripts/bench.py acquire [options of scripts/bench_acquire.py]
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
     python scripts/bench.py filters [options of scripts/bench_filters.py]
@@ -34,6 +35,13 @@ Doppler). A closing line per file gives target 2 (best assisted run: x real time
 CPU seconds, stage shares); ``--gnss-sdr`` also runs GNSS-SDR 0.0.17 with the pinned
 ``scripts/gnss_sdr_b3i.conf`` on the same file (its process wall and CPU time, the channels
 that started tracking) and prints the wall-time ratio against 0.5.
+
+``run --mode deep|loose|tight|all`` (issue 13): the same file(s) through ``sdr-di run --mode
+MODE`` (``run_deep``: scalar start-up, hand-over, integration loop, solution files; the
+sidecar's IMU, truth and ephemeris) in a fresh process per run, with ``--filter`` (default
+ekf); prints per mode the process wall and CPU time, the real-time factor (file seconds per
+wall second, and per CPU second), the scalar receiver's and the loop's share of the run,
+the hand-over time and the peak RSS. ``all`` = scalar (assisted), deep, loose and tight.
 
 ``acquire``: acquisition time per PRN at 25 MHz, normal (40 x 1 ms) and long (400 x 1 ms)
 searches, over +-5 kHz and +-1 kHz around a predicted Doppler.
@@ -144,6 +152,61 @@ def _run_receiver(path: Path, out: Path, search: str) -> dict:
     return r
 
 
+_MODE_CHILD = """
+import json, resource, sys
+from sdr_di.deep import DeepConfig
+from sdr_di.deep.run_deep import run_deep
+from sdr_di.receiver.run_scalar import open_source
+path, out, mode, filt = sys.argv[1:5]
+res = run_deep(open_source(path), out, config=DeepConfig(mode=mode, filter=filt),
+               progress=False)
+prof = {k: v for k, v in res.result.profile.items() if isinstance(v, (int, float))}
+print("RESULT", json.dumps({"profile": prof, "handover_s": res.result.handover_s,
+      "maxrss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+"""
+
+
+def _run_mode(path: Path, out: Path, mode: str, filt: str) -> dict:
+    """``sdr-di run --mode MODE`` (``run_deep``) in a fresh process: process wall and CPU
+    time, the receiver's profile, hand-over time, peak RSS."""
+    import resource
+
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    res = subprocess.run([sys.executable, "-c", _MODE_CHILD, str(path), str(out), mode, filt],
+                         check=False, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if res.returncode != 0:
+        raise SystemExit(f"run --mode {mode} failed: {res.stderr.strip()}")
+    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
+    r = json.loads(line[len("RESULT "):])
+    r["process_wall_s"] = wall
+    r["cpu_s"] = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+    return r
+
+
+def _bench_modes(files: list[Path], modes: tuple[str, ...], args: argparse.Namespace,
+                 out: Path) -> None:
+    """Real-time factor of the integration modes on ``files`` (module notes)."""
+    print(f"integration modes, filter {args.filter}: x real time = file seconds per process "
+          "wall second; per CPU s = file seconds per CPU second (user + sys, all threads); "
+          "scalar: share of the run in the scalar receiver (deep: start-up only; loose and "
+          "tight: the whole file), loop: in the integration loop")
+    print(f"{'mode':>6} {'file s':>6} {'wall s':>7} {'CPU s':>6} {'x real time':>11} "
+          f"{'per CPU s':>9} {'scalar':>7} {'loop':>6} {'hand-over s':>11} {'peak RSS MiB':>12}")
+    for f in files:
+        for mode in modes:
+            for _ in range(args.repeat):
+                r = _run_mode(f, out / f"run_{mode}", mode, args.filter)
+                p = r["profile"]
+                wall, d, tot = r["process_wall_s"], p["processed_s"], max(p["total"], 1e-9)
+                print(f"{mode:>6} {d:6.1f} {wall:7.2f} {r['cpu_s']:6.1f} {d / wall:11.2f} "
+                      f"{d / max(r['cpu_s'], 1e-9):9.2f} {100 * p['scalar'] / tot:6.1f}% "
+                      f"{100 * p['loop'] / tot:5.1f}% {r['handover_s']:11.2f} "
+                      f"{r['maxrss'] / 2**20:12.1f}")
+
+
 #: Issue 17's scalar target: file seconds per wall second of the whole process, and the
 #: largest fraction of GNSS-SDR's wall time on the same file.
 _RUN_TARGET_RT = 3.0
@@ -198,9 +261,10 @@ def bench_run(args: argparse.Namespace) -> None:
               "CPU s: the process's user + system time (all threads; on a shared machine the "
               "load-independent cost: below half the file length = 2x real time on one free "
               "core)")
-        print(f"{'search':>8} {'file s':>6} {'wall s':>7} {'CPU s':>6} {'x real time':>11} "
-              f"{'tracking':>8} "
-              + " ".join(f"{s[:7]:>7}" for s in _STAGES) + f" {'other':>6} {'peak RSS MiB':>12}")
+        scalar_head = (f"{'search':>8} {'file s':>6} {'wall s':>7} {'CPU s':>6} "
+                       f"{'x real time':>11} {'tracking':>8} "
+                       + " ".join(f"{s[:7]:>7}" for s in _STAGES)
+                       + f" {'other':>6} {'peak RSS MiB':>12}")
         if args.if_file:
             files = [Path(args.if_file)]
         else:
@@ -209,7 +273,16 @@ def bench_run(args: argparse.Namespace) -> None:
                 sub = out / f"d{d:g}"
                 _run_generate(d, sub, ("--bits", str(args.bits)))
                 files.append(sub / "bench.bin")
-        searches = ("cold", "assisted") if args.search == "both" else (args.search,)
+        modes = ("deep", "loose", "tight") if args.mode == "all" else (
+            () if args.mode == "scalar" else (args.mode,))
+        if modes:
+            _bench_modes(files, modes, args, out)
+        searches = () if args.mode not in ("scalar", "all") else (
+            ("cold", "assisted") if args.search == "both" else (args.search,))
+        if args.mode == "all":
+            searches = ("assisted",)
+        if searches:
+            print(scalar_head)
         best: dict[Path, dict] = {}
         for f, search in ((f, s) for f in files for s in searches):
             for _ in range(args.repeat):
@@ -224,8 +297,9 @@ def bench_run(args: argparse.Namespace) -> None:
                       + f" {100.0 - sum(shares):5.1f}% {r['maxrss'] / 2**20:12.1f}")
                 if search == "assisted" and (f not in best or wall < best[f]["wall"]):
                     best[f] = {"wall": wall, "cpu": r["cpu_s"], "d": d, "shares": shares}
-        print("stage shares: % of the process wall time (other: imports, numba cache loading, "
-              "setup, output files)")
+        if searches:
+            print("stage shares: % of the process wall time (other: imports, numba cache "
+                  "loading, setup, output files)")
         for f, b in best.items():
             print(f"target 2 (scalar, sdr-di run, best of {args.repeat}): {b['d']:.0f} s file "
                   f"in {b['wall']:.2f} s wall = {b['d'] / b['wall']:.2f}x real time (target >= "
@@ -277,6 +351,11 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--search", choices=("assisted", "cold", "both"), default="both",
                    help="initial search: the sidecar's satellites around their Doppler "
                    "(sdr-di run), all 63 PRNs cold (sdr-di run --cold), or both (default)")
+    r.add_argument("--mode", choices=("scalar", "deep", "loose", "tight", "all"),
+                   default="scalar", help="receiver mode (default scalar; all: scalar "
+                   "assisted, deep, loose and tight on the same file)")
+    r.add_argument("--filter", default="ekf",
+                   help="integration filter of deep, loose and tight (default ekf)")
     r.set_defaults(func=bench_run)
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_correlate
