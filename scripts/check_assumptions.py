@@ -40,14 +40,15 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sdr_di.deep.run_deep import run_deep  # noqa: E402
-from sdr_di.deep.vector_loop import DeepConfig  # noqa: E402
-from sdr_di.integration.assumptions import apply_to_deep, parse_assumptions  # noqa: E402
-from sdr_di.io.imu_files import read_truth  # noqa: E402
-from sdr_di.receiver.run_scalar import open_source  # noqa: E402
-from sdr_di.scenario import DEFAULT_SCENARIO  # noqa: E402
-from sdr_di.scenario.schema import load_scenario, parse_scenario  # noqa: E402
-from sdr_di.sim.generate import generate_files  # noqa: E402
+from sdr_di.deep.run_deep import run_deep
+from sdr_di.deep.vector_loop import DeepConfig
+from sdr_di.errors import SdrDiError
+from sdr_di.integration.assumptions import apply_to_deep, parse_assumptions
+from sdr_di.io.imu_files import read_truth
+from sdr_di.receiver.run_scalar import open_source
+from sdr_di.scenario import DEFAULT_SCENARIO
+from sdr_di.scenario.schema import load_scenario, parse_scenario
+from sdr_di.sim.generate import generate_files
 
 CIRCLE = (20.0, 28.0)
 C_LIGHT = 299792458.0
@@ -142,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
                 for label, cfg in runs:
                     try:
                         r = _run(paths, d / "run", cfg)
-                    except Exception as exc:  # a failed run is a figure too
+                    except SdrDiError as exc:  # a failed run is a figure too
                         print(f"  seed {seed} {label}: FAILED {type(exc).__name__}: {exc}",
                               flush=True)
                         r = {}

@@ -83,19 +83,19 @@ def test_apply_to_lc_overrides_lc_keys():
 
 @pytest.mark.parametrize(("raw", "match"), [
     ({"imu": {"grade": "consumer"}}, r"a\.toml \[imu\]\.grade: unknown IMU grade 'consumer'"),
-    ({"imu": {"accel_scale_factor_ppm": 50}}, r"\[imu\]\.accel_scale_factor_ppm: not an "
+    ({"imu": {"accel_scale_factor_ppm": 50}}, (r"\[imu\]\.accel_scale_factor_ppm: not an "
                                               r"assumption \(the 17-state filter has no "
-                                              r"scale-factor states"),
-    ({"oscillator": {"preset": "rubidium"}}, r"\[oscillator\]\.preset: unknown oscillator "
-                                             r"preset 'rubidium'"),
-    ({"oscillator": {"preset": "tcxo", "h_2": -1e-20}}, r"\[oscillator\]\.h_2: h-parameters "
-                                                        r"must be >= 0"),
-    ({"oscillator": {"g_sensitivity_per_g": [1e-9, 0, 0]}}, r"g_sensitivity_per_g: not an "
-                                                             r"assumption"),
+                                              r"scale-factor states")),
+    ({"oscillator": {"preset": "rubidium"}}, (r"\[oscillator\]\.preset: unknown oscillator "
+                                             r"preset 'rubidium'")),
+    ({"oscillator": {"preset": "tcxo", "h_2": -1e-20}}, (r"\[oscillator\]\.h_2: h-parameters "
+                                                        r"must be >= 0")),
+    ({"oscillator": {"g_sensitivity_per_g": [1e-9, 0, 0]}}, (r"g_sensitivity_per_g: not an "
+                                                             r"assumption")),
     ({"filter": {"name": "ekf"}}, r"unknown table\(s\) 'filter'"),
     ({"initial_errors": {"heading_deg": 20}}, r"\[initial_errors\]: unknown key 'heading_deg'"),
-    ({"initial_covariance": {"vel_mps": [0.1, -0.1, 0.1]}}, r"\[initial_covariance\]\.vel_mps"
-                                                           r": standard deviations"),
+    ({"initial_covariance": {"vel_mps": [0.1, -0.1, 0.1]}}, (r"\[initial_covariance\]\.vel_mps"
+                                                           r": standard deviations")),
     ({"measurement_noise": {"policy": "fixed"}}, r"policy 'fixed' needs"),
 ])
 def test_bad_assumptions_name_the_key(raw, match):
