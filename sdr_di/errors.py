@@ -104,3 +104,8 @@ class CampaignError(SdrDiError):
 class AcquisitionError(SdrDiError, ValueError):
     """An acquisition that cannot run: a file shorter than one code period, or search
     parameters out of range (coherent or non-coherent length, Doppler range, pfa)."""
+
+
+class StudyError(SdrDiError):
+    """Bad study specification (unknown table or key, unknown filter, baseline or cell,
+    a bad cell parameter) or an output folder that holds another study."""

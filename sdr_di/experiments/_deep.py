@@ -13,9 +13,12 @@ file as assistance, as ``sdr-di run --mode deep`` does.
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
+import hashlib
 import json
 import math
+import os
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -28,19 +31,25 @@ from ..scenario import DEFAULT_SCENARIO, Scenario, load_scenario, parse_scenario
 from .filter_figures import QUANTITIES
 
 __all__ = [
+    "ASSUMPTION_KEYS",
+    "FILE_CACHE",
     "CountingScalarReceiver",
     "DeepRun",
     "Inputs",
+    "assumption_config",
     "base_scenario",
     "check_number",
+    "file_keys",
     "generated_inputs",
     "has_mean",
+    "nested_assumptions",
     "parse_list",
     "ranked_prns",
     "record_run",
     "run_deep_variant",
     "segment_metrics",
     "with_outages",
+    "with_truth",
 ]
 
 
@@ -77,12 +86,102 @@ def check_number(exp: str, params: dict, key: str, *, lo: float = 0.0, allow_non
 
 
 def base_scenario(params: dict, seed: int, duration_s: float) -> Scenario:
-    """The experiment's base scenario with seed, duration, sample rate and C/N0 applied."""
+    """The experiment's base scenario with seed, duration, sample rate and C/N0 applied,
+    then the truth overrides of ``params["truth"]`` (:func:`with_truth`) when given."""
     path = Path(str(params["scenario"])) if params.get("scenario") else DEFAULT_SCENARIO
     sc = load_scenario(path)
-    return sc.with_overrides(seed=int(seed), duration_s=float(duration_s),
-                             sampling_rate_hz=params.get("sampling_rate_hz"),
-                             cn0_dbhz=params.get("cn0_dbhz"))
+    sc = sc.with_overrides(seed=int(seed), duration_s=float(duration_s),
+                           sampling_rate_hz=params.get("sampling_rate_hz"),
+                           cn0_dbhz=params.get("cn0_dbhz"))
+    return with_truth(sc, params.get("truth") or {})
+
+
+def with_truth(sc: Scenario, truth: dict) -> Scenario:
+    """``sc`` with scenario keys set: ``{"imu.accel_random_walk_mps_sqrth": 0.5}`` sets
+    ``[imu] accel_random_walk_mps_sqrth``; ``{"outage": [...]}`` appends ``[[outage]]``
+    tables (``docs/scenario.md``). The result is validated as a scenario file is.
+
+    Raises
+    ------
+    ScenarioError
+        A key or value the scenario schema rejects.
+    ExperimentError
+        A key that is neither ``outage`` nor ``table.key``.
+    """
+    if not truth:
+        return sc
+    raw = json.loads(json.dumps(sc.raw, default=str))
+    outages = []
+    for key, value in truth.items():
+        if key == "outage":
+            outages = list(value)
+            continue
+        table, dot, name = str(key).partition(".")
+        if not dot or not table or not name or "." in name:
+            raise ExperimentError(f"truth key {key!r}: expected 'outage' or 'table.key' of the "
+                                  "scenario schema (e.g. imu.accel_random_walk_mps_sqrth)")
+        if not isinstance(raw.get(table, {}), dict):
+            raise ExperimentError(f"truth key {key!r}: [{table}] is not a table")
+        raw.setdefault(table, {})[name] = value
+    base = sc.source.parent if sc.source is not None else None
+    sc = parse_scenario(raw, source=sc.source, base_dir=base)
+    return with_outages(sc, outages) if outages else sc
+
+
+#: Filter-assumption keys an experiment's ``assume`` dict may set (dotted ``table.key`` of the
+#: assumptions file format, ``docs/assumptions.md``), and the
+#: :class:`~sdr_di.deep.DeepConfig` field each sets today: ``imu.<f>`` sets a field of the
+#: filter's IMU spec (``DeepConfig.imu``; what the filter believes, never the truth). Hooking
+#: the assumptions module in replaces :func:`assumption_config`'s body by its
+#: ``parse_assumptions`` (the nested form of the dict) and ``apply_to_deep``.
+ASSUMPTION_KEYS: dict[str, str] = {
+    "imu.accel_bias_mg": "imu.accel_bias_mg",
+    "imu.gyro_bias_deg_h": "imu.gyro_bias_deg_h",
+    "imu.accel_random_walk_mps_sqrth": "imu.accel_random_walk",
+    "imu.gyro_random_walk_deg_sqrth": "imu.gyro_random_walk",
+    "imu.bias_time_s": "bias_time_s",
+    "oscillator.preset": "clock",
+    "initial_covariance.att_deg": "p0_att_deg",
+}
+
+
+def nested_assumptions(assume: dict) -> dict:
+    """``{"imu.accel_bias_mg": 8}`` -> ``{"imu": {"accel_bias_mg": 8}}`` (the assumptions
+    file's tables)."""
+    out: dict = {}
+    for key, value in assume.items():
+        table, _, name = str(key).partition(".")
+        out.setdefault(table, {})[name] = value
+    return out
+
+
+def assumption_config(assume: dict | None) -> dict:
+    """:class:`~sdr_di.deep.DeepConfig` keywords for a filter-assumption dict.
+
+    Raises
+    ------
+    ExperimentError
+        A key not in :data:`ASSUMPTION_KEYS`.
+    """
+    if not assume:
+        return {}
+    bad = sorted(set(assume) - set(ASSUMPTION_KEYS))
+    if bad:
+        raise ExperimentError(f"filter assumption(s) {', '.join(bad)} not known; known: "
+                              f"{', '.join(ASSUMPTION_KEYS)}")
+    cfg: dict = {}
+    imu = {}
+    for key, value in assume.items():
+        field = ASSUMPTION_KEYS[key]
+        if field.startswith("imu."):
+            imu[field[4:]] = float(value)
+        else:
+            cfg[field] = tuple(value) if isinstance(value, list) else value
+    if imu:
+        from ..ins.imu import ImuErrorModel
+
+        cfg["imu"] = dataclasses.replace(ImuErrorModel(), **imu)
+    return cfg
 
 
 def with_outages(sc: Scenario, outages: list[dict]) -> Scenario:
@@ -120,9 +219,84 @@ class Inputs:
     paths: dict
 
 
+
+#: Folder of the generated-file cache of the current task (``None``: generate into a private
+#: temporary folder and delete it after the run). Set by a study for its tasks.
+FILE_CACHE: contextvars.ContextVar[Path | None] = contextvars.ContextVar("FILE_CACHE",
+                                                                        default=None)
+
+#: Scenario tables the files never depend on (the filter's beliefs).
+_NOT_GENERATED = ("assume",)
+#: Scenario tables the IMU file depends on (the IF file depends on all but ``imu``).
+_IMU_TABLES = ("scenario", "time", "start", "motion", "imu")
+
+
+def _key(raw: dict) -> str:
+    canon = json.dumps(raw, sort_keys=True, default=str).encode()
+    return hashlib.sha256(canon).hexdigest()[:16]
+
+
+def file_keys(sc: Scenario) -> tuple[str, str]:
+    """Cache keys (hex) of the IF file (with truth and sidecar) and of the IMU file of ``sc``.
+
+    Each is a hash of only the scenario keys its file depends on: the IF file of everything
+    but the ``[imu]`` errors (so scenarios that differ in IMU errors share it; the IMU rate
+    stays, it samples the truth trajectory), the IMU file of
+    the seed, duration, epoch, start state, motion and ``[imu]``; neither of the filter's
+    assumptions. The scenario name is left out (it names files, it does not change them).
+    """
+    raw = {k: v for k, v in sc.raw.items() if k not in _NOT_GENERATED}
+    raw = json.loads(json.dumps(raw, default=str))
+    raw.get("scenario", {}).pop("name", None)
+    raw.setdefault("satellites", {})["ephemeris"] = str(sc.satellites.ephemeris)
+    if_raw = {k: v for k, v in raw.items() if k != "imu"}
+    # the truth trajectory is sampled at the IMU rate, and the IF follows the truth
+    if_raw["imu.rate_hz"] = raw.get("imu", {}).get("rate_hz")
+    imu_raw = {k: raw[k] for k in _IMU_TABLES if k in raw}
+    return _key(if_raw), _key(imu_raw)
+
+
+def _cached_files(sc: Scenario, cache: Path) -> dict:
+    """The files of ``sc`` from ``cache``, generating what is missing (module notes of
+    :data:`FILE_CACHE`); concurrent workers each generate into a folder of their own and
+    the first rename wins."""
+    import shutil
+    import uuid
+
+    from ..io.imu_files import write_imu
+    from ..sim.generate import generate_files, imu_model, simulate_truth
+
+    cache = Path(cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    k_if, k_imu = file_keys(sc)
+    if_dir = cache / f"s{sc.seed}-if-{k_if}"
+    imu_path = cache / f"s{sc.seed}-imu-{k_imu}.csv"
+    if not (if_dir / "files.json").is_file():
+        tmp = cache / f"tmp-{uuid.uuid4().hex}"
+        paths = generate_files(sc, tmp, name="run", progress=False)
+        if not imu_path.exists():
+            os.replace(paths["imu"], imu_path)
+        (tmp / "files.json").write_text(json.dumps({k: Path(v).name for k, v in paths.items()}))
+        try:
+            os.rename(tmp, if_dir)
+        except OSError:             # another worker's rename came first: same content
+            shutil.rmtree(tmp, ignore_errors=True)
+    names = json.loads((if_dir / "files.json").read_text())
+    paths = {k: if_dir / v for k, v in names.items()}
+    if not imu_path.exists():
+        # the IMU record of generate_files (same truth, same seed stream), alone
+        truth = simulate_truth(sc)
+        rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
+        tmp = cache / f"tmp-{uuid.uuid4().hex}.csv"
+        write_imu(tmp, imu_model(sc).apply(truth, rng), week=sc.week, sow=sc.sow)
+        os.replace(tmp, imu_path)
+    paths["imu"] = imu_path
+    return paths
+
+
 class generated_inputs:
-    """Context manager: generate ``sc`` into a temporary folder, yield :class:`Inputs`,
-    delete the folder on exit."""
+    """Context manager: generate ``sc`` (or take it from the task's :data:`FILE_CACHE`),
+    yield :class:`Inputs`; a private temporary folder is deleted on exit."""
 
     def __init__(self, sc: Scenario):
         self.sc = sc
@@ -134,17 +308,24 @@ class generated_inputs:
         from ..receiver.run_scalar import open_source
         from ..sim.generate import generate_files
 
+        cache = FILE_CACHE.get()
+        if cache is not None:
+            paths = _cached_files(self.sc, cache)
+            return self._open(paths, open_source, read_imu, read_truth, load_nav)
         self._tmp = tempfile.TemporaryDirectory(prefix="sdr_di_exp_")
         try:
             paths = generate_files(self.sc, self._tmp.name, progress=False)
-            meta = json.loads(Path(paths["metadata"]).read_text(encoding="utf-8"))
-            prns = [int(s["prn"]) for s in meta["satellites"]]
-            return Inputs(source=open_source(paths["if"]), imu=read_imu(paths["imu"]),
-                          truth=read_truth(paths["truth"])[0],
-                          nav=load_nav(self.sc.satellites.ephemeris), prns=prns, paths=paths)
+            return self._open(paths, open_source, read_imu, read_truth, load_nav)
         except BaseException:
             self._tmp.cleanup()
             raise
+
+    def _open(self, paths, open_source, read_imu, read_truth, load_nav) -> Inputs:
+        meta = json.loads(Path(paths["metadata"]).read_text(encoding="utf-8"))
+        prns = [int(s["prn"]) for s in meta["satellites"]]
+        return Inputs(source=open_source(paths["if"]), imu=read_imu(paths["imu"]),
+                      truth=read_truth(paths["truth"])[0],
+                      nav=load_nav(self.sc.satellites.ephemeris), prns=prns, paths=paths)
 
     def __exit__(self, *exc) -> None:
         if self._tmp is not None:

@@ -35,7 +35,6 @@ import shutil
 import signal
 import threading
 import time
-import uuid
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
@@ -44,9 +43,10 @@ import numpy as np
 from ..errors import CampaignError
 from ..io.atomic import ensure_output_dir
 from .aggregate import aggregate
-from .execute import execute_run, failed_record, write_json, write_run_record
+from .execute import execute_run, write_json, write_run_record
 from .outputs import write_campaign_outputs
 from .registry import Experiment, get_experiment, parse_params
+from .tasks import Task, run_tasks
 
 __all__ = ["CampaignResult", "run_campaign", "run_seed"]
 
@@ -153,52 +153,22 @@ def _client(scheduler: str | None, workers: int | None, allowed_failures: int):
         yield client
 
 
-def _threads(client) -> int:
-    try:
-        return max(1, sum(client.nthreads().values()))
-    except Exception:  # noqa: BLE001 - scheduler briefly unreachable: keep one run in flight
-        return 1
-
-
 def _collect(client, exp: Experiment, params: dict, seeds: list[int], runs_dir: Path,
              records: dict[int, dict], on_record) -> None:
-    """Submit the runs (at most one per worker thread in flight), write each record as it
-    arrives and store it in ``records`` (index -> record without file bytes)."""
-    from distributed import KilledWorker, as_completed
+    """Run the campaign's tasks (:func:`~.tasks.run_tasks`), write each record as it arrives
+    and store it in ``records`` (index -> record without file bytes)."""
+    tasks = [Task(f"{exp.name}-run-{i}", i, s, execute_run, (exp, params, s, i))
+             for i, s in enumerate(seeds)]
 
-    token = uuid.uuid4().hex[:8]
-    pending = list(enumerate(seeds))
-    where: dict[str, tuple[int, int]] = {}
-    ac = as_completed(loop=client.loop)
-
-    def submit_next() -> None:
-        i, s = pending.pop(0)
-        fut = client.submit(execute_run, exp, params, s, i, pure=False,
-                            key=f"{exp.name}-{token}-run-{i}")
-        where[fut.key] = (i, s)
-        ac.add(fut)
-
-    for _ in range(min(_threads(client), len(pending))):
-        submit_next()
-    for fut in ac:
-        i, s = where.pop(fut.key)
-        try:
-            rec = fut.result()
-        except KilledWorker as exc:
-            rec = failed_record(i, s, f"worker died while running this run ({exc})")
-        except Exception as exc:  # noqa: BLE001 - lost task: that run's failure
-            rec = failed_record(i, s, f"{type(exc).__name__}: {exc}")
-        finally:
-            fut.release()
+    def done(task: Task, rec: dict) -> None:
+        rec.pop("lost", None)
         write_run_record(runs_dir, rec)
         rec.pop("files", None)
-        records[i] = rec
+        records[task.index] = rec
         if on_record is not None:
             on_record(rec)
-        while pending and len(where) < _threads(client):
-            submit_next()
-        if pending and not where:
-            submit_next()
+
+    run_tasks(client, tasks, done)
 
 
 def run_campaign(experiment: str | Experiment, params: Mapping | None = None, runs: int = 4,

@@ -1,6 +1,6 @@
-"""CLI handlers: ``sdr-di campaign``, ``sdr-di robustness``, ``sdr-di report``.
+"""CLI handlers: ``sdr-di campaign``, ``sdr-di robustness``, ``sdr-di study``, ``sdr-di report``.
 
-:func:`add_parsers` adds the three sub-commands to the ``sdr-di`` sub-parser set; each sets
+:func:`add_parsers` adds the four sub-commands to the ``sdr-di`` sub-parser set; each sets
 ``func`` to its handler, which returns the exit status (0: all runs completed; 1: some runs
 failed, their errors printed) and raises :class:`~sdr_di.errors.SdrDiError` subclasses for
 bad input (printed by the CLI on one line, exit status 2).
@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..errors import CampaignError
 
-__all__ = ["add_parsers", "cmd_campaign", "cmd_report", "cmd_robustness"]
+__all__ = ["add_parsers", "cmd_campaign", "cmd_report", "cmd_robustness", "cmd_study"]
 
 
 #: Dask worker preload (script text) of a local campaign: the worker processes ignore SIGINT.
@@ -68,6 +68,28 @@ def add_parsers(subparsers) -> None:
         "time series, plots and report.html.")
     _common(p)
     p.set_defaults(func=cmd_robustness)
+
+    p = subparsers.add_parser(
+        "study", help="cells x filters x seeds, paired on the same files, with statistics",
+        description="Run a study spec (docs/studies.md): every cell's experiment with every "
+        "filter on the same generated files per seed, on a local Dask cluster (or "
+        "--scheduler), each (cell, seed) written as it finishes; then paired differences "
+        "against the baseline filter with Holm-corrected intervals, the claims' verdicts, "
+        "cells.csv, runs.csv and report.html. Re-running the same spec into the same folder "
+        "resumes it.")
+    p.add_argument("spec", type=Path, help="study TOML file (studies/*.toml)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--runs", type=int, default=None, metavar="N",
+                   help="seeds per cell (default: the spec's runs)")
+    p.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="Dask scheduler address (tcp://host:8786); default: local processes")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="local worker processes (default: number of cores; 0: run in this "
+                   "process, no cluster)")
+    p.add_argument("--force", action="store_true",
+                   help="replace a different study's runs in --out")
+    p.add_argument("--no-report", action="store_true", help="do not write report.html")
+    p.set_defaults(func=cmd_study)
 
     p = subparsers.add_parser(
         "report", help="render report.html for a campaign or robustness output folder",
@@ -167,6 +189,46 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     return 0 if res.ok else 1
 
 
+def cmd_study(args: argparse.Namespace) -> int:
+    """Handler of ``sdr-di study``."""
+    import dask
+
+    from ..io.atomic import check_output_dir
+    from .study import _check_folder, run_study
+    from .study_spec import load_study
+
+    spec = load_study(args.spec)
+    check_output_dir(args.out)
+    if args.runs is not None and args.runs < 1:
+        raise CampaignError(f"--runs must be >= 1, got {args.runs}")
+    if args.workers is not None and args.workers < 0:
+        raise CampaignError(f"--workers must be >= 0, got {args.workers}")
+    _check_folder(spec, args.out, args.force)
+
+    def show(rec: dict) -> None:
+        state = "ok" if rec["status"] == "ok" else f"FAILED: {rec.get('error')}"
+        print(f"  {rec['cell']:>24s}  seed {rec['seed_index']:3d}  {state}", flush=True)
+
+    preload = [*dask.config.get("distributed.worker.preload", []), _WORKERS_IGNORE_SIGINT]
+    with dask.config.set({"distributed.worker.preload": preload}):
+        res = run_study(spec, args.out, runs=args.runs, scheduler=args.scheduler,
+                        workers=args.workers, force=args.force, on_record=show,
+                        render=not args.no_report)
+    print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
+          f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
+          f"{res.elapsed_s:.1f} s")
+    for r in res.failed:
+        print(f"  failed: {r['cell']} seed {r['seed_index']} {r['filter']}: {r['error']}",
+              file=sys.stderr)
+    for j, cl in enumerate(spec.claims, 1):
+        verdicts = [f"{r['cell']}: {r[f'claim{j}']}" for r in res.cells if r[f"claim{j}"]]
+        print(f"claim {j} ({cl.text}): {'; '.join(verdicts)}")
+    print(f"cells     {args.out / 'cells.csv'}")
+    if not args.no_report:
+        print(f"report    {args.out / 'report.html'}")
+    return 1 if res.failed else 0
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     """Handler of ``sdr-di report``."""
     print(_render(args.dir))
@@ -180,6 +242,10 @@ def _render(folder: Path) -> Path:
 
     from .report import ReportWarning, render_report
 
+    if (Path(folder) / "study.json").is_file():
+        from .study_report import render_study_report
+
+        return render_study_report(folder)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReportWarning)
         path = render_report(folder)

@@ -8,8 +8,8 @@ An *experiment* is a small module (see ``docs/experiments.md``) with
     One line for ``--help`` and reports.
 ``default_params`` : dict
     Every parameter the experiment accepts with its default; the default's type decides how a
-    ``--param key=value`` string is read (bool, int, float, str; ``None`` reads a number, or
-    ``none``, or else keeps the string).
+    ``--param key=value`` string is read (bool, int, float, str; a dict reads a JSON object;
+    ``None`` reads a number, or ``none``, or else keeps the string).
 ``run(params, seed, out_dir) -> dict``
     One seeded run: a flat dict of scalar figures (float, int, str); may write time series
     (CSV) and plots (PNG) into ``out_dir``. Must depend only on ``params`` and ``seed``.
@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import json
 import math
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
@@ -51,6 +52,7 @@ BUILTIN: dict[str, str] = {
     "count-change": "sdr_di.experiments.count_change",
     "outage": "sdr_di.experiments.outage",
     "weak-signal": "sdr_di.experiments.weak_signal",
+    "compare": "sdr_di.experiments.compare",
 }
 
 _REGISTERED: dict[str, Experiment] = {}
@@ -127,6 +129,11 @@ def _coerce(key: str, text: str, default: Any) -> Any:
             if t.lower() in _FALSE:
                 return False
             raise ValueError("expected true/false")
+        if isinstance(default, dict):
+            v = json.loads(t)
+            if not isinstance(v, dict):
+                raise ValueError("expected a JSON object")  # noqa: TRY004 - reported below
+            return v
         if isinstance(default, int):
             return int(t)
         if isinstance(default, float):
@@ -145,7 +152,8 @@ def _coerce(key: str, text: str, default: Any) -> Any:
                 raise ValueError("not finite")
             return v
     except ValueError as exc:
-        kind = "true/false" if isinstance(default, bool) else type(default).__name__
+        kind = ("true/false" if isinstance(default, bool) else
+                "a JSON object" if isinstance(default, dict) else type(default).__name__)
         raise ExperimentError(f"--param {key}={text}: expected {kind} ({exc})") from None
     return t
 

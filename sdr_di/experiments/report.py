@@ -1,9 +1,11 @@
 """``render_report(dir)``: one self-contained HTML page for a campaign or single-run folder.
 
-The page holds the configuration, the failed runs, every table listed in ``campaign.json``
-or ``result.json`` (inline HTML, read from the CSV files) and every PNG of the folder plus
-those of the first few runs (embedded as base64 ``data:`` URIs): it can be mailed or archived
-alone.
+The page reads top-down as a researcher reads (the same order as a study's report,
+:mod:`.study_report`): what ran and how many runs completed, the failed runs, the
+experiment's own summary tables (numbers at 3 significant digits), the plots (the folder's
+and those of the first few runs), and last, collapsed, the raw tables (``aggregate``,
+``runs``, ``figures``, at 6 digits) and the parameters. Plots are embedded as base64
+``data:`` URIs: the page can be mailed or archived alone.
 """
 
 from __future__ import annotations
@@ -20,32 +22,45 @@ from .aggregate import aggregate
 from .execute import read_json, restore_floats
 from .tables import format_cell, read_csv_table, stats_rows
 
-__all__ = ["ReportWarning", "render_report"]
+__all__ = ["CSS", "ReportWarning", "img_html", "render_report", "sig", "table_html"]
 
-_CSS = """
+CSS = """
 body{font-family:system-ui,sans-serif;margin:2em;max-width:1200px;color:#222}
 table{border-collapse:collapse;margin:0.5em 0 1.5em;font-size:0.85em}
 th,td{border:1px solid #ccc;padding:2px 6px;text-align:right}
 th{background:#eee} td:first-child,th:first-child{text-align:left}
 .scroll{overflow-x:auto} img{max-width:100%;border:1px solid #ddd;margin:0.5em 0}
 .failed{color:#a00} code{background:#f4f4f4;padding:0 3px}
+details{margin:0.5em 0} summary{cursor:pointer;font-weight:600}
+.v-holds{color:#070} .v-reversed{color:#a00} .v-not-shown{color:#666}
 """
 
+#: Significant digits of numbers a person reads in a report (CSV files keep full precision).
+REPORT_DIGITS = 3
 
-def _cell(text: str) -> str:
+
+def sig(v, digits: int = REPORT_DIGITS) -> str:
+    """``v`` with ``digits`` significant digits (``nan`` for NaN, empty for None)."""
+    return format_cell(float(v) if isinstance(v, int) and not isinstance(v, bool) else v,
+                       digits)
+
+
+def _cell(text: str, digits: int) -> str:
     try:
-        return format_cell(float(text)) if text not in ("", "True", "False") else text
+        return sig(float(text), digits) if text not in ("", "True", "False") else text
     except ValueError:
         return text
 
 
-def _table_html(path: Path) -> str:
+def table_html(path: Path, digits: int = REPORT_DIGITS) -> str:
+    """A CSV table as HTML, numbers at ``digits`` significant digits."""
     head, rows = read_csv_table(path)
     out = ['<div class="scroll"><table><tr>']
     out += [f"<th>{html.escape(h)}</th>" for h in head]
     out.append("</tr>")
     for row in rows:
-        out.append("<tr>" + "".join(f"<td>{html.escape(_cell(c))}</td>" for c in row) + "</tr>")
+        out.append("<tr>" + "".join(f"<td>{html.escape(_cell(c, digits))}</td>" for c in row)
+                   + "</tr>")
     out.append("</table></div>")
     return "".join(out)
 
@@ -55,10 +70,14 @@ def _rows_html(head: list[str], rows: list[dict]) -> str:
     out += [f"<th>{html.escape(h)}</th>" for h in head]
     out.append("</tr>")
     for row in rows:
-        out.append("<tr>" + "".join(f"<td>{html.escape(format_cell(row.get(h)))}</td>"
+        out.append("<tr>" + "".join(f"<td>{html.escape(sig(row.get(h)))}</td>"
                                     for h in head) + "</tr>")
     out.append("</table></div>")
     return "".join(out)
+
+
+#: Tables of every campaign/run folder that are raw data (collapsed at the end of a report).
+_RAW_TABLES = ("aggregate", "runs", "figures")
 
 
 class ReportWarning(UserWarning):
@@ -121,7 +140,8 @@ def _partial_campaign(folder: Path) -> dict:
             "stats": aggregate(restore_floats(r.get("figures", {})) for r in ok)}
 
 
-def _img_html(path: Path, caption: str) -> str:
+def img_html(path: Path, caption: str) -> str:
+    """A PNG embedded as a ``data:`` URI with its caption."""
     data = base64.b64encode(path.read_bytes()).decode("ascii")
     return (f'<figure><img alt="{html.escape(caption)}" src="data:image/png;base64,{data}">'
             f"<figcaption>{html.escape(caption)}</figcaption></figure>")
@@ -166,7 +186,8 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
                               "campaign.json or result.json)")
     name = meta.get("experiment", "?")
     parts = [(f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>sdr-di {kind} "
-             f"{html.escape(name)}</title><style>{_CSS}</style></head><body>")]
+             f"{html.escape(name)}</title><style>{CSS}</style></head><body>")]
+    raw: list[str] = []          # raw tables and settings: last, collapsed
     if kind == "campaign":
         status = meta.get("status")
         parts.append(f"<h1>Campaign: {html.escape(name)}</h1>")
@@ -174,18 +195,20 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
         if status != "done":
             parts.append(f"<p class='failed'>Campaign status: {html.escape(str(status))} "
                          f"{html.escape(str(meta.get('error', '')))} (incomplete: the "
-                         "aggregate below comes from the run records so far)</p>")
+                         "aggregate comes from the run records so far)</p>")
             partial = _partial_campaign(folder)
             meta.update(partial)
             if partial["unreadable"]:
                 parts.append("<p class='failed'>Run records that could not be read: "
                              f"{html.escape(', '.join(partial['unreadable']))}</p>")
-            parts.append("<h2>Aggregate of the runs so far</h2>" + _rows_html(
-                ["figure", "n", "mean", "std", "min", "max", "value"],
-                stats_rows(partial["stats"])))
+            raw.append("<details open><summary>Aggregate of the runs so far</summary>"
+                       + _rows_html(["figure", "n", "mean", "std", "min", "max", "value"],
+                                    stats_rows(partial["stats"])) + "</details>")
         parts.append(f"<p>{meta.get('n_ok', '?')} of {meta.get('runs')} runs completed, "
                      f"{meta.get('n_failed', '?')} failed; base seed {meta.get('base_seed')}; "
-                     f"scheduler <code>{html.escape(str(meta.get('scheduler')))}</code>.</p>")
+                     f"scheduler <code>{html.escape(str(meta.get('scheduler')))}</code>. "
+                     f"Numbers: mean over the runs (std beside it), {REPORT_DIGITS} significant "
+                     "digits.</p>")
     else:
         parts.append(f"<h1>Run: {html.escape(name)}</h1>")
         parts.append(f"<p>{html.escape(meta.get('description', ''))}</p>")
@@ -193,8 +216,6 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
                      "</p>")
         if meta.get("status") != "ok":
             parts.append(f"<p class='failed'>{html.escape(str(meta.get('error')))}</p>")
-    params = json.dumps(meta.get("params", {}), indent=1)
-    parts.append(f"<h2>Parameters</h2><pre>{html.escape(params)}</pre>")
     for note in meta.get("notes", []):
         parts.append(f"<p><em>{html.escape(str(note))}</em></p>")
     failed = meta.get("failed") or []
@@ -204,11 +225,13 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
                   f"{html.escape(str(f.get('seed')))}): {html.escape(str(f.get('error')))}"
                   "</li>" for f in failed]
         parts.append("</ul>")
-    parts.append("<h2>Tables</h2>")
-    for t in meta.get("tables", []):
+    summary = [t for t in meta.get("tables", []) if t not in _RAW_TABLES]
+    if summary:
+        parts.append("<h2>Summary</h2>")
+    for t in summary:
         path = folder / f"{t}.csv"
         if path.is_file():
-            parts.append(f"<h3>{html.escape(t)}</h3>{_table_html(path)}")
+            parts.append(f"<h3>{html.escape(t)}</h3>{table_html(path)}")
     parts.append("<h2>Plots</h2>")
     pngs = sorted(folder.glob("*.png"))
     if kind == "campaign":
@@ -219,7 +242,17 @@ def render_report(folder: str | Path, max_run_plots: int = 3) -> Path:
     if not pngs:
         parts.append("<p><em>no plots in this folder</em></p>")
     for p in pngs:
-        parts.append(_img_html(p, p.relative_to(folder).as_posix()))
+        parts.append(img_html(p, p.relative_to(folder).as_posix()))
+    parts.append("<h2>Raw tables</h2>")
+    parts += raw
+    for t in meta.get("tables", []):
+        path = folder / f"{t}.csv"
+        if t in _RAW_TABLES and path.is_file():
+            parts.append(f"<details><summary>{html.escape(t)}</summary>"
+                         f"{table_html(path, 6)}</details>")
+    params = json.dumps(meta.get("params", {}), indent=1)
+    parts.append(f"<details><summary>Parameters</summary><pre>{html.escape(params)}</pre>"
+                 "</details>")
     parts.append("</body></html>\n")
     out = folder / "report.html"
     with atomic_open(out, "w") as fh:

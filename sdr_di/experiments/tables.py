@@ -23,12 +23,13 @@ def columns_of(rows: Sequence[dict]) -> list[str]:
     return cols
 
 
-def format_cell(v) -> str:
-    """Text of a cell: floats with 6 significant digits, NaN as ``nan``, None as empty."""
+def format_cell(v, digits: int = 6) -> str:
+    """Text of a cell: floats with ``digits`` significant digits, NaN as ``nan``, None as
+    empty."""
     if v is None:
         return ""
     if isinstance(v, float):
-        return "nan" if math.isnan(v) else f"{v:.6g}"
+        return "nan" if math.isnan(v) else f"{v:.{digits}g}"
     return str(v)
 
 

@@ -1,0 +1,356 @@
+"""``sdr-di study``: cells x filters x seeds, paired on the same files, with statistics.
+
+Execution
+---------
+* The task unit is one (cell, seed): the cell's experiment run (default ``compare``) with
+  every filter of the study on the same generated files (a paired design). Seed ``i`` is
+  :func:`~.campaign.run_seed` ``(base_seed, i)`` in every cell. Tasks are ordered seed by
+  seed, so that the files of a seed are generated once, reused by every cell that can, and
+  deleted when the seed's last task is done.
+* **File cache** (``DIR/cache``): a generated file is kept under a hash of only the
+  scenario keys it depends on (:func:`~._deep.file_keys`): cells that differ in IMU errors
+  share the IF file, cells that differ in the filter's assumptions, the mode or the filter
+  rate share every file. Local workers share the folder; on a cluster whose workers do not
+  see ``DIR``, each generates its own (correct, slower).
+* Tasks run on the same path as ``campaign`` (:func:`~.tasks.run_tasks`: a local Dask
+  cluster by default, ``scheduler`` for a cluster; ``workers=0`` runs them in this process).
+  Each record is written to ``runs/<cell>_<seed>.json`` the moment it arrives, so a killed
+  worker loses only its task and an interrupted study keeps what it had.
+* **Resumption**: ``study.json`` holds the spec hash (:attr:`~.study_spec.StudySpec.hash`).
+  Re-running the same spec into the same folder skips every (cell, seed) with a record of
+  that hash (except tasks lost with their worker, which run again); a different spec is
+  refused unless ``force`` (which removes the old runs). ``runs`` may grow: the first seeds
+  are the same.
+
+Outputs: ``cells.csv``, ``runs.csv``, ``comparisons.csv``, ``study.json``, ``report.html``
+(:mod:`.study_report`); ``docs/studies.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import shutil
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import StudyError
+from ..io.atomic import ensure_output_dir
+from ._deep import FILE_CACHE
+from .campaign import _client, _quiet_on_sigint, run_seed
+from .execute import (
+    execute_run,
+    read_json,
+    restore_floats,
+    write_json,
+    write_run_record,
+)
+from .paired import Comparison, claim_verdict, compare_pair, holm
+from .registry import get_experiment
+from .study_spec import QUANTITY_KEYS, StudySpec, spec_summary
+from .tables import write_table
+from .tasks import Task, run_tasks, run_tasks_here
+from .variants import variant_label
+
+__all__ = ["StudyResult", "execute_cell_run", "run_study", "summarize_study"]
+
+
+def execute_cell_run(exp, params: dict, seed: int, index: int, cache_dir: str | None) -> dict:
+    """:func:`~.execute.execute_run` with the study's file cache set for this task."""
+    token = FILE_CACHE.set(Path(cache_dir) if cache_dir else None)
+    try:
+        return execute_run(exp, params, seed, index)
+    finally:
+        FILE_CACHE.reset(token)
+
+
+@dataclasses.dataclass
+class StudyResult:
+    """Outcome of :func:`run_study`: the spec, the records ``{(cell, seed index): record}``,
+    the per-run rows, the comparisons, the per-cell rows, the counts of tasks run and
+    skipped, and the output folder."""
+
+    spec: StudySpec
+    records: dict
+    runs: list
+    comparisons: list
+    cells: list
+    n_run: int
+    n_skipped: int
+    out_dir: Path
+    elapsed_s: float
+
+    @property
+    def failed(self) -> list[dict]:
+        """Per-run rows (cell, seed, filter) that failed or diverged."""
+        return [r for r in self.runs if r["status"] != "ok"]
+
+
+def _record_path(runs_dir: Path, c: int, i: int) -> Path:
+    return runs_dir / f"{c}_{i}.json"
+
+
+def _same_study(out: Path, spec: StudySpec) -> bool:
+    try:
+        return read_json(out / "study.json").get("hash") == spec.hash
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def _check_folder(spec: StudySpec, out: Path, force: bool) -> None:
+    meta_path = out / "study.json"
+    if not meta_path.is_file():
+        if (out / "runs").exists() and not force:
+            raise StudyError(f"output folder {out} holds runs of something that is not a "
+                             "study; choose another --out or pass --force")
+        return
+    try:
+        old = read_json(meta_path).get("hash")
+    except (OSError, ValueError, AttributeError):
+        old = None
+    if old != spec.hash and not force:
+        raise StudyError(f"output folder {out} holds study {old} (a different spec than "
+                         f"{spec.hash}); choose another --out or pass --force to replace it")
+
+
+def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
+              scheduler: str | None = None, workers: int | None = None, force: bool = False,
+              on_record: Callable[[dict], None] | None = None,
+              render: bool = True) -> StudyResult:
+    """Run (or resume) a study and write its outputs (module notes).
+
+    Parameters
+    ----------
+    spec : StudySpec
+        :func:`~.study_spec.load_study`.
+    out_dir : path
+        Output folder.
+    runs : int, optional
+        Seeds per cell (default the spec's ``runs``).
+    scheduler : str, optional
+        Dask scheduler address; default a local cluster of ``workers`` processes.
+    workers : int, optional
+        Local worker processes (default the number of cores); ``0`` runs every task in this
+        process, without Dask.
+    force : bool
+        Replace a different study's runs in ``out_dir``.
+    on_record : callable, optional
+        Called with each record as it arrives.
+    render : bool
+        Write ``report.html``.
+
+    Raises
+    ------
+    StudyError
+        Bad ``runs``/``workers``, or ``out_dir`` holds a different study (without ``force``).
+    CampaignError
+        Scheduler unreachable.
+    """
+    t0 = time.perf_counter()
+    runs = spec.runs if runs is None else runs
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+        raise StudyError(f"--runs must be an integer >= 1, got {runs!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 0):
+        raise StudyError(f"--workers must be an integer >= 0, got {workers!r}")
+    if scheduler is not None and workers is not None:
+        raise StudyError("--workers applies to the local cluster only")
+    out = Path(out_dir)
+    _check_folder(spec, out, force)
+    exp = get_experiment(spec.experiment)
+    ensure_output_dir(out)
+    runs_dir = out / "runs"
+    if force and runs_dir.exists() and not _same_study(out, spec):
+        shutil.rmtree(runs_dir)
+    ensure_output_dir(runs_dir)
+    cache = out / "cache"
+    seeds = [run_seed(spec.base_seed, i) for i in range(runs)]
+
+    records: dict[tuple[int, int], dict] = {}
+    todo: list[Task] = []
+    where: dict[str, tuple[int, int]] = {}
+    for i, seed in enumerate(seeds):
+        for c, cell in enumerate(spec.cells):
+            path = _record_path(runs_dir, c, i)
+            if path.is_file():
+                try:
+                    rec = read_json(path)
+                except (OSError, ValueError):
+                    rec = None
+                if isinstance(rec, dict) and rec.get("spec_hash") == spec.hash \
+                        and not rec.get("lost"):
+                    records[(c, i)] = rec
+                    continue
+            name = f"study-{c}-{i}"
+            todo.append(Task(name, i * len(spec.cells) + c, seed, execute_cell_run,
+                             (exp, cell.params, seed, i * len(spec.cells) + c, str(cache))))
+            where[name] = (c, i)
+    n_skipped = len(records)
+    left = {i: sum(1 for t in todo if where[t.name][1] == i) for i in range(runs)}
+    summary = spec_summary(spec)
+    write_json(out / "study.json", {**summary, "status": "running", "runs": runs,
+                                    "seeds": seeds})
+
+    def done(task: Task, rec: dict) -> None:
+        c, i = where[task.name]
+        rec.update(cell=spec.cells[c].name, cell_index=c, seed_index=i, spec_hash=spec.hash)
+        write_run_record(runs_dir, rec, files_dir=runs_dir / f"{c}_{i}",
+                         json_path=_record_path(runs_dir, c, i))
+        rec.pop("files", None)
+        records[(c, i)] = rec
+        left[i] -= 1
+        if left[i] == 0:                 # the seed's last task: its files go
+            for p in cache.glob(f"s{seeds[i]}-*"):
+                shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(True)
+        if on_record is not None:
+            on_record(rec)
+
+    address = "in-process"
+    try:
+        if todo and workers == 0 and scheduler is None:
+            run_tasks_here(todo, done)
+        elif todo:
+            with _client(scheduler, workers, 0) as client:
+                address = client.scheduler.address
+                with _quiet_on_sigint():
+                    run_tasks(client, todo, done)
+    except BaseException as exc:
+        status = "interrupted" if isinstance(exc, KeyboardInterrupt) else "crashed"
+        write_json(out / "study.json", {**summary, "status": status, "runs": runs,
+                                        "seeds": seeds, "error": f"{type(exc).__name__}: {exc}",
+                                        "n_records": len(records)})
+        raise
+    shutil.rmtree(cache, ignore_errors=True)
+    res = summarize_study(spec, records, runs, out)
+    res.n_run, res.n_skipped = len(todo), n_skipped
+    res.elapsed_s = time.perf_counter() - t0
+    write_json(out / "study.json", {**summary, "status": "done", "runs": runs, "seeds": seeds,
+                                    "scheduler": address, "n_run": len(todo),
+                                    "n_skipped": n_skipped, "elapsed_s": res.elapsed_s,
+                                    "n_failed_runs": len(res.failed)})
+    if render:
+        from .study_report import render_study_report
+
+        render_study_report(out)
+    return res
+
+
+def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
+    rows = []
+    for c, cell in enumerate(spec.cells):
+        mode = str(cell.params.get("modes", "deep"))
+        for i in range(runs):
+            rec = records.get((c, i), {})
+            figs = restore_floats(rec.get("figures", {})) if rec.get("status") == "ok" else {}
+            for f in spec.filters:
+                lab = variant_label(f, mode)
+                row: dict = {"cell": cell.name, "seed_index": i, "seed": rec.get("seed"),
+                             "filter": f}
+                if rec.get("status") != "ok":
+                    row.update(status="failed", error=rec.get("error", "no record"))
+                elif figs.get(f"{lab}.completed") != 1:
+                    row.update(status="failed" if f"{lab}.error" in figs else "diverged",
+                               error=figs.get(f"{lab}.error", "non-finite errors"))
+                else:
+                    row.update(status="ok", error="")
+                for q, (stem, unit) in QUANTITY_KEYS.items():
+                    v = figs.get(f"{lab}.{stem}_rmse", math.nan)
+                    v = float(v) if isinstance(v, (int, float)) else math.nan
+                    if row["status"] != "ok" or not math.isfinite(v):
+                        if row["status"] == "ok":
+                            row.update(status="diverged", error=f"{q} RMSE not finite")
+                        v = math.nan
+                    row[f"{q}_rmse_{unit.replace('/', 'p')}"] = v
+                row["handover_s"] = figs.get(f"{lab}.handover_s", math.nan)
+                row["elapsed_s"] = rec.get("elapsed_s", math.nan)
+                rows.append(row)
+    for row in rows:                     # a diverged quantity makes the whole run a loss
+        if row["status"] != "ok":
+            for q, (_, unit) in QUANTITY_KEYS.items():
+                row[f"{q}_rmse_{unit.replace('/', 'p')}"] = math.nan
+    return rows
+
+
+def _col(q: str) -> str:
+    return f"{q}_rmse_{QUANTITY_KEYS[q][1].replace('/', 'p')}"
+
+
+def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> StudyResult:
+    """Per-run rows, paired comparisons (Holm over the family) and per-cell rows; writes
+    ``runs.csv``, ``comparisons.csv`` and ``cells.csv`` into ``out``."""
+    rows = _run_rows(spec, records, runs)
+    vals: dict = {}
+    for r in rows:
+        for q in QUANTITY_KEYS:
+            vals.setdefault((r["cell"], r["filter"], q), [math.nan] * runs)[r["seed_index"]] = \
+                r[_col(q)]
+    pairs = [(cell.name, f, spec.baseline) for cell in spec.cells for f in spec.filters
+             if f != spec.baseline]
+    for cl in spec.claims:
+        for cell in spec.cells:
+            if (cl.cells is None or cell.name in cl.cells) and \
+                    (cell.name, cl.filter, cl.against) not in pairs:
+                pairs.append((cell.name, cl.filter, cl.against))
+    m = max(1, len(pairs) * len(QUANTITY_KEYS))
+    level = 1.0 - spec.alpha / m
+    comps: list[Comparison] = [compare_pair(cn, f, a, q, vals[(cn, f, q)], vals[(cn, a, q)],
+                                            level)
+                               for cn, f, a in pairs for q in QUANTITY_KEYS]
+    t_p = [c.log_p if spec.interval == "log_ratio" else c.d_p for c in comps]
+    for c, th, sh in zip(comps, holm(t_p), holm([c.sign_p for c in comps])):
+        c.t_p_holm, c.sign_p_holm = float(th), float(sh)
+    by = {(c.cell, c.filter, c.against, c.quantity): c for c in comps}
+
+    cell_rows = []
+    for cell in spec.cells:
+        means = {}
+        for f in spec.filters:
+            for q in QUANTITY_KEYS:
+                x = np.asarray(vals[(cell.name, f, q)], float)
+                means[(f, q)] = float(np.mean(x[np.isfinite(x)])) if np.isfinite(x).any() \
+                    else math.nan
+        for f in spec.filters:
+            n_ok = sum(1 for r in rows if r["cell"] == cell.name and r["filter"] == f
+                       and r["status"] == "ok")
+            row: dict = {"cell": cell.name, **cell.factors, "filter": f, "n_runs": runs,
+                         "n_ok": n_ok, "n_failed": runs - n_ok}
+            for q, (stem, unit) in QUANTITY_KEYS.items():
+                x = np.asarray(vals[(cell.name, f, q)], float)
+                fin = x[np.isfinite(x)]
+                u = unit.replace("/", "p")
+                row[f"{q}_rmse_{u}"] = means[(f, q)]
+                row[f"{q}_rmse_sd"] = float(np.std(fin, ddof=1)) if fin.size > 1 else math.nan
+                best = min((means[(g, q)] for g in spec.filters
+                            if math.isfinite(means[(g, q)])), default=math.nan)
+                row[f"{q}_best"] = int(math.isfinite(means[(f, q)]) and means[(f, q)] == best)
+                c = by.get((cell.name, f, spec.baseline, q))
+                row[f"d_{q}_{u}"] = c.d_mean if c else math.nan
+                row[f"d_{q}_ci_low"] = c.d_ci_low if c else math.nan
+                row[f"d_{q}_ci_high"] = c.d_ci_high if c else math.nan
+                row[f"{q}_ratio"] = c.ratio if c else math.nan
+                row[f"{q}_ratio_ci_low"] = math.exp(c.log_ci_low) if c and math.isfinite(
+                    c.log_ci_low) else math.nan
+                row[f"{q}_ratio_ci_high"] = math.exp(c.log_ci_high) if c and math.isfinite(
+                    c.log_ci_high) else math.nan
+                row[f"{q}_wins"] = c.wins if c else ""
+                row[f"{q}_sign_p"] = c.sign_p if c else math.nan
+                row[f"{q}_sign_p_holm"] = c.sign_p_holm if c else math.nan
+                row[f"{q}_t_p_holm"] = c.t_p_holm if c else math.nan
+            for j, cl in enumerate(spec.claims, 1):
+                verdict = ""
+                if f == cl.filter and (cl.cells is None or cell.name in cl.cells):
+                    verdict = claim_verdict([by[(cell.name, cl.filter, cl.against, q)]
+                                             for q in cl.quantities], cl.min_wins,
+                                            cl.max_sign_p, cl.interval_excludes_zero,
+                                            spec.interval)
+                row[f"claim{j}"] = verdict
+            cell_rows.append(row)
+    write_table(out, "runs", rows)
+    write_table(out, "comparisons", [
+        {**{k: v for k, v in dataclasses.asdict(c).items()}, "ratio": c.ratio} for c in comps])
+    write_table(out, "cells", cell_rows)
+    return StudyResult(spec=spec, records=records, runs=rows, comparisons=comps,
+                       cells=cell_rows, n_run=0, n_skipped=0, out_dir=out, elapsed_s=0.0)
