@@ -212,6 +212,18 @@ CASES: list[tuple[str, list[str]]] = [
     ("lc-imu-too-short", [*LC, "--imu", "{d}/set/s_imu.csv", "--truth",
                           "{d}/set/s_truth.csv"]),
     ("lc-out-file", [*LC, "--out", "{d}/afile"]),
+    # -- assumptions and the truth oscillator (issue 14) ---------------------------------------
+    ("lc-assume-unknown-grade", [*LC, "--assume", "{d}/assume_grade.toml"]),
+    ("lc-assume-negative-h", [*LC, "--assume", "{d}/assume_neg_h.toml"]),
+    ("lc-assume-unknown-key", [*LC, "--assume", "{d}/assume_key.toml"]),
+    ("lc-assume-missing", [*LC, "--assume", "{d}/nope.toml"]),
+    ("lc-assume-oscillator", [*LC, "--assume", "{d}/assume_osc.toml"]),
+    ("run-scalar-assume", ["run", "{d}/set/s.bin", "--assume", "{d}/assume_osc.toml"]),
+    ("run-deep-assume-bad", ["run", "{d}/set/s.bin", "--mode", "deep", "--no-progress",
+                             "--assume", "{d}/assume_neg_h.toml", "--out", "{d}/o"]),
+    ("generate-assume", [*GD, "--assume", "{d}/assume_osc.toml", "--out", "{d}/o"]),
+    ("generate-oscillator-preset", [*GD, "--scenario", "{d}/osc_preset.toml", "--out",
+                                   "{d}/o"]),
     ("lc-out-under-file", [*LC, "--out", "{d}/afile/sub"]),
     ("lc-scenario-missing", [*LC, "--scenario", "{d}/nope.toml"]),
     ("lc-scenario-not-toml", [*LC, "--scenario", "{d}/bad.toml"]),
@@ -327,6 +339,15 @@ def make_workdir(d: Path, generated: Path) -> None:
             '"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/')
         + 'motion = "circle"\n')
     (d / "emptydir").mkdir()
+    for name, text in (("assume_grade", '[imu]\ngrade = "consumer"\n'),
+                       ("assume_neg_h", '[oscillator]\npreset = "tcxo"\nh0 = -2e-19\n'),
+                       ("assume_key", "[initial_errors]\nheading_deg = 20\n"),
+                       ("assume_osc", '[oscillator]\npreset = "ocxo"\n')):
+        (d / f"{name}.toml").write_text(text)
+    (d / "osc_preset.toml").write_text(
+        DEFAULT_SCENARIO.read_text().replace(
+            '"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/')
+        + '\n[oscillator]\npreset = "rubidium"\n')
     for folder, name, text in (("camp_corrupt", "campaign.json", '{"experiment": "x", '),
                                ("camp_list", "campaign.json", "[1, 2]"),
                                ("res_corrupt", "result.json", "\x00\x01"),
