@@ -31,18 +31,17 @@ from ..scenario import DEFAULT_SCENARIO, Scenario, load_scenario, parse_scenario
 from .filter_figures import QUANTITIES
 
 __all__ = [
-    "ASSUMPTION_KEYS",
     "FILE_CACHE",
     "CountingScalarReceiver",
     "DeepRun",
     "Inputs",
-    "assumption_config",
     "base_scenario",
     "check_number",
     "file_keys",
     "generated_inputs",
     "has_mean",
     "nested_assumptions",
+    "parse_assume",
     "parse_list",
     "ranked_prns",
     "record_run",
@@ -128,60 +127,36 @@ def with_truth(sc: Scenario, truth: dict) -> Scenario:
     return with_outages(sc, outages) if outages else sc
 
 
-#: Filter-assumption keys an experiment's ``assume`` dict may set (dotted ``table.key`` of the
-#: assumptions file format, ``docs/assumptions.md``), and the
-#: :class:`~sdr_di.deep.DeepConfig` field each sets today: ``imu.<f>`` sets a field of the
-#: filter's IMU spec (``DeepConfig.imu``; what the filter believes, never the truth). Hooking
-#: the assumptions module in replaces :func:`assumption_config`'s body by its
-#: ``parse_assumptions`` (the nested form of the dict) and ``apply_to_deep``.
-ASSUMPTION_KEYS: dict[str, str] = {
-    "imu.accel_bias_mg": "imu.accel_bias_mg",
-    "imu.gyro_bias_deg_h": "imu.gyro_bias_deg_h",
-    "imu.accel_random_walk_mps_sqrth": "imu.accel_random_walk",
-    "imu.gyro_random_walk_deg_sqrth": "imu.gyro_random_walk",
-    "imu.bias_time_s": "bias_time_s",
-    "oscillator.preset": "clock",
-    "initial_covariance.att_deg": "p0_att_deg",
-}
-
-
 def nested_assumptions(assume: dict) -> dict:
-    """``{"imu.accel_bias_mg": 8}`` -> ``{"imu": {"accel_bias_mg": 8}}`` (the assumptions
-    file's tables)."""
+    """``{"imu.accel_bias_mg": 8}`` -> ``{"imu": {"accel_bias_mg": 8}}``: an experiment's
+    flat ``assume`` dict (dotted ``table.key``) as the tables of an assumptions file
+    (``docs/assumptions.md``); a value that is already a table is kept as one."""
     out: dict = {}
     for key, value in assume.items():
-        table, _, name = str(key).partition(".")
-        out.setdefault(table, {})[name] = value
+        table, dot, name = str(key).partition(".")
+        if dot:
+            out.setdefault(table, {})[name] = value
+        else:
+            out.setdefault(table, {}).update(value if isinstance(value, dict) else {})
+            if not isinstance(value, dict):
+                raise ExperimentError(f"assume key {key!r}: expected table.key (e.g. "
+                                      "imu.accel_random_walk_mps_sqrth) or a table")
     return out
 
 
-def assumption_config(assume: dict | None) -> dict:
-    """:class:`~sdr_di.deep.DeepConfig` keywords for a filter-assumption dict.
+def parse_assume(assume: dict | None, source: str = "assume"):
+    """The filter's assumptions of an experiment's ``assume`` dict (``None`` when empty).
 
     Raises
     ------
-    ExperimentError
-        A key not in :data:`ASSUMPTION_KEYS`.
+    AssumptionsError
+        What :func:`~sdr_di.integration.assumptions.parse_assumptions` rejects.
     """
     if not assume:
-        return {}
-    bad = sorted(set(assume) - set(ASSUMPTION_KEYS))
-    if bad:
-        raise ExperimentError(f"filter assumption(s) {', '.join(bad)} not known; known: "
-                              f"{', '.join(ASSUMPTION_KEYS)}")
-    cfg: dict = {}
-    imu = {}
-    for key, value in assume.items():
-        field = ASSUMPTION_KEYS[key]
-        if field.startswith("imu."):
-            imu[field[4:]] = float(value)
-        else:
-            cfg[field] = tuple(value) if isinstance(value, list) else value
-    if imu:
-        from ..ins.imu import ImuErrorModel
+        return None
+    from ..integration.assumptions import parse_assumptions
 
-        cfg["imu"] = dataclasses.replace(ImuErrorModel(), **imu)
-    return cfg
+    return parse_assumptions(nested_assumptions(assume), source=source)
 
 
 def with_outages(sc: Scenario, outages: list[dict]) -> Scenario:
@@ -360,12 +335,14 @@ class DeepRun:
 
 
 def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
-                     **config: Any) -> DeepRun:
+                     assume: dict | None = None, **config: Any) -> DeepRun:
     """Run :class:`~sdr_di.deep.DeepReceiver` with ``filter_name`` in ``mode`` on ``inputs``.
 
     ``mode`` (``"loose"``, ``"tight"``, ``"deep"``) is the receiver's coupling
     (``DeepConfig.mode``); ``"deep"`` is the configuration's default and is not passed, so
-    the call also works with a receiver that predates the modes. ``config`` are further
+    the call also works with a receiver that predates the modes. ``assume`` is the filter's
+    assumptions (an experiment's ``assume`` dict, :func:`parse_assume`), applied to the
+    configuration as ``--assume`` is. ``config`` are further
     :class:`~sdr_di.deep.DeepConfig` fields.
 
     Exceptions of the package (:class:`~sdr_di.errors.SdrDiError`) and numerical failures
@@ -379,7 +356,13 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
         config["mode"] = mode
     scalar = CountingScalarReceiver(log=False)
     try:
-        rx = DeepReceiver(DeepConfig(filter=filter_name, **config), scalar=scalar)
+        cfg = DeepConfig(filter=filter_name, **config)
+        a = parse_assume(assume)
+        if a is not None:
+            from ..integration.assumptions import apply_to_deep
+
+            cfg = apply_to_deep(cfg, a)
+        rx = DeepReceiver(cfg, scalar=scalar)
         res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
                      truth=inputs.truth)
     except (SdrDiError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:

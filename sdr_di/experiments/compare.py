@@ -3,8 +3,9 @@
 The run of a study cell (``sdr-di study``, ``docs/studies.md``): the scenario (default
 ``signals/default.toml``) with the cell's truth keys (``truth``, :func:`~._deep.with_truth`)
 is generated once per seed, and the receiver runs on those files once per variant
-(``filters`` x ``modes``, :mod:`.variants`) with the cell's filter assumptions (``assume``,
-:func:`~._deep.assumption_config`). All variants are scored over one window, from the
+(``filters`` x ``modes``, :mod:`.variants`) with the cell's filter assumptions (``assume``:
+dotted keys of the assumptions file, ``imu.accel_random_walk_mps_sqrth``,
+``initial_errors.att_deg``; :func:`~._deep.parse_assume`, applied as ``--assume`` is). All variants are scored over one window, from the
 latest hand-over of the run plus ``settle_s`` to the end, so their figures pair.
 
 Figures (per variant ``f``): ``f.completed``, ``f.error`` (when it failed), ``f.handover_s``,
@@ -22,10 +23,10 @@ from pathlib import Path
 from ..errors import ExperimentError
 from . import plotting
 from ._deep import (
-    assumption_config,
     base_scenario,
     check_number,
     generated_inputs,
+    parse_assume,
     segment_metrics,
 )
 from .filter_figures import rmse_bar_plot
@@ -72,7 +73,7 @@ def check_params(params: dict) -> None:
         if not isinstance(params[key], dict):
             raise ExperimentError(f"{NAME}: {key}={params[key]!r}: expected a table of keys "
                                   "(a study spec's cell, or JSON)")
-    assumption_config(params["assume"])
+    parse_assume(params["assume"], f"{NAME}: assume")
     if params["settle_s"] >= params["duration_s"]:
         raise ExperimentError(f"{NAME}: settle_s must be shorter than duration_s")
     if params["scenario"] is not None and not Path(str(params["scenario"])).is_file():
@@ -102,7 +103,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     fig: dict = {"duration_s": duration,
                  "truth": json.dumps(params["truth"], sort_keys=True),
                  "assume": json.dumps(params["assume"], sort_keys=True)}
-    cfg = {**loop_config(params), **assumption_config(params["assume"])}
+    cfg = {**loop_config(params), "assume": params["assume"]}
     with generated_inputs(sc) as inp:
         fig["sampling_rate_hz"] = float(inp.source.sampling_rate_hz)
         series = run_variants(inp, variant_list(NAME, params["filters"], params["modes"]),

@@ -53,7 +53,7 @@ from .registry import get_experiment
 from .study_spec import QUANTITY_KEYS, StudySpec, spec_summary
 from .tables import write_table
 from .tasks import Task, run_tasks, run_tasks_here
-from .variants import variant_label
+from .variants import entry_label
 
 __all__ = ["StudyResult", "execute_cell_run", "run_study", "summarize_study"]
 
@@ -246,14 +246,15 @@ def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
             rec = records.get((c, i), {})
             figs = restore_floats(rec.get("figures", {})) if rec.get("status") == "ok" else {}
             for f in spec.filters:
-                lab = variant_label(f, mode)
+                lab = entry_label(f, mode)
                 row: dict = {"cell": cell.name, "seed_index": i, "seed": rec.get("seed"),
                              "filter": f}
                 if rec.get("status") != "ok":
                     row.update(status="failed", error=rec.get("error", "no record"))
-                elif figs.get(f"{lab}.completed") != 1:
-                    row.update(status="failed" if f"{lab}.error" in figs else "diverged",
-                               error=figs.get(f"{lab}.error", "non-finite errors"))
+                elif f"{lab}.error" in figs:
+                    row.update(status="failed", error=figs[f"{lab}.error"])
+                elif figs.get(f"{lab}.completed", 1) != 1:      # experiments without the
+                    row.update(status="diverged", error="non-finite errors")  # flag: RMSE
                 else:
                     row.update(status="ok", error="")
                 for q, (stem, unit) in QUANTITY_KEYS.items():

@@ -7,7 +7,8 @@ coupling mode, filter rate, sampling rate, any parameter of the experiment) with
     [study]
     name = "smoke"
     experiment = "compare"           # the run of a cell (default)
-    filters = ["ekf", "ff-aukf"]     # entries may carry options: "ff-aukf:q_states=nominal"
+    filters = ["ekf", "ff-aukf"]     # entries may carry options: "ff-aukf:q_states=nominal",
+                                     # and a coupling of their own: "ekf@tight"
     baseline = "ekf"                 # paired differences are against this filter
     runs = 2                         # seeds per cell (sdr-di study --runs overrides)
     base_seed = 0                    # seed i = SeedSequence(base_seed, spawn_key=(i,))
@@ -57,7 +58,7 @@ from pathlib import Path
 from ..errors import SdrDiError, StudyError
 from .filter_figures import parse_filter_spec
 from .registry import get_experiment, parse_params
-from .variants import MODES
+from .variants import MODES, split_entry
 
 __all__ = ["QUANTITY_KEYS", "Cell", "Claim", "StudySpec", "load_study", "parse_study"]
 
@@ -229,7 +230,8 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
     _need(len(set(filters)) == len(filters), where, "[study] filters has duplicates")
     for f in filters:
         try:
-            parse_filter_spec(f"{where}: [study] filters", f)
+            parse_filter_spec(f"{where}: [study] filters",
+                              split_entry(f"{where}: [study] filters", f)[0])
         except SdrDiError as exc:
             raise StudyError(str(exc)) from None
     baseline = str(st.get("baseline", filters[0])).strip().lower()

@@ -40,8 +40,8 @@ from .filter_figures import (
     parse_filter_spec,
 )
 
-__all__ = ["MODES", "Variant", "loop_config", "mode_list", "nan_figures", "plot_error_norms",
-           "run_variants",
+__all__ = ["MODES", "Variant", "entry_label", "loop_config", "mode_list", "nan_figures", "plot_error_norms",
+           "run_variants", "split_entry",
            "variant_label", "variant_list", "variant_rows", "write_errors_csv"]
 
 #: Coupling modes of the integration loop (``DeepConfig.mode``).
@@ -90,13 +90,40 @@ def mode_list(exp: str, text: str, allowed: Sequence[str] = MODES) -> list[str]:
     return list(dict.fromkeys(names))
 
 
+def split_entry(exp: str, entry: str, mode: str = "deep") -> tuple[str, str]:
+    """``"ekf@tight"`` -> ``("ekf", "tight")``; an entry without ``@`` takes ``mode``."""
+    spec, at, m = str(entry).strip().lower().partition("@")
+    if at:
+        mode_list(exp, m)
+        return spec, m
+    return spec, mode
+
+
+def entry_label(entry: str, mode: str = "deep") -> str:
+    """Label of a filter entry (``ekf``, ``ekf@tight``) run in a cell whose mode is ``mode``."""
+    return variant_label(*split_entry("filters", entry, mode))
+
+
 def variant_list(exp: str, filters: str, modes: str = "deep") -> list[Variant]:
-    """Every mode crossed with every filter entry (mode-major order)."""
+    """Every mode crossed with every filter entry (mode-major order). An entry with its own
+    mode (``ekf@tight``: how a study compares couplings paired on the same files) runs once,
+    in that mode, with the first mode's variants."""
     out = []
-    for mode in mode_list(exp, modes):
-        for spec in filter_list(exp, filters):
+    entries = [e.strip().lower() for e in str(filters).split(",") if e.strip()]
+    own = [e for e in entries if "@" in e]
+    crossed = ",".join(e for e in entries if "@" not in e) if len(own) < len(entries) else ""
+    for k, mode in enumerate(mode_list(exp, modes)):
+        for spec in filter_list(exp, crossed) if crossed else []:
             name, opts = parse_filter_spec(exp, spec)
             out.append(Variant(spec, name, opts, mode))
+        for e in own if k == 0 else []:
+            spec, m = split_entry(exp, e)
+            name, opts = parse_filter_spec(exp, spec)
+            out.append(Variant(spec, name, opts, m))
+    labels = [v.label for v in out]
+    if len(set(labels)) != len(labels):
+        raise ExperimentError(f"{exp}: filters={filters!r}, modes={modes!r}: the same variant "
+                              "twice")
     return out
 
 
