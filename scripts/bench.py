@@ -12,6 +12,7 @@ Usage::
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
     python scripts/bench.py filters [options of scripts/bench_filters.py]
     python scripts/bench.py deep [options of scripts/bench_deep.py]
+    python scripts/bench.py study [--spec studies/smoke.toml] [--runs 2] [--workers 0 2]
 
 ``generate``: runs ``sdr-di generate`` on the default scenario (7 satellites, 25 MHz, 4-bit)
 for each duration in a fresh process, and prints wall time, samples per second, real-time
@@ -378,6 +379,11 @@ def main(argv: list[str] | None = None) -> None:
     dp = sub.add_parser("deep", help="deep receiver real-time factor, stage shares, memory")
     bench_deep.add_arguments(dp)
     dp.set_defaults(func=bench_deep.run)
+    import bench_study
+
+    st = sub.add_parser("study", help="study runs per hour, in process vs local Dask cluster")
+    bench_study.add_arguments(st)
+    st.set_defaults(func=bench_study.run)
     args = parser.parse_args(argv)
     args.func(args)
 
