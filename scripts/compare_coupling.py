@@ -33,18 +33,16 @@ import argparse
 import csv
 import io
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from sdr_di.deep import DeepConfig, DeepReceiver
+from sdr_di.deep.vector_loop import MODES
+from sdr_di.io.atomic import atomic_open, ensure_output_dir
 
-from sdr_di.deep import DeepConfig, DeepReceiver  # noqa: E402
-from sdr_di.deep.vector_loop import MODES  # noqa: E402
-from sdr_di.io.atomic import atomic_open, ensure_output_dir  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 #: Figures of the table: (result key, label, unit).
 FIGURES = (("pos_m_rmse", "position RMSE", "m"), ("pos_m_max", "position max", "m"),
