@@ -305,6 +305,7 @@ def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> Stu
         c.t_p_holm, c.sign_p_holm = float(th), float(sh)
     by = {(c.cell, c.filter, c.against, c.quantity): c for c in comps}
 
+    factor_keys = list(dict.fromkeys(k for cell in spec.cells for k in cell.factors))
     cell_rows = []
     for cell in spec.cells:
         means = {}
@@ -316,7 +317,8 @@ def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> Stu
         for f in spec.filters:
             n_ok = sum(1 for r in rows if r["cell"] == cell.name and r["filter"] == f
                        and r["status"] == "ok")
-            row: dict = {"cell": cell.name, **cell.factors, "filter": f, "n_runs": runs,
+            row: dict = {"cell": cell.name, **{k: cell.factors.get(k, "") for k in factor_keys},
+                         "filter": f, "n_runs": runs,
                          "n_ok": n_ok, "n_failed": runs - n_ok}
             for q, (stem, unit) in QUANTITY_KEYS.items():
                 x = np.asarray(vals[(cell.name, f, q)], float)

@@ -81,9 +81,10 @@ def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> 
         ax.set_ylabel(f"{_QLABEL[q]} RMSE\nratio to {baseline}")
         ax.grid(True, alpha=0.3, which="both")
     axes[-1].set_xticks(range(len(names)), names, rotation=25, ha="right")
+    axes[-1].set_xlim(-0.6, len(names) - 0.4)
     axes[0].legend(fontsize="small", ncol=4)
-    fig.suptitle("paired RMSE ratio per cell (geometric mean over seeds, corrected interval; "
-                 "below 1: better than the baseline)")
+    fig.suptitle("paired RMSE ratio to the baseline per cell: geometric mean over seeds,\n"
+                 "corrected interval; below 1 = better than the baseline", fontsize="medium")
     return plotting._save(fig, path)
 
 
@@ -110,7 +111,8 @@ def render_study_report(folder: str | Path) -> Path:
         f"<p>{n_cells} cell(s) x {len(filters)} filters ({html.escape(', '.join(filters))}) x "
         f"{meta.get('runs')} seeds, paired on the same files; baseline "
         f"<b>{html.escape(baseline)}</b>; experiment <code>{html.escape(meta.get('experiment', ''))}"
-        f"</code>. Intervals: paired t on per-seed {html.escape(meta.get('interval', ''))}s at "
+        f"</code>. Intervals: paired t on the per-seed "
+        f"{'log RMSE ratios' if meta.get('interval') == 'log_ratio' else 'RMSE differences'} at "
         f"{sig(100 * level)} % (Bonferroni over the {m} comparisons, family-wise "
         f"{sig(100 * (1 - meta.get('alpha', 0.05)))} %); p-values Holm-adjusted over the same "
         f"family. Status: {html.escape(str(meta.get('status')))}.</p>")
