@@ -3,8 +3,7 @@
 
 Usage::
 
-    python scripts/bench.py generate [--durations 10 60] [--out DIR] [--keep]
-        [--oscillator tcxo]
+    python scripts/bench.py generate [options of scripts/bench_generate.py]
     python scripts/bench.py run [--durations 30] [--bits 8] [--keep] [--if-file F]
         [--repeat N] [--search assisted|cold|both] [--gnss-sdr]
         [--mode scalar|deep|loose|tight|all] [--filter ekf]
@@ -14,13 +13,10 @@ Usage::
     python scripts/bench.py deep [options of scripts/bench_deep.py]
     python scripts/bench.py study [--spec studies/smoke.toml] [--runs 2] [--workers 0 2]
 
-``generate``: runs ``sdr-di generate`` on the default scenario (7 satellites, 25 MHz, 4-bit)
-for each duration in a fresh process, and prints wall time, samples per second, real-time
-factor (data seconds per wall second) and the process's peak resident memory, so 10 s vs 60 s
-shows whether memory grows with the file length. The first run also pays numba compilation
-unless the cache is warm; a warm-up run of 0.2 s is made first. ``--oscillator PRESET`` times
-each duration twice, without and with a truth ``[oscillator]`` of that preset (issue 14), and
-adds the child's CPU time (user + sys).
+``generate``: ``sdr-di generate`` on the default scenario per duration in a fresh process:
+wall and CPU time, real-time factor, MB/s written, peak RSS, issue 17's target 1, and the
+generator's stage profile (``scripts/bench_generate.py``; ``--oscillator PRESET`` and
+``--impairments`` time those variants too).
 
 ``run``: runs the scalar receiver (``run_scalar``, the pipeline of ``sdr-di run --mode
 scalar``: acquisition, tracking, decoding, PVT at 5 Hz, CSV/NMEA output) in a fresh process on
@@ -78,39 +74,6 @@ def _run_generate(duration: float, out: Path, extra: tuple[str, ...] = ()) -> tu
         raise SystemExit(f"generate failed: {res.stderr.strip()}")
     rss_kb = int(next(l for l in res.stdout.splitlines() if l.startswith("MAXRSS")).split()[1])
     return wall, rss_kb * 1024
-
-
-def bench_generate(args: argparse.Namespace) -> None:
-    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sdr-di-bench-"))
-    try:
-        _run_generate(0.2, out)  # warm numba cache
-        print(f"machine: {os.cpu_count()} cores; default scenario, 7 satellites, 25 MHz, "
-              "4-bit iq_int8")
-        print(f"{'duration s':>10} {'wall s':>8} {'Msamples/s':>11} {'x real time':>12} "
-              f"{'peak RSS MiB':>13} {'file MiB':>9}")
-        variants = [("off", ())]
-        if args.oscillator:  # the default scenario plus a truth [oscillator] table
-            sc = out / "oscillator.toml"
-            default = Path(__file__).resolve().parents[1] / "signals" / "default.toml"
-            text = default.read_text().replace('ephemeris = "', 'ephemeris = "'
-                                               + str(default.parent) + "/")
-            sc.write_text(text + f'\n[oscillator]\npreset = "{args.oscillator}"\n')
-            variants.append((args.oscillator, ("--scenario", str(sc))))
-        for d in args.durations:
-            for label, extra in variants:
-                ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-                wall, rss = _run_generate(d, out, extra)
-                ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-                cpu = ru1.ru_utime + ru1.ru_stime - ru0.ru_utime - ru0.ru_stime
-                size = (out / "bench.bin").stat().st_size
-                n = d * 25e6
-                print(f"{d:10.1f} {wall:8.2f} {n / wall / 1e6:11.2f} {d / wall:12.2f} "
-                      f"{rss / 2**20:13.1f} {size / 2**20:9.1f}"
-                      + (f"  oscillator {label:5s} CPU {cpu:.2f} s" if args.oscillator
-                         else ""))
-    finally:
-        if not args.keep:
-            shutil.rmtree(out, ignore_errors=True)
 
 
 _RUN_CHILD = """
@@ -327,14 +290,12 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="what", required=True)
-    g = sub.add_parser("generate", help="IF generation throughput and memory")
-    g.add_argument("--durations", type=float, nargs="+", default=[10.0, 60.0])
-    g.add_argument("--out", default=None, help="output directory (default: a temp dir)")
-    g.add_argument("--keep", action="store_true", help="keep the generated files")
-    g.add_argument("--oscillator", default=None, metavar="PRESET",
-                   help="also time each duration with a truth [oscillator] of this preset "
-                   "(tcxo, ocxo)")
-    g.set_defaults(func=bench_generate)
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_generate
+
+    g = sub.add_parser("generate", help="IF generation throughput, CPU, memory, stage profile")
+    bench_generate.add_arguments(g)
+    g.set_defaults(func=bench_generate.run)
     r = sub.add_parser("run", help="scalar receiver real-time factor and memory")
     r.add_argument("--durations", type=float, nargs="+", default=[30.0],
                    help="generated file lengths [s] (default 30: issue 17's target 2)")

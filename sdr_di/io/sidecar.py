@@ -22,7 +22,9 @@ The sidecar of ``run.bin`` is ``run.json``. Keys (schema ``sdr-di-if/1``):
                        the message carries (a new upload from the first 30 s frame after it
                        went on the air)
 ``imu_file``, ``truth_file``, ``ephemeris_file``   companion files
-``generator``          ``{"name": "sdr-di", "version"}``
+``generator``          ``{"name": "sdr-di", "version", "synthesis_version"}``: the
+                       sample-synthesis algorithm (``sdr_di.sim.ifgen.SYNTHESIS_VERSION``;
+                       a file is byte-identical for a scenario and seed within a version)
 ``files``              ``{NAME: {"size": bytes, "sha256_first_last_mib": hex}}`` for the IF,
                        IMU and truth files of the set, NAME as written in ``if_file``...
                        (see below; absent in sidecars written by hand or by sdr-di before it

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import math
+from concurrent.futures import ThreadPoolExecutor, wait
 from pathlib import Path
 
 import numpy as np
@@ -36,9 +37,9 @@ from ..scenario.schema import Scenario
 from ..signal.navmsg import broadcast_klobuchar
 from ..timebase import bdt_minus_utc, bdt_to_datetime
 from .geometry import ReceiverPath
-from .ifgen import IfGenerator, build_satellites
-from .oscillator import scenario_clock
+from .ifgen import SYNTHESIS_VERSION, IfGenerator, build_satellites
 from .motion import segment_from_spec
+from .oscillator import scenario_clock
 from .trajectory import generate_trajectory
 
 
@@ -133,10 +134,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
     with OutputSet() as files:  # any error or interrupt: the .part files go, old files stay
         try:
             with files.open(paths["if"]) as fh:
-                for chunk in gen.chunks():
-                    fh.write(memoryview(np.ascontiguousarray(chunk)).cast("B"))
-                    if bar is not None:
-                        bar.update(int(chunk.shape[0]))
+                write_overlapped(fh, gen.chunks(reuse=True), bar)
         finally:
             if bar is not None:
                 bar.close()
@@ -177,13 +175,39 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "imu_file": paths["imu"].name,
             "truth_file": paths["truth"].name,
             "ephemeris_file": str(sc.satellites.ephemeris),
-            "generator": {"name": "sdr-di", "version": __version__},
+            "generator": {"name": "sdr-di", "version": __version__,
+                          "synthesis_version": SYNTHESIS_VERSION},
         }
         meta["files"] = {paths[k].name: _fingerprint(paths[k], files)
                          for k in ("if", "imu", "truth")}
         write_sidecar(paths["metadata"], meta, output_set=files)  # opened last: renamed last
         files.commit()
     return paths
+
+
+def write_overlapped(fh, chunks, bar=None) -> None:
+    """Write ``chunks`` (from :meth:`IfGenerator.chunks` with ``reuse=True``) to ``fh``, each
+    on a writer thread while the next is generated (the kernel releases the GIL).
+
+    At most one write is in flight: it is waited for before the next is started, so the
+    buffer it reads is never the one being generated (two buffers cycle). An error of a write
+    (disk full) is raised here, in the caller's thread.
+    """
+    with ThreadPoolExecutor(1, thread_name_prefix="sdr-di-writer") as pool:
+        pending = None
+        try:
+            for chunk in chunks:
+                if pending is not None:
+                    pending.result()
+                pending = pool.submit(fh.write, memoryview(np.ascontiguousarray(chunk)).cast("B"))
+                if bar is not None:
+                    bar.update(int(chunk.shape[0]))
+            if pending is not None:
+                pending.result()
+        finally:
+            if pending is not None:
+                pending.cancel()
+                wait([pending])
 
 
 def _fingerprint(final: Path, files: OutputSet) -> dict:

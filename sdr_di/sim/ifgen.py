@@ -11,7 +11,8 @@ Data flow per chunk of ``chunk_ms`` milliseconds (bounded memory whatever the fi
    ``f_IF s - f_B3I D_carr`` and per-sample increments are handed to the numba kernel
    (:mod:`~sdr_di.sim._numba_ifgen`) with the data x NH symbols of the epochs in the chunk;
 4. the kernel sums the satellites, adds white Gaussian noise (unit variance per component)
-   and quantizes.
+   and quantizes (:mod:`~sdr_di.sim._numba_ifgen`: vectorized synthesis, counter-based noise,
+   so the file does not depend on the chunking or the thread count).
 
 Amplitude from C/N0 with noise variance sigma^2 = 1 per component: complex baseband
 ``A = sqrt(2 C/N0 / fs)`` (C = A^2, N0 = 2 sigma^2 / fs); real IF ``A = sqrt(4 C/N0 / fs)``
@@ -33,21 +34,29 @@ import itertools
 import math
 from typing import Iterator
 
+import numba
 import numpy as np
 
 from ..constants import CHIP_RATE_B3I, F_B3I, SECONDS_PER_WEEK, is_geo
 from ..errors import NoEphemerisError, ScenarioError
 from ..frames import ecef_to_llh
-from ..io.sample_formats import get_format, pack_iq_int4, quantizer_levels
+from ..io.sample_formats import get_format, quantizer_levels
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from ..scenario.schema import Scenario
 from ..signal.codes import NH20_BITS, b3i_code
 from ..signal.navmsg import NavBits, nav_bits
-from ._numba_ifgen import LUT_COS, LUT_SIN, synthesize_chunk
+from ._numba_ifgen import code_words, pack_iq_int4_kernel, synthesize_chunk
 from .geometry import ReceiverPath, satellite_delays
 
-#: Noise streams per chunk (fixed, so files do not depend on the machine's core count).
-N_NOISE_STREAMS = 4
+#: Version of the sample-synthesis algorithm (recorded in the sidecar's ``generator``): files
+#: of one scenario and seed are byte-identical within a version. 2: counter-based
+#: near-Gaussian noise and polynomial carrier (1: NumPy SFC64 ziggurat noise, carrier table).
+SYNTHESIS_VERSION = 2
+#: Node intervals per geometry computation (:meth:`IfGenerator.node_state`) at least.
+GEOMETRY_BLOCK_NODES = 1000
+#: Node intervals handed to a kernel thread at a time (dynamic schedule: a thread slowed by
+#: other load takes fewer).
+KERNEL_CHUNK_NODES = 8
 #: Optimal uniform-quantizer step / sigma for 2**bits levels (Max 1960), bits 1..8.
 _MAX_STEP = {1: None, 2: 0.9957, 3: 0.5860, 4: 0.3352, 5: 0.1881, 6: 0.1041, 7: 0.0568,
              8: 0.0308}
@@ -171,6 +180,9 @@ class IfGenerator:
         self.n_nodes_total = int(math.ceil(sc.duration_s / self.node_dt - 1e-9))
         self.n_samples = self.n_nodes_total * self.n_per_node
         self.codes = np.stack([b3i_code(s.prn) for s in sats]).astype(np.float32)
+        self.code_words = code_words(self.codes)
+        self.noise_key = np.uint64(np.random.SeedSequence([sc.seed, 0x1F5D2])
+                                   .generate_state(1, np.uint64)[0])
         self.nh = 1.0 - 2.0 * NH20_BITS.astype(np.float32)
         self.chunk_nodes = sig.chunk_ms
         #: Truth oscillator path (:class:`~sdr_di.sim.oscillator.ClockTruth`, set by the
@@ -244,35 +256,67 @@ class IfGenerator:
         return f
 
     # -- sample streaming --------------------------------------------------------------
-    def noise_streams(self, chunk_index: int) -> tuple:
-        """Independent noise generators of one chunk (seeded from scenario seed and index)."""
-        ss = np.random.SeedSequence([self.sc.seed, 0x1F5D1, chunk_index])
-        return tuple(np.random.Generator(np.random.SFC64(c)) for c in ss.spawn(N_NOISE_STREAMS))
+    def synthesize(self, j0: int, n: int, out: np.ndarray | None = None,
+                   state: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """Quantized samples of node intervals ``j0 .. j0 + n - 1``, ``(n N, ncomp)`` int8 or
+        int16 (``out`` reused when given and of that shape; ``state``: the intervals'
+        :meth:`node_state`, computed when not given)."""
+        dtype = np.int16 if self.fmt.dtype.itemsize == 2 else np.int8
+        shape = (n * self.n_per_node, self.ncomp)
+        if out is None or out.shape != shape or out.dtype != dtype:
+            out = np.empty(shape, dtype)
+        st = self.node_state(j0, n) if state is None else state
+        with numba.parallel_chunksize(KERNEL_CHUNK_NODES):
+            synthesize_chunk(out, self.noise_key, j0 * self.n_per_node, self.n_per_node,
+                             self.code_words, st["chip0"], st["ms0"], st["dchip"], st["ph0"],
+                             st["dph"], st["amp"], st["sym"], st["sym_base"],
+                             np.float32(self.gain), self.level)
+        return out
 
-    def chunks(self, n_nodes: int | None = None) -> Iterator[np.ndarray]:
+    def chunks(self, n_nodes: int | None = None, *,
+               reuse: bool = False) -> Iterator[np.ndarray]:
         """Yield quantized chunks in the container layout of the sample format.
 
         Each chunk is ``(n, 2)`` / ``(n, 1)`` int8 or int16, or ``(n,)`` uint8 for ``iq_int4``.
+        The geometry (:meth:`node_state`) is computed for blocks of at least
+        :data:`GEOMETRY_BLOCK_NODES` intervals (its cost is mostly per call), the samples
+        ``chunk_ms`` at a time; neither changes the samples.
 
         Parameters
         ----------
         n_nodes : int, optional
             Generate only the first ``n_nodes`` node intervals (~ms); default the whole file.
+        reuse : bool
+            Cycle two buffers: a yielded array is overwritten by the chunk after the next one
+            (so a writer thread can write one while the next is generated, with no allocation
+            per chunk). Default False: every chunk is a new array.
         """
         total = self.n_nodes_total if n_nodes is None else min(n_nodes, self.n_nodes_total)
-        dtype = np.int16 if self.fmt.dtype.itemsize == 2 else np.int8
-        for ci, j0 in enumerate(range(0, total, self.chunk_nodes)):
-            n = min(self.chunk_nodes, total - j0)
-            st = self.node_state(j0, n)
-            out = np.empty((n * self.n_per_node, self.ncomp), dtype)
-            synthesize_chunk(out, self.noise_streams(ci), self.n_per_node, self.codes,
-                             st["chip0"], st["ms0"], st["dchip"], st["ph0"], st["dph"],
-                             st["amp"], st["sym"], st["sym_base"], LUT_COS, LUT_SIN,
-                             np.float32(self.gain), self.level)
-            if self.fmt.name == "iq_int4":
-                yield pack_iq_int4(out[:, 0], out[:, 1])
-            else:
-                yield out
+        block = max(self.chunk_nodes, GEOMETRY_BLOCK_NODES)
+        bufs: list = [None, None]
+        packed: list = [None, None]
+        ci = 0
+        for b0 in range(0, total, block):
+            geo = self.node_state(b0, min(block, total - b0))
+            for j0 in range(b0, min(b0 + block, total), self.chunk_nodes):
+                n = min(self.chunk_nodes, total - j0, b0 + block - j0)
+                a, b = j0 - b0, j0 - b0 + n
+                st = {k: (np.ascontiguousarray(v[:, a:b]) if v.ndim == 2 and k != "sym" else v)
+                      for k, v in geo.items()}
+                out = self.synthesize(j0, n, bufs[ci % 2], st)
+                if reuse:
+                    bufs[ci % 2] = out
+                if self.fmt.name == "iq_int4":
+                    p = packed[ci % 2]
+                    if p is None or p.shape[0] != out.shape[0]:
+                        p = np.empty(out.shape[0], np.uint8)
+                        if reuse:
+                            packed[ci % 2] = p
+                    pack_iq_int4_kernel(p, out)
+                    yield p
+                else:
+                    yield out
+                ci += 1
 
     def start_summary(self) -> list[dict]:
         """Per-satellite state at sample 0 for the sidecar."""
