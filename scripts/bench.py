@@ -53,7 +53,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import resource
 import time
 from pathlib import Path
 
