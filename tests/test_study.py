@@ -280,3 +280,39 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
     assert "injected" in (out / "report.html").read_text()
     again = run_study(spec, out, runs=2, workers=0)
     assert again.n_run == 0 and again.n_skipped == 4
+
+
+# ---- command line ----------------------------------------------------------------------------
+def _run_cli(argv: list[str]) -> int:
+    import argparse
+
+    from sdr_di.experiments.commands import add_parsers
+
+    parser = argparse.ArgumentParser(prog="sdr-di")
+    add_parsers(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+@pytest.mark.parametrize("argv, msg", [
+    (["study", "nope.toml"], "nope.toml: cannot read"),
+    (["study", str(REPO / "studies" / "smoke.toml"), "--runs", "0"], "--runs must be >= 1"),
+    (["study", str(REPO / "studies" / "smoke.toml"), "--workers", "-1"], "--workers"),
+])
+def test_cli_bad_input_is_a_one_line_error_before_any_work(tmp_path, argv, msg):
+    from sdr_di.errors import SdrDiError
+
+    with pytest.raises(SdrDiError, match=msg):
+        _run_cli(argv + ["--out", str(tmp_path / "o")])
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_refuses_a_folder_with_another_study(tmp_path, capsys):
+    from sdr_di.experiments.execute import write_json
+
+    out = tmp_path / "o"
+    out.mkdir()
+    write_json(out / "study.json", {"hash": "0123456789abcdef"})
+    with pytest.raises(StudyError, match="different spec"):
+        _run_cli(["study", str(REPO / "studies" / "smoke.toml"), "--out", str(out)])
+    assert sorted(p.name for p in out.iterdir()) == ["study.json"]
