@@ -249,3 +249,21 @@ def test_deep_run_with_assumptions_records_both_worlds(tmp_path, capsys):
     head = np.abs(rows["att_err_u_deg"])
     assert head[0] > 5.0               # the injected error is there after the first update
     assert head[-1] < 0.5 * head[0]    # and the filter pulls it in
+
+
+def test_fixed_noise_source_replaces_r_only():
+    from sdr_di.integration.assumptions import FixedNoiseSource
+    from sdr_di.integration.loop import Measurements
+
+    class Stub:
+        n_channels = 3
+
+        def measure(self, loop, iv):
+            return Measurements(z=np.arange(6.0), R=np.eye(6) * 7.0, geometry=(1, 2),
+                                used=np.ones(3, bool))
+
+    src = FixedNoiseSource(Stub(), 2.0, 0.1)
+    m = src.measure(None, None)
+    np.testing.assert_array_equal(np.diag(m.R), [4.0] * 3 + [0.01] * 3)
+    np.testing.assert_array_equal(m.z, np.arange(6.0))
+    assert src.n_channels == 3 and m.geometry == (1, 2)
