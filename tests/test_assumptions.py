@@ -264,6 +264,6 @@ def test_fixed_noise_source_replaces_r_only():
 
     src = FixedNoiseSource(Stub(), 2.0, 0.1)
     m = src.measure(None, None)
-    np.testing.assert_array_equal(np.diag(m.R), [4.0] * 3 + [0.01] * 3)
+    np.testing.assert_allclose(np.diag(m.R), [4.0] * 3 + [0.01] * 3, rtol=1e-12)
     np.testing.assert_array_equal(m.z, np.arange(6.0))
     assert src.n_channels == 3 and m.geometry == (1, 2)
