@@ -101,3 +101,146 @@ def test_tight_stays_bounded_with_three_satellites_while_loose_coasts(runs):
     # both back on 7 after the blockage
     after = t > BLOCK[1] + 1.0
     assert after.any() and np.all(tight[after, COL["n_used"]] == 7)
+
+
+# ---- the sources without IF data (fast) -------------------------------------------------------
+def _enu_to_ecef_cov(llh, D):
+    from sdr_di.frames import C_e_n
+
+    C = C_e_n(llh[0], llh[1])
+    return C.T @ D @ C
+
+
+def test_fix_covariance_is_the_formal_covariance_in_enu_and_neu():
+    import types
+
+    from sdr_di.integration.loose_fixes import fix_covariance
+
+    llh = np.array([math.radians(40.0), math.radians(116.0), 100.0])
+    cov = np.zeros((4, 4))
+    cov[:3, :3] = _enu_to_ecef_cov(llh, np.diag([1.0, 4.0, 9.0]))        # E, N, U [m^2]
+    cov[3, 3] = 25.0
+    cov_v = np.zeros((4, 4))
+    cov_v[:3, :3] = _enu_to_ecef_cov(llh, np.diag([0.01, 0.04, 0.09]))
+    sol = types.SimpleNamespace(llh=llh, cov=cov, cov_v=cov_v)
+    R = fix_covariance(sol)
+    np.testing.assert_allclose(R, np.diag([0.01, 0.04, 0.09, 4.0, 1.0, 9.0]), atol=1e-9)
+
+
+def _epoch(sample, sow, fix_sow=None):
+    import types
+
+    obs = types.SimpleNamespace(week=755, sow=sow, prn=np.array([27]), cn0_dbhz=np.array([40.0]))
+    sol = types.SimpleNamespace(valid=fix_sow is not None, week=755, sow=fix_sow)
+    return types.SimpleNamespace(sample=sample, obs=obs, sol=sol, nav={}, iono=None, sat=None)
+
+
+def test_epochs_are_placed_by_their_bdt_and_the_ins_interpolated():
+    """An epoch goes to the interval whose IMU span holds its BDT (receiver time minus the
+    clock bias / c: loose the fix's own, tight the filter's), not its receiver time."""
+    import types
+
+    from sdr_di.constants import C_LIGHT
+    from sdr_di.integration.gnss_epochs import ScalarEpochSource
+    from sdr_di.integration.loop import Interval
+    from sdr_di.integration.loose_fixes import LooseFixSource
+
+    imu_t = np.arange(0, 2.0001, 0.005)
+    sow0 = 1000.0
+    fs = 1000.0
+    # receiver time 1.000 s; the clock runs 12 ms ahead of BDT: BDT 0.988 s
+    b = 0.012 * C_LIGHT
+    ep = _epoch(1000, sow0 + 1.0, fix_sow=sow0 + 0.988)
+    ivs = [Interval(i0, i0 + 4, round(imu_t[i0] * fs), round(imu_t[i0 + 4] * fs))
+           for i0 in range(0, 396, 4)]                     # 20 ms intervals
+    loop = types.SimpleNamespace(clock_bias_m=b)
+    for cls in (LooseFixSource, ScalarEpochSource):
+        src = cls([ep], [27], imu_t, (755, sow0), fs, {})
+        got = [iv for iv in ivs if (setattr(iv, "clock_bias_m", b) or True)
+               and src._take_epoch(loop, iv) is ep]
+        assert len(got) == 1
+        assert imu_t[got[0].i0] < 0.988 <= imu_t[got[0].i1] + 1e-12, cls
+    nav = types.SimpleNamespace
+    iv = Interval(0, 4, 0, 20, nav0=nav(llh=np.zeros(3), v_n=np.zeros(3)),
+                  nav1=nav(llh=np.array([1.0, 2.0, 3.0]), v_n=np.array([4.0, 0.0, 0.0])))
+    llh, v = ScalarEpochSource([], [27], imu_t, (755, sow0), fs, {}).ins_at(iv, 0.015)
+    np.testing.assert_allclose(llh, [0.75, 1.5, 2.25])
+    np.testing.assert_allclose(v, [3.0, 0.0, 0.0])
+
+
+def test_tight_source_pulls_an_ins_error_in_through_the_loop():
+    """Static receiver, five satellites, observables from the PVT's own forward model at the
+    truth (so only the INS error is seen): the tight source in the unchanged integration
+    loop pulls a 20 m north / 0.5 m/s east INS error and a 30 m clock error in."""
+    import types
+
+    from sdr_di.constants import OMEGA_E
+    from sdr_di.filters import make_filter
+    from sdr_di.frames import C_e_n, llh_to_ecef
+    from sdr_di.ins.error_model import InsErrorModel, process_noise
+    from sdr_di.ins.gravity import normal_gravity
+    from sdr_di.ins.imu import ImuErrorModel
+    from sdr_di.ins.mechanization import StrapdownINS
+    from sdr_di.integration.gnss_epochs import GnssEpoch
+    from sdr_di.integration.loop import IntegrationLoop
+    from sdr_di.integration.measurements import RangeRateMeasurementModel
+    from sdr_di.integration.tight_ranges import TightRangeSource
+    from sdr_di.receiver.observables import Observables
+    from sdr_di.receiver.pvt import SatelliteStates, modelled_observables
+
+    rate, fs, sow0, week = 200.0, 1000.0, 369000.0, 755
+    llh0 = np.array([math.radians(40.0), math.radians(116.0), 100.0])
+    r0 = llh_to_ecef(*llh0)
+    n = round(12.0 * rate) + 1
+    lat = llh0[0]
+    imu = types.SimpleNamespace(
+        t=np.arange(n) / rate, rate_hz=rate,
+        f_b=np.tile([0.0, 0.0, float(normal_gravity(lat, llh0[2]))], (n, 1)),
+        w_ib_b=np.tile([0.0, OMEGA_E * math.cos(lat), OMEGA_E * math.sin(lat)], (n, 1)))
+    C_n_e = C_e_n(llh0[0], llh0[1]).T
+    dirs = []
+    for az, el in ((10, 70), (100, 40), (190, 35), (280, 50), (45, 20)):
+        a, e = math.radians(az), math.radians(el)
+        dirs.append(C_n_e @ [math.sin(a) * math.cos(e), math.cos(a) * math.cos(e), math.sin(e)])
+    sat_r = r0 + 2.2e7 * np.array(dirs)
+    ns = len(dirs)
+    sat = SatelliteStates(np.ones(ns, bool), sat_r, np.zeros((ns, 3)), np.zeros(ns),
+                          np.zeros(ns), ())
+    epochs = []
+    for k in range(0, round(12.0 * fs), 200):                 # 5 Hz
+        P, D, _, _ = modelled_observables(sat, np.arange(ns), r0, np.zeros(3), 0.0, 0.0,
+                                          sow0 + k / fs, None)
+        obs = Observables(sample_index=k, week=week, sow=sow0 + k / fs,
+                          prn=np.arange(1, ns + 1), t_tx_week=np.full(ns, week),
+                          t_tx_sow=np.full(ns, sow0), pseudorange_m=P,
+                          pseudorange_rate_mps=D, doppler_hz=np.zeros(ns),
+                          carrier_phase_m=np.zeros(ns), cn0_dbhz=np.full(ns, 45.0))
+        epochs.append(GnssEpoch(k, obs, sat, None, None, {}))
+    ins = StrapdownINS(llh0 + [20.0 / 6.37e6, 0.0, 0.0], np.array([0.5, 0.0, 0.0]),
+                       att=np.zeros(3))
+    ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], 1.0 / rate)
+    T = 4 / rate
+    spec = ImuErrorModel()
+    Q = process_noise(T, gyro_random_walk_si=spec.gyro_random_walk_si,
+                      accel_random_walk_si=spec.accel_random_walk_si,
+                      gyro_bias_si=spec.gyro_bias_si, accel_bias_si=spec.accel_bias_si)
+    p0 = np.r_[[1e-3 ** 2] * 3, [1.0] * 3, (30 / 6.4e6) ** 2, (30 / 6.4e6) ** 2, 900.0,
+               [spec.gyro_bias_si ** 2] * 3, [spec.accel_bias_si ** 2] * 3, 2500.0, 1.0]
+    process, model = InsErrorModel(), RangeRateMeasurementModel()
+    kf = make_filter("ekf", process, model, np.zeros(17), np.diag(p0), Q, None, dt=T)
+    loop = IntegrationLoop(
+        imu=imu, t_if=imu.t, i_start=0, k_start=0, n_per=4, fs=fs, stop=10 ** 9, margin=0,
+        ins=ins, clock_bias_m=30.0, clock_drift_mps=0.0, kf=kf, process=process,
+        set_geometry=model.set_geometry, sow_of_sample=lambda k: sow0 + k / fs,
+        output_every=1)
+    src = TightRangeSource(epochs, list(range(1, ns + 1)), imu.t, (week, sow0), fs, {})
+    loop.run(src)
+    cols = loop.columns(ns)
+    assert np.all(cols["n"][9:] == ns)               # the first epoch in (0.18, 0.2] s
+    assert np.all(np.isnan(cols["nis"][:9]))        # no update before the first epoch
+    assert np.isfinite(cols["nis"]).sum() >= 55      # then one per epoch (5 Hz, 12 s)
+    north_m = (cols["llh"][:, 0] - llh0[0]) * 6.37e6
+    assert north_m[8] > 15.0                         # before the first update
+    assert abs(north_m[-1]) < 0.5
+    assert np.linalg.norm(cols["v"][-1]) < 0.05
+    assert abs(cols["b"][-1]) < 0.5                  # truth clock bias 0

@@ -7,6 +7,11 @@
 ``loose``         closed-loop loosely coupled run (``sdr-di lc``)
 ``loop``          the integration loop every coupling mode on IF data shares (INS, filter,
                   feedback, rows); a mode supplies its measurement source
+``gnss_epochs``   the scalar receiver's epochs recorded for loose and tight, their common
+                  measurement source (time tags, INS interpolation, channel columns)
+``loose_fixes``   loose mode's source: WLS position/velocity fixes, R from their formal
+                  covariances (``sdr-di run --mode loose``; ``lc`` is the simulated one)
+``tight_ranges``  tight mode's source: pseudoranges and rates into paper 004 eq 6-12
 
 The process model is :class:`sdr_di.ins.error_model.InsErrorModel`.
 """
