@@ -134,6 +134,12 @@ def _chunk_args(n_nodes, n_per_node, n_sat=3, seed=3):
     return K.code_words(code), chip0, ms0, dchip, ph0, dph, amp, sym, np.full(n_sat, 4)
 
 
+def no_jammers(n_nodes):
+    """Kernel jammer arguments for none."""
+    return (np.zeros(0, np.int64), np.zeros((0, n_nodes), np.float32), np.zeros(0),
+            np.zeros(0), np.zeros(0, np.uint64), np.zeros(0), np.zeros((4, 4), np.float32))
+
+
 def test_output_independent_of_chunking_and_threads():
     n_nodes, npn = 12, 2500
     words, chip0, ms0, dchip, ph0, dph, amp, sym, base = _chunk_args(n_nodes, npn)
@@ -148,7 +154,7 @@ def test_output_independent_of_chunking_and_threads():
                 out = np.empty(((b - a) * npn, 2), np.int8)
                 sub = [np.ascontiguousarray(x[:, a:b]) for x in (chip0, ms0, dchip, ph0, dph, amp)]
                 K.synthesize_chunk(out, key, a * npn, npn, words, *sub, sym, base,
-                                   np.float32(3.0), 7)
+                                   np.full(b - a, 3.0, np.float32), 7, *no_jammers(b - a))
                 outs.append(out)
             return np.concatenate(outs)
         finally:
@@ -161,7 +167,7 @@ def test_output_independent_of_chunking_and_threads():
     amp0 = np.zeros_like(amp)
     out = np.empty_like(whole)
     K.synthesize_chunk(out, key, 0, npn, words, chip0, ms0, dchip, ph0, dph, amp0, sym, base,
-                       np.float32(3.0), 7)
+                       np.full(n_nodes, 3.0, np.float32), 7, *no_jammers(n_nodes))
     assert not np.array_equal(out, whole)
 
 

@@ -21,6 +21,12 @@ The sidecar of ``run.bin`` is ``run.json``. Keys (schema ``sdr-di-if/1``):
                        ``"broadcast"``: ``[{"from_s", "toe", "week", "aode"}]``, the records
                        the message carries (a new upload from the first 30 s frame after it
                        went on the air)
+                       and ``"effective_cn0_dbhz"``: the theoretical C/N0 with every jammer
+                       at its highest J/S (``sdr_di.sim.interference``; = cn0_dbhz without)
+``interference``       the scenario's jammers (``[[interference]]`` keys) with their spectral
+                       separation ``"kappa_per_hz"`` and ``"kappa_model"``
+``agc``                ``{"sigma_in", "gain_lsb"}`` at the start, ``"time_constant_s"``,
+                       ``"target_sigma_lsb"`` (null: Max 1960's optimum step)
 ``imu_file``, ``truth_file``, ``ephemeris_file``   companion files
 ``generator``          ``{"name": "sdr-di", "version", "synthesis_version"}``: the
                        sample-synthesis algorithm (``sdr_di.sim.ifgen.SYNTHESIS_VERSION``;

@@ -145,6 +145,11 @@ class Scenario:
     #: :func:`sdr_di.integration.assumptions.parse_assumptions`); never part of ``raw``, the
     #: hash or any generated file.
     assume: dict[str, Any] | None = dataclasses.field(default=None, compare=False)
+    #: Jammers (``[[interference]]``), multipath replicas (``[[multipath]]``) and the
+    #: front-end AGC (``[agc]``; None: its defaults): :mod:`sdr_di.scenario.impairments`.
+    interference: tuple = ()
+    multipath: tuple = ()
+    agc: Any = None
 
     @property
     def hash(self) -> str:
@@ -338,7 +343,7 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     if not isinstance(raw, dict):
         raise ScenarioError(f"{where}: expected TOML tables at the top level")
     known = {"scenario", "time", "start", "motion", "imu", "satellites", "signal", "outage",
-             "receiver_clock", "oscillator", "assume"}
+             "receiver_clock", "oscillator", "assume", "interference", "multipath", "agc"}
     extra = sorted(set(raw) - known)
     if extra:
         raise ScenarioError(f"{where}: unknown table(s) {', '.join(map(repr, extra))}")
@@ -478,6 +483,12 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     if "oscillator" in raw:
         oscillator = oscillator_from_table(raw["oscillator"], f"{where}: [oscillator]",
                                            ScenarioError)
+    from .impairments import check_bands, parse_agc, parse_interference, parse_multipath
+
+    jammers = parse_interference(raw.get("interference", []), where)
+    check_bands(jammers, fs, f_if, is_complex, where)
+    multipath = parse_multipath(raw.get("multipath", []), where)
+    agc = parse_agc(raw.get("agc", {}), where)
     assume = raw.get("assume")
     if assume is not None and not isinstance(assume, dict):
         raise ScenarioError(f"{where}: [assume] must be a table")
@@ -491,5 +502,5 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
         att=tuple(math.radians(a) for a in att_deg),  # type: ignore[arg-type]
         motion=motion, imu=imu, satellites=satellites, signal=signal,
         outages=tuple(outages), clock=clock, raw=raw_canon, oscillator=oscillator,
-        assume=assume,
+        assume=assume, interference=jammers, multipath=multipath, agc=agc,
     )

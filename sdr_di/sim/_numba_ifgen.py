@@ -30,7 +30,10 @@ Noise (:func:`noise_quantize`)
     -0.001, P(|z| > 1, 2, 3, 4) = 0.3179, 0.0454, 0.00275, 4.9e-5 (Gaussian: 0.3173, 0.0455,
     0.00270, 6.3e-5), largest value 4.88. All arithmetic, no table: vectorized as well.
 
-Quantization: ``q = clip(floor(g x + 1/2), -L, L)`` (1 bit: the sign), fused with the noise.
+Jammers (:func:`add_cw`, :func:`add_noise_jammer`; models in :mod:`sdr_di.sim.interference`)
+are added to the satellites' sum before the noise and the quantizer, whose gain ``g`` is given
+per interval (the AGC). Quantization: ``q = clip(floor(g x + 1/2), -L, L)`` (1 bit: the
+sign), fused with the noise.
 """
 
 from __future__ import annotations
@@ -235,6 +238,74 @@ def noise_quantize(out, sig, key, ctr0, gain, level):
             out[k] = min(max(np.floor(x + np.float32(0.5)), -lv), lv)
 
 
+@njit(cache=True)
+def add_cw(sig, ncomp, a, f, ph, m0):
+    """Add ``a exp(j 2 pi (ph + f m))`` for file samples ``m = m0 ..`` (``f`` cycles per
+    sample, ``ph`` cycles at sample 0); real output: the real part."""
+    n = sig.shape[0] // ncomp
+    b = ph + f * m0
+    b -= np.floor(b)
+    af = np.float32(a)
+    if ncomp == 2:
+        for i in range(n):
+            p = b + i * f
+            co, si = _carrier(np.float32(p - np.floor(p + 0.5)))
+            sig[2 * i] += af * co
+            sig[2 * i + 1] += af * si
+    else:
+        for i in range(n):
+            p = b + i * f
+            co, _ = _carrier(np.float32(p - np.floor(p + 0.5)))
+            sig[i] += af * co
+
+
+@njit(cache=True)
+def add_noise_jammer(sig, ncomp, a, f, ph, key, r, taps, m0):
+    """Add ``a`` times band-limited unit-power complex Gaussian noise, mixed to ``f``.
+
+    Low-rate white samples ``w[k]`` (rate ``r`` per output sample; counter ``key``,
+    ``2 (k + taps)`` and ``+1``, each component of variance 1/2) are interpolated by the
+    polyphase table ``taps`` (phases, n_taps; nearest phase) at ``u = m r`` for file samples
+    ``m = m0 ..``, then multiplied by ``exp(j 2 pi (ph + f m))``."""
+    n = sig.shape[0] // ncomp
+    n_ph, n_t = taps.shape
+    half = n_t // 2
+    k_first = np.int64(np.floor(m0 * r)) - half + 1
+    k_last = np.int64(np.floor((m0 + n - 1) * r)) + half + 1
+    nw = k_last - k_first + 1
+    wr = np.empty(nw, np.float32)
+    wi = np.empty(nw, np.float32)
+    s = np.float32(math.sqrt(0.5))
+    for k in range(nw):
+        ctr = np.uint64(2 * (k + k_first + n_t))
+        wr[k] = normal_from_counter(key, ctr) * s
+        wi[k] = normal_from_counter(key, ctr + np.uint64(1)) * s
+    b = ph + f * m0
+    b -= np.floor(b)
+    af = np.float32(a)
+    for i in range(n):
+        u = (m0 + i) * r
+        k0 = np.int64(np.floor(u))
+        p = np.int64((u - k0) * n_ph + 0.5)
+        if p == n_ph:
+            p = 0
+            k0 += 1
+        base = k0 - half + 1 - k_first
+        xr = np.float32(0.0)
+        xi = np.float32(0.0)
+        for t in range(n_t):
+            h = taps[p, t]
+            xr += wr[base + t] * h
+            xi += wi[base + t] * h
+        q = b + i * f
+        co, si = _carrier(np.float32(q - np.floor(q + 0.5)))
+        if ncomp == 2:
+            sig[2 * i] += af * (xr * co - xi * si)
+            sig[2 * i + 1] += af * (xr * si + xi * co)
+        else:
+            sig[i] += af * (xr * co - xi * si)
+
+
 @njit(cache=True, parallel=True, nogil=True)
 def synthesize_chunk(
     out,  # int8/int16 (n, 2) complex or (n, 1) real: quantized samples (written)
@@ -250,12 +321,20 @@ def synthesize_chunk(
     amp,  # float32 (n_sat, n_nodes): amplitude over the interval (noise sigma = 1)
     sym,  # float32 (n_sat, n_sym): data x NH symbol (+/-1) of each code epoch
     sym_base,  # int64 (n_sat,): code-epoch index of sym[:, 0]
-    gain,  # float32: quantizer input scale (LSB per unit noise sigma)
+    gains,  # float32 (n_nodes,): quantizer input scale (LSB per unit) of each interval (AGC)
     level,  # int: largest quantizer magnitude L (1: sign only)
+    jam_kind,  # int64 (n_jam,): 0 CW, 1 band-limited noise
+    jam_amp,  # float32 (n_jam, n_nodes): jammer amplitude over the interval (0: off)
+    jam_freq,  # float64 (n_jam,): jammer centre [cycles per sample]
+    jam_phase,  # float64 (n_jam,): CW phase at sample 0 [cycles]
+    jam_key,  # uint64 (n_jam,): noise jammer keys
+    jam_rate,  # float64 (n_jam,): noise jammer low-rate samples per sample (its bandwidth)
+    taps,  # float32 (phases, n_taps): the noise jammer's interpolator
 ):
-    """Fill ``out`` with quantized signal + unit-variance noise for ``n_nodes`` intervals.
+    """Fill ``out`` with quantized signal + jammers + unit-variance noise for ``n_nodes``
+    intervals.
 
-    Complex output (``out.shape[1] == 2``) is ``sum a d c exp(+j 2 pi phi) + n``; real
+    Complex output (``out.shape[1] == 2``) is ``sum a d c exp(+j 2 pi phi) + J + n``; real
     output is its real part plus real noise. The intervals are independent (one ``prange``
     iteration each: run it under ``numba.parallel_chunksize`` for load balancing); the
     result does not depend on the thread count or the schedule.
@@ -272,8 +351,17 @@ def synthesize_chunk(
             if a != 0.0:
                 add_satellite(sig, ncomp, words[s], chip0[s, j], ms0[s, j], dchip[s, j],
                               ph0[s, j], dph[s, j], a, sym[s], sym_base[s])
+        first = sample0 + j * n_per_node
+        for q in range(jam_kind.shape[0]):
+            if jam_amp[q, j] != 0.0:
+                if jam_kind[q] == 0:
+                    add_cw(sig, ncomp, jam_amp[q, j], jam_freq[q], jam_phase[q], first)
+                else:
+                    add_noise_jammer(sig, ncomp, jam_amp[q, j], jam_freq[q], 0.0, jam_key[q],
+                                     jam_rate[q], taps, first)
         k0 = j * m
-        noise_quantize(flat[k0:k0 + m], sig, key, np.uint64(ncomp * sample0 + k0), gain, level)
+        noise_quantize(flat[k0:k0 + m], sig, key, np.uint64(ncomp * sample0 + k0), gains[j],
+                       level)
 
 
 @njit(cache=True, parallel=True, nogil=True)

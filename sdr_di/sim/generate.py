@@ -146,6 +146,11 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             truth, clock_bias_s=clock.bias_s, clock_drift_s_s=clock.drift_s_s),
             week=week, sow=sow, output_set=files)
         utc = bdt - _dt.timedelta(seconds=bdt_minus_utc(bdt))
+        jams, cn0_eff = gen.jammers.records({s.prn: s.cn0_dbhz for s in gen.sats},
+                                            sc.satellites.cn0_dbhz)
+        sats = gen.start_summary()
+        for row in sats:
+            row["effective_cn0_dbhz"] = cn0_eff[row["prn"]]
         meta = {
             "if_file": paths["if"].name,
             "sampling_rate_hz": gen.fs,
@@ -160,7 +165,9 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "receiver_clock": {"bias_s": sc.clock.bias_s, "drift_s_s": sc.clock.drift_s_s},
             "oscillator": None if sc.oscillator is None else sc.oscillator.as_dict(),
             "imu": dataclasses.asdict(sc.imu),
-            "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain},
+            "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain,
+                    **gen.jammers.agc.as_dict()},
+            "interference": jams,
             "ionosphere": "klobuchar" if gen.iono is not None else "none",
             "klobuchar_source": gen.iono_source,
             "klobuchar": None if gen.iono is None else {"alpha": list(gen.iono.alpha),
@@ -168,7 +175,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "troposphere": sc.signal.troposphere,
             "scenario": {"name": sc.name, "hash": sc.hash, "seed": sc.seed,
                          "file": str(sc.source) if sc.source else None},
-            "satellites": gen.start_summary(),
+            "satellites": sats,
             "outages": [{"prn": o.prn, "start_s": o.start_s, "end_s": o.end_s,
                          "attenuation_db": None if math.isinf(o.attenuation_db)
                          else o.attenuation_db} for o in sc.outages],

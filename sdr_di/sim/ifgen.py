@@ -47,6 +47,7 @@ from ..signal.codes import NH20_BITS, b3i_code
 from ..signal.navmsg import NavBits, nav_bits
 from ._numba_ifgen import code_words, pack_iq_int4_kernel, synthesize_chunk
 from .geometry import ReceiverPath, satellite_delays
+from .interference import JammerPlan
 
 #: Version of the sample-synthesis algorithm (recorded in the sidecar's ``generator``): files
 #: of one scenario and seed are byte-identical within a version. 2: counter-based
@@ -181,6 +182,10 @@ class IfGenerator:
         self.n_samples = self.n_nodes_total * self.n_per_node
         self.codes = np.stack([b3i_code(s.prn) for s in sats]).astype(np.float32)
         self.code_words = code_words(self.codes)
+        self.jammers = JammerPlan(
+            sc.interference, sc.agc, self.fs, sig.if_hz, sig.complex_baseband,
+            sc.satellites.cn0_dbhz, self.sigma_in,
+            lambda sigma: quantizer_gain(sig.quantization_bits, sigma), sc.seed)
         self.noise_key = np.uint64(np.random.SeedSequence([sc.seed, 0x1F5D2])
                                    .generate_state(1, np.uint64)[0])
         self.nh = 1.0 - 2.0 * NH20_BITS.astype(np.float32)
@@ -244,7 +249,7 @@ class IfGenerator:
         for k, x in enumerate(sym_lists):
             sym[k, : len(x)] = x
         return dict(chip0=chip0, ms0=ms0, dchip=dchip, ph0=ph0, dph=dph, amp=amp, sym=sym,
-                    sym_base=bases, s=s, t=t)
+                    sym_base=bases, s=s, t=t, jam_amp=self.jammers.amplitudes(t[:-1]))
 
     def outage_factor(self, prn: int, t: np.ndarray) -> np.ndarray:
         """Amplitude factor (0 = blocked) of the outage schedule at true times ``t``."""
@@ -266,12 +271,27 @@ class IfGenerator:
         if out is None or out.shape != shape or out.dtype != dtype:
             out = np.empty(shape, dtype)
         st = self.node_state(j0, n) if state is None else state
+        jp = self.jammers
         with numba.parallel_chunksize(KERNEL_CHUNK_NODES):
             synthesize_chunk(out, self.noise_key, j0 * self.n_per_node, self.n_per_node,
                              self.code_words, st["chip0"], st["ms0"], st["dchip"], st["ph0"],
                              st["dph"], st["amp"], st["sym"], st["sym_base"],
-                             np.float32(self.gain), self.level)
+                             self.agc_gains(j0, st["jam_amp"]), self.level, jp.kind,
+                             st["jam_amp"], jp.freq, jp.phase, jp.key, jp.rate, jp.taps)
         return out
+
+    def agc_gains(self, j0: int, jam_amp: np.ndarray) -> np.ndarray:
+        """Quantizer gains of nodes ``j0 ..`` (:class:`~sdr_di.sim.interference.JammerPlan`:
+        constant without jammers); nodes skipped since the last call are replayed, so the
+        gains do not depend on the order the ranges are asked in."""
+        jp = self.jammers
+        if len(jp.jammers) and j0 not in (0, jp.agc_node):
+            start = jp.agc_node if jp.agc_node < j0 else 0
+            for b0 in range(start, j0, GEOMETRY_BLOCK_NODES):
+                nb = min(GEOMETRY_BLOCK_NODES, j0 - b0)
+                t = self.node_times(np.arange(b0, b0 + nb, dtype=np.float64))[1]
+                jp.gains(b0, jp.amplitudes(t), self.node_dt)
+        return jp.gains(j0, jam_amp, self.node_dt)
 
     def chunks(self, n_nodes: int | None = None, *,
                reuse: bool = False) -> Iterator[np.ndarray]:
