@@ -182,6 +182,8 @@ class IfGenerator:
         self.n_samples = self.n_nodes_total * self.n_per_node
         self.codes = np.stack([b3i_code(s.prn) for s in sats]).astype(np.float32)
         self.code_words = code_words(self.codes)
+        if sc.multipath:  # parsed, generated from the next commit on
+            raise ScenarioError("[[multipath]]: not generated yet by this version")
         self.jammers = JammerPlan(
             sc.interference, sc.agc, self.fs, sig.if_hz, sig.complex_baseband,
             sc.satellites.cn0_dbhz, self.sigma_in,
