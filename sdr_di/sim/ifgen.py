@@ -48,6 +48,7 @@ from ..signal.navmsg import NavBits, nav_bits
 from ._numba_ifgen import code_words, pack_iq_int4_kernel, synthesize_chunk
 from .geometry import ReceiverPath, satellite_delays
 from .interference import JammerPlan
+from .multipath import SignalRow, replica_rows
 
 #: Version of the sample-synthesis algorithm (recorded in the sidecar's ``generator``): files
 #: of one scenario and seed are byte-identical within a version. 2: counter-based
@@ -181,9 +182,10 @@ class IfGenerator:
         self.n_nodes_total = int(math.ceil(sc.duration_s / self.node_dt - 1e-9))
         self.n_samples = self.n_nodes_total * self.n_per_node
         self.codes = np.stack([b3i_code(s.prn) for s in sats]).astype(np.float32)
-        self.code_words = code_words(self.codes)
-        if sc.multipath:  # parsed, generated from the next commit on
-            raise ScenarioError("[[multipath]]: not generated yet by this version")
+        #: Kernel rows: the direct signals (row k = satellite k), then the multipath replicas.
+        self.rows = [SignalRow(k) for k in range(len(sats))] + replica_rows(
+            [s.prn for s in sats], sc.multipath)
+        self.code_words = code_words(self.codes[[r.k for r in self.rows]])
         self.jammers = JammerPlan(
             sc.interference, sc.agc, self.fs, sig.if_hz, sig.complex_baseband,
             sc.satellites.cn0_dbhz, self.sigma_in,
@@ -214,30 +216,41 @@ class IfGenerator:
         j = np.arange(j0, j0 + n + 1, dtype=np.float64)
         s, t, b = self.node_times(j)
         sig = self.sc.signal
-        n_sat = len(self.sats)
-        chip0 = np.empty((n_sat, n))
-        ms0 = np.empty((n_sat, n), np.int64)
-        dchip = np.empty((n_sat, n))
-        ph0 = np.empty((n_sat, n))
-        dph = np.empty((n_sat, n))
-        amp = np.empty((n_sat, n), np.float32)
-        sym_lists, bases = [], np.empty(n_sat, np.int64)
+        n_rows = len(self.rows)
+        chip0 = np.empty((n_rows, n))
+        ms0 = np.empty((n_rows, n), np.int64)
+        dchip = np.empty((n_rows, n))
+        ph0 = np.empty((n_rows, n))
+        dph = np.empty((n_rows, n))
+        amp = np.empty((n_rows, n), np.float32)
+        sym_lists, bases = [], np.empty(n_rows, np.int64)
         r_rx = self.path(t)[0]
         rx = (r_rx, ecef_to_llh(r_rx))  # once per chunk, shared by every satellite
-        for k, sat in enumerate(self.sats):
-            d = satellite_delays(sat.eph, self.path, t, self.sc.sow, b, self.iono,
-                                 sig.troposphere == "saastamoinen", rx=rx)
+        delays = {}
+        for i, row in enumerate(self.rows):  # direct signals first, then replicas
+            sat = self.sats[row.k]
+            if row.k not in delays:
+                delays[row.k] = satellite_delays(sat.eph, self.path, t, self.sc.sow, b,
+                                                 self.iono, sig.troposphere == "saastamoinen",
+                                                 rx=rx)
+            d = delays[row.k]
             x = _week_seconds_between(self.sc.week, self.sc.sow, sat.nav.week, sat.nav.t0)
             u_ms = (x + s - d.d_code) * 1000.0  # code epochs since the first nav bit
+            if row.delay_chips:
+                u_ms = u_ms - row.delay_chips / 10230.0
             ms = np.floor(u_ms).astype(np.int64)
-            chip0[k] = ((u_ms - ms) * 10230.0)[:-1]
-            ms0[k] = ms[:-1]
+            chip0[i] = ((u_ms - ms) * 10230.0)[:-1]
+            ms0[i] = ms[:-1]
             du = np.diff(s) - np.diff(d.d_code)
-            dchip[k] = du * CHIP_RATE_B3I / self.n_per_node
+            dchip[i] = du * CHIP_RATE_B3I / self.n_per_node
             phi = sig.if_hz * s - F_B3I * d.d_carr
-            ph0[k] = np.mod(phi[:-1], 1.0)
-            dph[k] = (sig.if_hz * np.diff(s) - F_B3I * np.diff(d.d_carr)) / self.n_per_node
-            amp[k] = sat.amplitude * self.outage_factor(sat.prn, t[:-1])
+            dphi = sig.if_hz * np.diff(s) - F_B3I * np.diff(d.d_carr)
+            if row.phase_cycles or row.doppler_hz:
+                phi = phi + row.phase_cycles + row.doppler_hz * s
+                dphi = dphi + row.doppler_hz * np.diff(s)
+            ph0[i] = np.mod(phi[:-1], 1.0)
+            dph[i] = dphi / self.n_per_node
+            amp[i] = row.alpha * sat.amplitude * self.outage_factor(sat.prn, t[:-1])
             m = np.arange(ms.min(), ms.max() + 2)
             if sat.is_d1:
                 bits = sat.nav.bits[m // 20]
@@ -245,9 +258,9 @@ class IfGenerator:
             else:
                 sym = 1.0 - 2.0 * sat.nav.bits[m // 2].astype(np.float32)
             sym_lists.append(sym.astype(np.float32))
-            bases[k] = m[0]
+            bases[i] = m[0]
         width = max(len(x) for x in sym_lists)
-        sym = np.ones((n_sat, width), np.float32)
+        sym = np.ones((n_rows, width), np.float32)
         for k, x in enumerate(sym_lists):
             sym[k, : len(x)] = x
         return dict(chip0=chip0, ms0=ms0, dchip=dchip, ph0=ph0, dph=dph, amp=amp, sym=sym,
