@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -148,6 +149,10 @@ def _fake_run(params: dict, seed: int, out_dir) -> dict:
     raises on ``bad_seed``; ukf diverges on ``div_seed``."""
     if params["cell"] == "bad" and seed == params["bad_seed"]:
         raise FloatingPointError("stand-in failure")
+    if params["kill_once"] and seed == params["bad_seed"] and \
+            not Path(params["kill_once"]).exists():
+        Path(params["kill_once"]).touch()
+        os._exit(3)                     # the worker dies under this task, once
     rng = np.random.default_rng(seed)
     base = 1.0 + rng.random()
     fig = {}
@@ -165,8 +170,8 @@ def _fake_run(params: dict, seed: int, out_dir) -> dict:
 
 FAKE = register_experiment(Experiment(
     name="test-study-fake", run=_fake_run,
-    default_params={"cell": "", "bad_seed": -1, "div_seed": -1, "filters": "",
-                    "modes": "deep"}))
+    default_params={"cell": "", "bad_seed": -1, "div_seed": -1, "kill_once": "",
+                    "filters": "", "modes": "deep"}))
 
 
 def _fake_spec(runs: int, bad_seed: int = -1, div_seed: int = -1, **extra) -> dict:
@@ -228,6 +233,24 @@ def test_study_machinery_failures_resumption_and_refusal(tmp_path):
         run_study(other, out, runs=2, workers=0)
     forced = run_study(other, out, runs=2, workers=0, force=True)
     assert forced.n_run == 4 and forced.n_skipped == 0
+
+
+def test_a_killed_worker_loses_only_its_task_which_runs_again_on_resume(tmp_path):
+    from sdr_di.experiments.campaign import run_seed
+
+    seeds = [run_seed(0, i) for i in range(3)]
+    raw = _fake_spec(3, bad_seed=seeds[1])
+    raw["cells"] = [{"name": "good", "cell": "good",
+                     "kill_once": str(tmp_path / "killed")}]
+    spec = parse_study(raw)
+    out = tmp_path / "study"
+    res = run_study(spec, out, workers=2)
+    lost = [r for r in res.runs if r["status"] == "failed"]
+    assert {r["seed_index"] for r in lost} == {1} and "worker died" in lost[0]["error"]
+    assert sum(r["status"] == "ok" for r in res.runs) == 6          # seeds 0 and 2 kept
+    again = run_study(spec, out, workers=0)
+    assert again.n_run == 1 and again.n_skipped == 2
+    assert all(r["status"] == "ok" for r in again.runs)
 
 
 # ---- studies/smoke.toml end to end -----------------------------------------------------------
