@@ -179,3 +179,15 @@ def test_code_words_round_trip():
     bits = (w[:, k // 64] >> (k % 64).astype(np.uint64)) & np.uint64(1)
     assert np.array_equal(1.0 - 2.0 * bits, code)
     assert not w[:, -2:].any()
+
+
+def test_int4_packing_kernel_matches_the_format_registry():
+    from sdr_di.io.sample_formats import pack_iq_int4, unpack_iq_int4
+
+    v = np.arange(-8, 8, dtype=np.int8)
+    iq = np.stack(np.meshgrid(v, v), axis=-1).reshape(-1, 2).copy()
+    out = np.empty(iq.shape[0], np.uint8)
+    K.pack_iq_int4_kernel(out, iq)
+    assert np.array_equal(out, pack_iq_int4(iq[:, 0], iq[:, 1]))
+    i, q = unpack_iq_int4(out)
+    assert np.array_equal(i, iq[:, 0]) and np.array_equal(q, iq[:, 1])
