@@ -18,11 +18,14 @@ Amplitude from C/N0 with noise variance sigma^2 = 1 per component: complex baseb
 ``A = sqrt(2 C/N0 / fs)`` (C = A^2, N0 = 2 sigma^2 / fs); real IF ``A = sqrt(4 C/N0 / fs)``
 (C = A^2 / 2, N0 = 2 sigma^2 / fs).
 
-Automatic gain: the quantizer step is set once from the expected input power (noise plus all
-nominal signals), at the step that maximizes the SNR of a uniform quantizer for a Gaussian
-input (Max 1960: 0.9957 sigma for 4 levels, 0.5860 for 8, 0.3352 for 16, 0.1881 for 32,
-0.1041 for 64, 0.0568 for 128, 0.0308 for 256; beyond 8 bits a 4-sigma full scale). Like a
-front-end AGC with a slow loop, it does not follow the C/N0 changes of outages.
+Automatic gain: the quantizer step follows the expected input power (noise, all nominal
+signals and the jammers on; :mod:`~sdr_di.sim.interference`, ``[agc]``), at the step that
+maximizes the SNR of a uniform quantizer for a Gaussian input (Max 1960: 0.9957 sigma for 4
+levels, 0.5860 for 8, 0.3352 for 16, 0.1881 for 32, 0.1041 for 64, 0.0568 for 128, 0.0308
+for 256; beyond 8 bits a 4-sigma full scale) unless ``[agc].target_sigma_lsb`` says
+otherwise. Without jammers it is constant: it does not follow the C/N0 changes of outages
+(each satellite is 34 dB under the noise). Multipath replicas are extra rows of the kernel's
+satellite arrays (:mod:`~sdr_di.sim.multipath`).
 
 Sample 0 is at receiver-clock time ``(week, sow)`` of the scenario start.
 """
