@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+from concurrent.futures import ThreadPoolExecutor
 from typing import Iterator
 
 import numba
@@ -317,8 +318,9 @@ class IfGenerator:
 
         Each chunk is ``(n, 2)`` / ``(n, 1)`` int8 or int16, or ``(n,)`` uint8 for ``iq_int4``.
         The geometry (:meth:`node_state`) is computed for blocks of at least
-        :data:`GEOMETRY_BLOCK_NODES` intervals (its cost is mostly per call), the samples
-        ``chunk_ms`` at a time; neither changes the samples.
+        :data:`GEOMETRY_BLOCK_NODES` intervals (its cost is mostly per call), one block ahead
+        on a helper thread, the samples ``chunk_ms`` at a time; none of it changes the
+        samples.
 
         Parameters
         ----------
@@ -334,27 +336,34 @@ class IfGenerator:
         bufs: list = [None, None]
         packed: list = [None, None]
         ci = 0
-        for b0 in range(0, total, block):
-            geo = self.node_state(b0, min(block, total - b0))
-            for j0 in range(b0, min(b0 + block, total), self.chunk_nodes):
-                n = min(self.chunk_nodes, total - j0, b0 + block - j0)
-                a, b = j0 - b0, j0 - b0 + n
-                st = {k: (np.ascontiguousarray(v[:, a:b]) if v.ndim == 2 and k != "sym" else v)
-                      for k, v in geo.items()}
-                out = self.synthesize(j0, n, bufs[ci % 2], st)
-                if reuse:
-                    bufs[ci % 2] = out
-                if self.fmt.name == "iq_int4":
-                    p = packed[ci % 2]
-                    if p is None or p.shape[0] != out.shape[0]:
-                        p = np.empty(out.shape[0], np.uint8)
-                        if reuse:
-                            packed[ci % 2] = p
-                    pack_iq_int4_kernel(p, out)
-                    yield p
-                else:
-                    yield out
-                ci += 1
+        with ThreadPoolExecutor(1, thread_name_prefix="sdr-di-geometry") as pool:
+            # the next block's geometry is computed while this block's samples are made
+            # (the kernel releases the GIL)
+            ahead = pool.submit(self.node_state, 0, min(block, total))
+            for b0 in range(0, total, block):
+                b1 = min(b0 + block, total)
+                geo = ahead.result()
+                if b1 < total:
+                    ahead = pool.submit(self.node_state, b1, min(block, total - b1))
+                for j0 in range(b0, b1, self.chunk_nodes):
+                    n = min(self.chunk_nodes, b1 - j0)
+                    a, b = j0 - b0, j0 - b0 + n
+                    st = {k: (np.ascontiguousarray(v[:, a:b]) if v.ndim == 2 and k != "sym"
+                              else v) for k, v in geo.items()}
+                    out = self.synthesize(j0, n, bufs[ci % 2], st)
+                    if reuse:
+                        bufs[ci % 2] = out
+                    if self.fmt.name == "iq_int4":
+                        p = packed[ci % 2]
+                        if p is None or p.shape[0] != out.shape[0]:
+                            p = np.empty(out.shape[0], np.uint8)
+                            if reuse:
+                                packed[ci % 2] = p
+                        pack_iq_int4_kernel(p, out)
+                        yield p
+                    else:
+                        yield out
+                    ci += 1
 
     def start_summary(self) -> list[dict]:
         """Per-satellite state at sample 0 for the sidecar."""
