@@ -19,6 +19,12 @@ The sums are of different lengths where a bit is cut by the start of the loop; t
 (:func:`~sdr_di.receiver.lock.cn0_known_noise` with per-sum noise powers and lengths)
 weights them: ``a^2 = sum(|P_b|^2 - n_b N) / sum(n_b^2)``, ``C/N0 = a^2 f_s / N``. A bit that spans two integration intervals is accumulated across them: the NCO
 phase is continuous and the feedback moves its frequency by a small fraction of a hertz.
+
+``N`` is the noise power the prompts see after despreading: the vector loop passes the input
+power per sample unless the channel's noise correlator disagrees with it (an in-band jammer:
+:class:`~sdr_di.receiver.lock.PostCorrelationNoise`, whose values the loop continues from
+the scalar channel at the hand-over), so the C/N0 and the fast and loss tests follow the
+effective C/N0 under interference.
 """
 
 from __future__ import annotations
@@ -117,7 +123,8 @@ class BitPower:
         Parameters
         ----------
         noise_power : float
-            Noise power per complex sample, in the units of the prompts.
+            Noise power per complex sample after despreading, in the units of the prompts
+            (module notes).
         fs : float
             Sample rate [Hz].
         """

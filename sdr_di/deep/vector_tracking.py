@@ -16,6 +16,7 @@ thresholds, navigation data) are the notes of :mod:`sdr_di.deep.vector_loop`, ca
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
@@ -39,6 +40,7 @@ from ..receiver.correlator import (
     reduce_code_phase,
 )
 from ..receiver.ifreader import IfSource
+from ..receiver.lock import NOISE_SAMPLES, PostCorrelationNoise, noise_code_phase
 from ..receiver.navdata import NavDataInForce
 from ..receiver.observables import ReceiverTime
 from ..receiver.scalar import ScalarReceiver
@@ -79,6 +81,8 @@ class _Chan:
     rejoining: bool = False  # lost: waits for a whole window of fresh prompts
     fast_fail: int = 0       # last tests: 0 pass, 1 fast test failed, 2 loss test too
     nav: ChannelNavDecoder | None = None   # navigation message after the hand-over
+    #: noise-correlator values (receiver.lock notes), continued from the scalar channel
+    noise: PostCorrelationNoise = dataclasses.field(default_factory=PostCorrelationNoise)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -210,6 +214,7 @@ class VectorTracking:
             dtau = c.epoch * CODE_LENGTH_B3I + float(sc.theta) - chips_deep
             pre.reset(c.idx, dtau=dtau, df=0.0, sigma_tau=0.1, sigma_phi=0.3, sigma_f=3.0)
             c.f_scalar = float(sc.fd)
+            c.noise = copy.deepcopy(sc.noise)
         self.tau_prev = pred0.tau
 
     def close(self) -> None:
@@ -288,23 +293,38 @@ class VectorTracking:
     def correlate(self, rows: _EpochRows):
         """Early, prompt, late of every epoch of every channel: one call of the receiver's
         kernel on the stored samples (bit-window replicas, one rotation row per epoch), NH
-        code wiped off. Returns ``(E, P, L)`` complex (n_rows,)."""
+        code wiped off. Returns ``(E, P, L)`` complex (n_rows,). The same call runs each
+        epoch's noise correlator (its first ``NOISE_SAMPLES`` samples, far from the
+        prompt's code phase: :mod:`~sdr_di.receiver.lock` notes), whose sums go to the
+        channels' :class:`~sdr_di.receiver.lock.PostCorrelationNoise`."""
         td = time.perf_counter()
         n_rows = rows.starts.size
-        nsamp = rows.nsamp
         tab_idx = np.repeat(self.chan_idx, rows.reps)
         rot_re, rot_im = carrier_rotation(rows.dphi)
         th = reduce_code_phase(rows.theta, CODE_LENGTH_B3I)
+        n_noise = np.minimum(rows.nsamp, NOISE_SAMPLES)
+        th_noise = np.array([noise_code_phase(t, e)
+                             for t, e in zip(th.tolist(), rows.epoch.tolist())])
+        nsamp = np.concatenate((rows.nsamp, n_noise))
+        idx = np.arange(n_rows, dtype=np.int64)
         threads = self.kthreads.pick()
-        n_sub = kernel_tasks(n_rows, int(nsamp.max()), threads)
-        out = np.empty((n_rows, 3, 2))
-        correlate_epl_bits(self.x_buf, self.n_comp, self.bits, tab_idx, CODE_PAD,
-                           CODE_LENGTH_B3I, rows.starts - self.buf0, nsamp, th,
-                           np.repeat(rows.dchip, rows.reps), rows.phi, rows.dphi, rot_re,
-                           rot_im, np.arange(n_rows, dtype=np.int64), self.pre.spacing, n_sub,
-                           out)
+        n_sub = kernel_tasks(2 * n_rows, int(nsamp.max()), threads)
+        out = np.empty((2 * n_rows, 3, 2))
+        dchip = np.repeat(rows.dchip, rows.reps)
+        correlate_epl_bits(self.x_buf, self.n_comp, self.bits, np.r_[tab_idx, tab_idx],
+                           CODE_PAD, CODE_LENGTH_B3I, np.r_[rows.starts, rows.starts] - self.buf0,
+                           nsamp, np.r_[th, th_noise], np.r_[dchip, dchip],
+                           np.r_[rows.phi, rows.phi], np.r_[rows.dphi, rows.dphi], rot_re,
+                           rot_im, np.r_[idx, idx], self.pre.spacing, n_sub, out)
         self.kthreads.record(threads, (time.perf_counter() - td) / float(nsamp.sum()))
         epl = out.view(np.complex128)[..., 0]
+        a = n_rows
+        for c, cnt in zip(self.chans, rows.reps):
+            if cnt:
+                c.noise.add(epl[a:a + cnt, 0], epl[a:a + cnt, 1], epl[a:a + cnt, 2],
+                            n_noise[a - n_rows:a - n_rows + cnt])
+            a += cnt
+        epl = epl[:n_rows]
         E = epl[:, 0] * rows.nh
         P = epl[:, 1] * rows.nh
         L = epl[:, 2] * rows.nh
@@ -354,16 +374,17 @@ class VectorTracking:
         C/N0, navigation decoding, the fast test (interval left out), the loss test (channel
         lost, its C/N0 window emptied) and the C/N0 taken up once the window allows."""
         cfg, fs = self.cfg, self.fs
+        npow = c.noise.noise_power(self.npow)
         mon = c.power
         mon.add(prompts, nsamp, epochs % c.bit_ms == 0)
         self.nav_log.demodulate(c, prompts, epochs, t_s)
         if mon.new:
             # tests on the last bit sums: _FAST_MS to leave the interval out,
             # _LOSS_MS to declare the channel lost (module notes)
-            fast = mon.cn0_dbhz(self.npow, fs, last=_FAST_MS // c.bit_ms)
+            fast = mon.cn0_dbhz(npow, fs, last=_FAST_MS // c.bit_ms)
             c.fast_fail = 0 if fast >= cfg.cn0_min_dbhz - cfg.fast_margin_db else 1
             if c.fast_fail and not mon.cn0_dbhz(
-                    self.npow, fs, last=_LOSS_MS // c.bit_ms) >= \
+                    npow, fs, last=_LOSS_MS // c.bit_ms) >= \
                     cfg.cn0_min_dbhz - cfg.loss_margin_db:
                 c.fast_fail = 2
             if c.fast_fail and c.nav is not None:
@@ -377,7 +398,7 @@ class VectorTracking:
             elif c.fast_fail == 0 and mon.count >= (
                     mon.p.size if c.rejoining else _CN0_MIN_MS // c.bit_ms):
                 c.rejoining = False
-                c.cn0_dbhz = mon.cn0_dbhz(self.npow, fs)
+                c.cn0_dbhz = mon.cn0_dbhz(npow, fs)
 
     def _usable(self, c: _Chan, n_epochs: int) -> bool:
         """Measurement-vector gate of channel ``c`` (module notes): C/N0 at least the gate

@@ -12,7 +12,9 @@ The channel then
    epochs on the NH-wiped sums of an interval aligned with the bit edges;
 3. every ``lock_eval_ms``: C/N0 of the last ``cn0_window_ms`` 1 ms prompts (signal power
    ``M2 - P_n`` with the noise power ``P_n`` measured by the receiver on the input samples,
-   :attr:`Channel.noise_power_per_sample`; M2M4 moments when that is not set), carrier-lock
+   :attr:`Channel.noise_power_per_sample`, or by the channel's noise correlator where the two
+   disagree (interference: :class:`~sdr_di.receiver.lock.PostCorrelationNoise`); M2M4
+   moments when neither is available), carrier-lock
    metric, state transitions (``PULL_IN`` -> ``TRACK``, ``TRACK`` -> ``PULL_IN`` or ``LOST``),
    FLL-assist narrowing during pull-in, NH synchronization (D1) or bit synchronization (D2);
 4. demodulates bits (D1: sign of the NH-wiped 20 ms sum of prompt I; D2: 2 ms), finds the
@@ -48,7 +50,15 @@ from ..signal.codes import NH20, nav_type
 from ..signal.navmsg import EphemerisAssembler, decode_subframe, find_preamble
 from ..signal.words import PREAMBLE, SUBFRAME_BITS
 from .correlator import check_prn
-from .lock import LockCounter, carrier_lock_metric, m2m4_powers, prompt_signal_power
+from .lock import (
+    NOISE_SAMPLES,
+    LockCounter,
+    PostCorrelationNoise,
+    carrier_lock_metric,
+    m2m4_powers,
+    noise_code_phase,
+    prompt_signal_power,
+)
 from .loops import CarrierLoop, CodeLoop, costas_atan, dll_nelp, fll_atan
 from .tracking import ChannelObservation, ChannelState, TrackingConfig, TrackingLog
 
@@ -142,10 +152,14 @@ class Channel:
         #: Input noise power per sample (mean |x|^2 of the samples); when set (the receiver
         #: measures it on every chunk) C/N0 uses it, otherwise the M2M4 moments.
         self.noise_power_per_sample: float | None = None
+        #: Noise-correlator values (:mod:`~sdr_di.receiver.lock` notes): the C/N0 takes its
+        #: noise power from them where they disagree with the input power (interference).
+        self.noise = PostCorrelationNoise()
         # NCO (valid once started)
         self.next_start = 0
         self.n_next = 0
         self.block: list[tuple] = []
+        self.n_block_epochs = 0
         self._block_ends: list[tuple] = []
         self.block_end = 0
         self.theta = 0.0
@@ -266,6 +280,9 @@ class Channel:
         (``coherent_ms`` epochs aligned with the bit edges; the first block after the sync is
         shorter). The rows of :attr:`block` are the kernel parameters of each epoch:
         ``(start, n, theta, dchip, phi, dphi)``; ``block_end`` is one past the last sample.
+        The first :attr:`n_block_epochs` rows are the epochs; one noise-correlator row per
+        epoch follows them (its first ``NOISE_SAMPLES`` samples, code phase far
+        from the prompt's: :mod:`~sdr_di.receiver.lock` notes).
         """
         m = 1
         if self._bit_off is not None and self.state == ChannelState.TRACK:
@@ -299,6 +316,9 @@ class Channel:
             start += n
             ep += 1
             ends.append((start, th, ph, dph))
+        rows += [(r[0], min(r[1], NOISE_SAMPLES), noise_code_phase(r[2], self.epoch + i),
+                  r[3], r[4], r[5]) for i, r in enumerate(rows)]
+        self.n_block_epochs = m
         self.block = rows
         self._block_ends = ends
         self.block_end = start
@@ -316,9 +336,14 @@ class Channel:
         Parameters
         ----------
         outs : sequence
-            One ``(E, P, L)`` (complex) per row of :attr:`block`.
+            One ``(E, P, L)`` (complex) per row of :attr:`block` (the noise rows' may be
+            left out).
         """
-        m = len(self.block)
+        m = self.n_block_epochs
+        if len(outs) > m:
+            nz = outs[m:]
+            self.noise.add([o[0] for o in nz], [o[1] for o in nz], [o[2] for o in nz],
+                           [r[1] for r in self.block[m:m + len(nz)]])
         self._frozen = False
         for i in range(m):
             e, p, l = outs[i]
@@ -338,8 +363,9 @@ class Channel:
         self._plan()
 
     def process_epoch(self, e: complex, p: complex, l: complex) -> None:
-        """Single-epoch form of :meth:`process_block` (the block must be one epoch long)."""
-        if len(self.block) != 1:
+        """Single-epoch form of :meth:`process_block` (the block must be one epoch long; no
+        noise-correlator values)."""
+        if self.n_block_epochs != 1:
             raise ValueError("process_epoch needs a one-epoch block; use process_block")
         self.process_block(((e, p, l),))
 
@@ -420,8 +446,9 @@ class Channel:
         if n < 10:
             return
         pr = self._recent(n)
-        if self.noise_power_per_sample is not None and self.noise_power_per_sample > 0.0:
-            pn = self.noise_power_per_sample * self.fs * _T_EPOCH
+        npow = self.noise.noise_power(self.noise_power_per_sample)
+        if npow is not None and npow > 0.0:
+            pn = npow * self.fs * _T_EPOCH
             pd = prompt_signal_power(pr, pn)
         else:
             pd, pn = m2m4_powers(pr)
