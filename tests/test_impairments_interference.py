@@ -199,3 +199,24 @@ def test_cli_refuses_a_bad_jammer_in_one_line_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("sdr-di: error:") and err.count("\n") == 1
     assert "bandwidth_hz" in err and not out.exists()
+
+
+def test_prompt_cn0_under_a_noise_jammer_matches_the_sidecar_theory():
+    """Correlations at the true code phase and Doppler (the generator's own acceptance
+    helper) give the effective C/N0 of the kappa formula, not the jammer-free one."""
+    from test_ifgen_signal import correlate  # the generator's C/N0 acceptance correlator
+
+    n_ms, cn0 = 500, 45.0
+    jam = {"type": "noise", "offset_hz": 0.0, "bandwidth_hz": 2e6, "js_db": 30.0}
+    sc = scenario({"interference": [jam]}, duration=(n_ms + 3) / 1000)
+    raw = json.loads(json.dumps(sc.raw))
+    raw["satellites"].update(prns=[27], cn0_dbhz=cn0)
+    sc = parse_scenario(raw, base_dir=load_scenario(DEFAULT_SCENARIO).source.parent)
+    gen = make_generator(sc)
+    x = np.concatenate(list(gen.chunks())).astype(np.float64)
+    p = correlate(gen, x[:, 0] + 1j * x[:, 1], 0, n_ms)
+    T = gen.n_per_node / gen.fs
+    est = 10 * np.log10(abs(p.mean()) ** 2 / np.mean(np.abs(p - p.mean()) ** 2) / T)
+    _, eff = gen.jammers.records({27: cn0}, cn0)
+    assert eff[27] < cn0 - 5.0  # the jammer matters: about 6 dB
+    assert est == pytest.approx(eff[27], abs=0.6), (est, eff[27])

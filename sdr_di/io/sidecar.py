@@ -24,7 +24,8 @@ The sidecar of ``run.bin`` is ``run.json``. Keys (schema ``sdr-di-if/1``):
                        and ``"effective_cn0_dbhz"``: the theoretical C/N0 with every jammer
                        at its highest J/S (``sdr_di.sim.interference``; = cn0_dbhz without)
 ``interference``       the scenario's jammers (``[[interference]]`` keys) with their spectral
-                       separation ``"kappa_per_hz"`` and ``"kappa_model"``
+                       separation ``"kappa_per_hz"`` (of the file as sampled, aliases of the
+                       unfiltered chips folded in) and ``"kappa_model"``
 ``agc``                ``{"sigma_in", "gain_lsb"}`` at the start, ``"time_constant_s"``,
                        ``"target_sigma_lsb"`` (null: Max 1960's optimum step)
 ``imu_file``, ``truth_file``, ``ephemeris_file``   companion files

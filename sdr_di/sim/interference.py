@@ -26,8 +26,9 @@ averages the measured power over ``tau fs`` samples (250 000 at 10 ms, 25 MHz) f
 
 Effective C/N0 (sidecar): ``1 / (C/N0)_eff = 1 / (C/N0) + sum_q (J_q / C) kappa_q`` with
 ``kappa = integral G_s(f) G_j(f) df``, both spectra of unit power, ``G_s`` the B3I BPSK
-spectrum ``Tc sinc^2(f Tc)`` (Betz, *Engineering Satellite-Based Navigation and Timing*,
-2016, ch. 9: spectral separation coefficient). For a CW jammer ``kappa = G_s(offset)``
+spectrum ``Tc sinc^2(f Tc)`` as sampled (the generator's chips are unfiltered, so every
+alias folds into the sampled band: :func:`b3i_psd` with ``fs``) (Betz, *Engineering
+Satellite-Based Navigation and Timing*, 2016, ch. 9: spectral separation coefficient). For a CW jammer ``kappa = G_s(offset)``
 is the continuous-spectrum approximation only: the code's spectrum is a line spectrum
 (1 kHz spacing), so a CW line between two code lines barely hurts and one on a line hurts
 far more; the sidecar marks it ``"kappa_model": "continuous approximation"``.
@@ -83,22 +84,44 @@ def noise_jammer_psd(f_hz: np.ndarray, bandwidth_hz: float) -> np.ndarray:
     return np.interp(np.asarray(f_hz) / bandwidth_hz, nu, spec, left=0.0, right=0.0) / bandwidth_hz
 
 
-def b3i_psd(f_hz: np.ndarray) -> np.ndarray:
-    """Unit-power PSD [1/Hz] of the B3I BPSK(10) signal: ``Tc sinc^2(f Tc)``."""
+def b3i_psd(f_hz: np.ndarray, fs: float | None = None) -> np.ndarray:
+    """Unit-power PSD [1/Hz] of the B3I BPSK(10) signal, ``Tc sinc^2(f Tc)``; with ``fs``,
+    as sampled at ``fs`` without a filter (the generator's chips are ideal):
+    ``sum_n Tc sinc^2((f - n fs) Tc)``, every alias folded in."""
     tc = 1.0 / CHIP_RATE_B3I
-    return tc * np.sinc(np.asarray(f_hz) * tc) ** 2
+    f = np.asarray(f_hz, float)
+    if fs is None:
+        return tc * np.sinc(f * tc) ** 2
+    n_alias = int(math.ceil(40.0 * CHIP_RATE_B3I / fs)) + 1
+    out = np.zeros(np.shape(f))
+    for n in range(-n_alias, n_alias + 1):
+        out += np.sinc((f - n * fs) * tc) ** 2
+    return tc * out
 
 
-def kappa_per_hz(jammer: Interference) -> tuple[float, str]:
+def kappa_per_hz(jammer: Interference, fs: float | None = None, if_hz: float = 0.0,
+                 complex_baseband: bool = True) -> tuple[float, str]:
     """Spectral separation coefficient ``kappa`` [1/Hz] of a jammer with B3I, and its model
     (``"exact"`` for the noise jammer's generated spectrum, ``"continuous approximation"``
-    for CW)."""
-    if jammer.kind == "cw":
-        return float(b3i_psd(jammer.offset_hz)), "continuous approximation"
-    b = jammer.bandwidth_hz
-    f = np.linspace(-0.75 * b, 0.75 * b, 200_001)
-    g = noise_jammer_psd(f, b) * b3i_psd(f + jammer.offset_hz)
-    return float(np.trapezoid(g, f)), "exact"
+    for CW).
+
+    Without ``fs``: the textbook coefficient with the unsampled B3I spectrum. With ``fs``:
+    with the spectrum as sampled (aliases folded in, :func:`b3i_psd`), which is what a
+    correlator sees in the generated file: below about twice the chip rate the folded
+    signal is denser in the sampled band than ``Tc sinc^2``, and an in-band jammer costs more
+    (2 MHz at the centre, 2.5 MHz complex sampling: 6 dB more than the textbook value). Real
+    samples add the jammer's image at ``-(2 f_IF + offset)``."""
+    def one(offset: float) -> float:
+        if jammer.kind == "cw":
+            return float(b3i_psd(offset, fs))
+        b = jammer.bandwidth_hz
+        f = np.linspace(-0.75 * b, 0.75 * b, 20_001)
+        return float(np.trapezoid(noise_jammer_psd(f, b) * b3i_psd(f + offset, fs), f))
+
+    k = one(jammer.offset_hz)
+    if fs is not None and not complex_baseband:
+        k += one(-(2.0 * if_hz + jammer.offset_hz))
+    return k, "continuous approximation" if jammer.kind == "cw" else "exact"
 
 
 def effective_cn0_dbhz(cn0_dbhz: float, nominal_cn0_dbhz: float,
@@ -140,6 +163,8 @@ class JammerPlan:
         self.jammers = jammers
         self.agc = agc if agc is not None else AgcSpec(0.01, None)
         self.fs = fs
+        self.if_hz = if_hz
+        self.complex_baseband = complex_baseband
         self.base_sigma = base_sigma
         self.gain_of_sigma = gain_of_sigma
         c_nominal = 10.0 ** (nominal_cn0_dbhz / 10.0) * 2.0 / fs
@@ -199,7 +224,7 @@ class JammerPlan:
         C/N0 with every jammer at its highest J/S (``{prn: dB-Hz}``)."""
         jams, worst = [], []
         for jam in self.jammers:
-            kappa, model = kappa_per_hz(jam)
+            kappa, model = kappa_per_hz(jam, self.fs, self.if_hz, self.complex_baseband)
             d = jam.as_dict()
             d.update(kappa_per_hz=kappa, kappa_model=model)
             jams.append(d)
