@@ -305,26 +305,31 @@ class VectorTracking:
         n_noise = np.minimum(rows.nsamp, NOISE_SAMPLES)
         th_noise = np.array([noise_code_phase(t, e)
                              for t, e in zip(th.tolist(), rows.epoch.tolist())])
-        nsamp = np.concatenate((rows.nsamp, n_noise))
-        idx = np.arange(n_rows, dtype=np.int64)
+
+        def pair(a, b=None):
+            # each epoch's noise row right after it: the kernel's threads take contiguous
+            # halves of the rows, which then hold equal work
+            return np.column_stack((a, a if b is None else b)).ravel()
+
+        nsamp = pair(rows.nsamp, n_noise)
         threads = self.kthreads.pick()
         n_sub = kernel_tasks(2 * n_rows, int(nsamp.max()), threads)
         out = np.empty((2 * n_rows, 3, 2))
-        dchip = np.repeat(rows.dchip, rows.reps)
-        correlate_epl_bits(self.x_buf, self.n_comp, self.bits, np.r_[tab_idx, tab_idx],
-                           CODE_PAD, CODE_LENGTH_B3I, np.r_[rows.starts, rows.starts] - self.buf0,
-                           nsamp, np.r_[th, th_noise], np.r_[dchip, dchip],
-                           np.r_[rows.phi, rows.phi], np.r_[rows.dphi, rows.dphi], rot_re,
-                           rot_im, np.r_[idx, idx], self.pre.spacing, n_sub, out)
+        correlate_epl_bits(self.x_buf, self.n_comp, self.bits, pair(tab_idx), CODE_PAD,
+                           CODE_LENGTH_B3I, pair(rows.starts - self.buf0), nsamp,
+                           pair(th, th_noise), pair(np.repeat(rows.dchip, rows.reps)),
+                           pair(rows.phi), pair(rows.dphi), rot_re, rot_im,
+                           pair(np.arange(n_rows, dtype=np.int64)), self.pre.spacing, n_sub, out)
         self.kthreads.record(threads, (time.perf_counter() - td) / float(nsamp.sum()))
         epl = out.view(np.complex128)[..., 0]
-        a = n_rows
+        nz = epl[1::2]
+        a = 0
         for c, cnt in zip(self.chans, rows.reps):
             if cnt:
-                c.noise.add(epl[a:a + cnt, 0], epl[a:a + cnt, 1], epl[a:a + cnt, 2],
-                            n_noise[a - n_rows:a - n_rows + cnt])
+                c.noise.add(nz[a:a + cnt, 0], nz[a:a + cnt, 1], nz[a:a + cnt, 2],
+                            n_noise[a:a + cnt])
             a += cnt
-        epl = epl[:n_rows]
+        epl = epl[0::2]
         E = epl[:, 0] * rows.nh
         P = epl[:, 1] * rows.nh
         L = epl[:, 2] * rows.nh

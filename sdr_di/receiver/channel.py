@@ -159,6 +159,7 @@ class Channel:
         self.next_start = 0
         self.n_next = 0
         self.block: list[tuple] = []
+        self._epoch_rows: list[tuple] = []
         self.n_block_epochs = 0
         self._block_ends: list[tuple] = []
         self.block_end = 0
@@ -280,9 +281,9 @@ class Channel:
         (``coherent_ms`` epochs aligned with the bit edges; the first block after the sync is
         shorter). The rows of :attr:`block` are the kernel parameters of each epoch:
         ``(start, n, theta, dchip, phi, dphi)``; ``block_end`` is one past the last sample.
-        The first :attr:`n_block_epochs` rows are the epochs; one noise-correlator row per
-        epoch follows them (its first ``NOISE_SAMPLES`` samples, code phase far
-        from the prompt's: :mod:`~sdr_di.receiver.lock` notes).
+        Each of the :attr:`n_block_epochs` epoch rows is followed by its noise-correlator row
+        (its first ``NOISE_SAMPLES`` samples, code phase far from the prompt's:
+        :mod:`~sdr_di.receiver.lock` notes).
         """
         m = 1
         if self._bit_off is not None and self.state == ChannelState.TRACK:
@@ -316,10 +317,13 @@ class Channel:
             start += n
             ep += 1
             ends.append((start, th, ph, dph))
-        rows += [(r[0], min(r[1], NOISE_SAMPLES), noise_code_phase(r[2], self.epoch + i),
-                  r[3], r[4], r[5]) for i, r in enumerate(rows)]
+        # each epoch's noise row right after it: the kernel's threads take contiguous halves
+        # of the rows, which then hold equal work
+        self.block = [x for i, r in enumerate(rows) for x in (
+            r, (r[0], min(r[1], NOISE_SAMPLES), noise_code_phase(r[2], self.epoch + i),
+                r[3], r[4], r[5]))]
+        self._epoch_rows = rows
         self.n_block_epochs = m
-        self.block = rows
         self._block_ends = ends
         self.block_end = start
         self.n_next = rows[0][1]
@@ -336,14 +340,15 @@ class Channel:
         Parameters
         ----------
         outs : sequence
-            One ``(E, P, L)`` (complex) per row of :attr:`block` (the noise rows' may be
-            left out).
+            One ``(E, P, L)`` (complex) per row of :attr:`block`, or one per epoch (no
+            noise-correlator values).
         """
         m = self.n_block_epochs
-        if len(outs) > m:
-            nz = outs[m:]
+        if len(outs) == 2 * m:
+            nz = outs[1::2]
             self.noise.add([o[0] for o in nz], [o[1] for o in nz], [o[2] for o in nz],
-                           [r[1] for r in self.block[m:m + len(nz)]])
+                           [r[1] for r in self.block[1::2]])
+            outs = outs[0::2]
         self._frozen = False
         for i in range(m):
             e, p, l = outs[i]
@@ -375,7 +380,7 @@ class Channel:
         ep = self.epoch
         self._ring[ep % _RING] = p
         self._n_tracked += 1
-        dt1 = self.block[i][1] / self.fs
+        dt1 = self._epoch_rows[i][1] / self.fs
         frozen = self._frozen
         if self._bit_off is None:
             # 1 ms loops (pull-in, or tracking before bit sync)
