@@ -204,7 +204,9 @@ def test_cli_refuses_a_bad_jammer_in_one_line_before_any_work(tmp_path, capsys):
 def test_prompt_cn0_under_a_noise_jammer_matches_the_sidecar_theory():
     """Correlations at the true code phase and Doppler (the generator's own acceptance
     helper) give the effective C/N0 of the kappa formula, not the jammer-free one."""
-    from test_ifgen_signal import correlate  # the generator's C/N0 acceptance correlator
+    from test_ifgen_signal import (
+        correlate,  # the generator's C/N0 acceptance correlator
+    )
 
     n_ms, cn0 = 500, 45.0
     jam = {"type": "noise", "offset_hz": 0.0, "bandwidth_hz": 2e6, "js_db": 30.0}

@@ -92,7 +92,7 @@ def b3i_psd(f_hz: np.ndarray, fs: float | None = None) -> np.ndarray:
     f = np.asarray(f_hz, float)
     if fs is None:
         return tc * np.sinc(f * tc) ** 2
-    n_alias = int(math.ceil(40.0 * CHIP_RATE_B3I / fs)) + 1
+    n_alias = math.ceil(40.0 * CHIP_RATE_B3I / fs) + 1
     out = np.zeros(np.shape(f))
     for n in range(-n_alias, n_alias + 1):
         out += np.sinc((f - n * fs) * tc) ** 2
