@@ -26,7 +26,11 @@
    and intervals; one bit-window replica row per channel, one carrier rotation table per
    channel, both named per row). Each channel then updates its loops and synchronization
    (:meth:`Channel.process_block`). The input noise power per sample (mean ``|x|^2`` of each
-   chunk) is handed to the channels for their C/N0 estimators.
+   chunk) is handed to the channels for their C/N0 estimators; each epoch row of a block is
+   followed by the channel's noise-correlator row, which they use instead where the two
+   disagree (interference: :class:`~sdr_di.receiver.lock.PostCorrelationNoise`). The reader
+   reads the next chunk in a background thread while the kernel runs
+   (:meth:`~sdr_di.receiver.ifreader.IfSource.read_stored`).
 3. **Output epochs** every ``epoch_interval_s`` (sample ``start + round(k dt fs)``, k >= 1):
    once every tracking channel has passed the epoch's sample, ``on_epoch(sample,
    observations, ephemerides)`` is called with a
