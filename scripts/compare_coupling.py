@@ -108,6 +108,7 @@ def plot(results: dict, modes, path: Path) -> None:
 
     fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
     colors = dict(zip(MODES, ("tab:red", "tab:blue", "tab:green")))
+    styles = {"tight": "--"}            # loose and tight often overlap
     for ax, (attr, label) in zip(axes, (("att_err", "attitude error [deg]"),
                                         ("vel_err", "velocity error [m/s]"),
                                         ("pos_err", "position error [m]"))):
@@ -118,7 +119,8 @@ def plot(results: dict, modes, path: Path) -> None:
                 ax.plot(t, e, color=colors[mode], lw=0.5, alpha=0.4)
             n = min(len(t) for t, _ in series)
             mean = np.mean([e[:n] for _, e in series], axis=0)
-            ax.plot(series[0][0][:n], mean, color=colors[mode], lw=2.0, label=mode)
+            ax.plot(series[0][0][:n], mean, color=colors[mode], lw=2.0,
+                    ls=styles.get(mode, "-"), label=mode)
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="upper right")
