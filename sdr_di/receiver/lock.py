@@ -261,59 +261,78 @@ class PostCorrelationNoise:
         self._v = np.zeros(int(n_values))
         self._i = 0
         self.count = 0
+        self._s = self._s2 = 0.0     # sums of the values held and of their squares
         self.z = float(z)
         self.min_values = int(min_values)
 
     def add(self, early, prompt, late, n_samples) -> None:
-        """Add noise-correlator sums (complex, scalars or arrays of the same shape) of
-        ``n_samples`` samples each [stored units]."""
-        e = np.atleast_1d(np.asarray(early, np.complex128))
-        p = np.atleast_1d(np.asarray(prompt, np.complex128))
-        l = np.atleast_1d(np.asarray(late, np.complex128))
-        n = np.broadcast_to(np.asarray(n_samples, float), p.shape)
-        ok = n > 0
-        if not ok.all():
-            e, p, l, n = e[ok], p[ok], l[ok], n[ok]
-        v = (e.real ** 2 + e.imag ** 2 + p.real ** 2 + p.imag ** 2 + l.real ** 2
-             + l.imag ** 2) / (3.0 * n)
-        size = self._v.size
-        if v.size >= size:
-            self._v[:] = v[-size:]
-            self._i = 0
-            self.count = size
-            return
-        j = self._i + v.size
-        if j <= size:
-            self._v[self._i:j] = v
+        """Add noise-correlator sums (complex, scalars or sequences of the same length) of
+        ``n_samples`` samples each (a scalar or a sequence) [stored units]."""
+        if np.ndim(prompt) == 0:
+            self._put((early,), (prompt,), (late,), (n_samples,))
+        elif len(prompt) <= 32:     # a scalar channel's block: plain Python is cheaper
+            n = n_samples if np.ndim(n_samples) else [n_samples] * len(prompt)
+            self._put(early, prompt, late, n)
         else:
-            k = size - self._i
-            self._v[self._i:] = v[:k]
-            self._v[:j - size] = v[k:]
-        self._i = j % size
-        self.count = min(size, self.count + v.size)
+            e = np.asarray(early, np.complex128)
+            p = np.asarray(prompt, np.complex128)
+            l = np.asarray(late, np.complex128)
+            n = np.broadcast_to(np.asarray(n_samples, float), p.shape)
+            ok = n > 0
+            e, p, l, n = e[ok], p[ok], l[ok], n[ok]
+            v = (e.real ** 2 + e.imag ** 2 + p.real ** 2 + p.imag ** 2 + l.real ** 2
+                 + l.imag ** 2) / (3.0 * n)
+            for x in v.tolist():
+                self._push(x)
+
+    def _put(self, early, prompt, late, n_samples) -> None:
+        for e, p, l, n in zip(early, prompt, late, n_samples):
+            if n > 0:
+                self._push((e.real * e.real + e.imag * e.imag + p.real * p.real
+                            + p.imag * p.imag + l.real * l.real + l.imag * l.imag) / (3.0 * n))
+
+    def _push(self, x: float) -> None:
+        """One value into the ring, with running sums of the values and their squares
+        (summed afresh at every wrap, so that rounding does not accumulate)."""
+        v, i = self._v, self._i
+        if self.count == v.size:
+            old = float(v[i])
+            self._s -= old
+            self._s2 -= old * old
+        else:
+            self.count += 1
+        v[i] = x
+        self._s += x
+        self._s2 += x * x
+        self._i = i + 1
+        if self._i == v.size:
+            self._i = 0
+            self._s = float(np.sum(v))
+            self._s2 = float(np.dot(v, v))
 
     def clear(self) -> None:
         """Forget every value."""
         self._i = 0
         self.count = 0
+        self._s = self._s2 = 0.0
 
     def per_sample(self) -> float:
         """Mean post-correlation noise power per sample [stored units^2] (NaN when empty)."""
         if self.count == 0:
             return math.nan
-        return float(np.mean(self._v[:self.count]))
+        return self._s / self.count
 
     def noise_power(self, input_power: float | None) -> float | None:
         """Noise power per sample for the C/N0 (module notes): ``input_power`` (may be None)
         unless the post-correlation mean differs from it by more than ``z`` standard errors
         (or there is no input power and enough values), then that mean."""
-        if self.count < self.min_values:
+        k = self.count
+        if k < self.min_values:
             return input_power
-        v = self._v[:self.count]
-        m = float(np.mean(v))
+        m = self._s / k
         if not m > 0.0:
             return input_power
         if input_power is None or not input_power > 0.0:
             return m
-        se = float(np.std(v)) / math.sqrt(self.count)
+        se = math.sqrt(max(self._s2 / k - m * m, 0.0) / k)
         return m if abs(m - input_power) > self.z * se else input_power
