@@ -94,3 +94,49 @@ def test_envelope_reference_values():
     assert envelope(0.5, 1.5, 1) == 0.0 and envelope(0.5, 3.0, -1) == 0.0
     # continuous at the edge of the linear range (delta -> 1.5)
     assert envelope(0.5, 1.4999, 1) == pytest.approx(0.0, abs=1e-4)
+
+
+def test_ground_reflector_gives_the_image_antenna_delay_and_phase():
+    """reflector = "ground": the replica's code lags the direct one by 2 h sin(el) / c and
+    its carrier by that delay plus the reflection's half cycle."""
+    from sdr_di.constants import C_LIGHT, CHIP_RATE_B3I, F_B3I
+    from sdr_di.sim.generate import make_generator
+
+    h = 12.0
+    sc0 = load_scenario(DEFAULT_SCENARIO)
+    raw = json.loads(json.dumps(sc0.raw))
+    raw["scenario"]["duration_s"] = 0.05
+    raw["satellites"].update(prns=[PRN])
+    raw["multipath"] = [{"prn": PRN, "alpha": 0.3, "reflector": "ground",
+                         "antenna_height_m": h}]
+    gen = make_generator(parse_scenario(raw, base_dir=sc0.source.parent))
+    st = gen.node_state(0, 3)
+    el = np.radians(gen.sats[0].elevation_deg)
+    tau = 2 * h * np.sin(el) / C_LIGHT
+    lag = (st["chip0"][0, 0] - st["chip0"][1, 0]) % 10230.0
+    assert lag == pytest.approx(tau * CHIP_RATE_B3I, abs=1e-4)
+    assert 0.3 < lag < 0.9  # 24 m sin(el): a fraction of a chip
+    dphase = (st["ph0"][1, 0] - st["ph0"][0, 0] - (0.5 - F_B3I * tau)) % 1.0
+    assert min(dphase, 1 - dphase) < 2e-3
+    assert st["amp"][1, 0] == pytest.approx(0.3 * st["amp"][0, 0])
+
+
+@pytest.mark.parametrize("table,pattern", [
+    ({"reflector": "ground"}, r"antenna_height_m"),
+    ({"reflector": "ground", "antenna_height_m": 5.0, "delay_chips": 0.1},
+     r"\.delay_chips: not with reflector"),
+    ({"reflector": "wall", "antenna_height_m": 5.0}, r"\.reflector: 'wall' is not one of"),
+    ({"reflector": "ground", "antenna_height_m": -1.0}, r"antenna_height_m: must be > 0"),
+])
+def test_bad_reflector_tables(table, pattern):
+    import re
+
+    from sdr_di.errors import ScenarioError
+
+    sc0 = load_scenario(DEFAULT_SCENARIO)
+    raw = json.loads(json.dumps(sc0.raw))
+    raw["multipath"] = [{"prn": PRN, "alpha": 0.3, **table}]
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario(raw, base_dir=sc0.source.parent)
+    assert re.search(r"\[\[multipath\]\]\[0\]", str(exc.value)) and re.search(pattern,
+                                                                            str(exc.value))

@@ -81,11 +81,20 @@ class Multipath:
     delay_chips: float
     phase_deg: float
     doppler_offset_hz: float
+    #: ``reflector = "ground"``: antenna height [m] over a horizontal ground plane; the delay,
+    #: its rate (Doppler) and the carrier phase then follow the satellite's elevation
+    #: (``delay_chips`` and ``doppler_offset_hz`` are not given; ``phase_deg`` adds to the
+    #: reflection's 180 deg). None: the fixed replica above.
+    antenna_height_m: float | None = None
 
     def as_dict(self) -> dict:
-        return {"prn": "all" if self.prn is None else self.prn, "alpha": self.alpha,
-                "delay_chips": self.delay_chips, "phase_deg": self.phase_deg,
-                "doppler_offset_hz": self.doppler_offset_hz}
+        d = {"prn": "all" if self.prn is None else self.prn, "alpha": self.alpha,
+             "phase_deg": self.phase_deg}
+        if self.antenna_height_m is None:
+            d.update(delay_chips=self.delay_chips, doppler_offset_hz=self.doppler_offset_hz)
+        else:
+            d.update(reflector="ground", antenna_height_m=self.antenna_height_m)
+        return d
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,8 +156,17 @@ def parse_multipath(raw: Any, where: str) -> tuple[Multipath, ...]:
         p = r._get("prn", _REQUIRED)
         prn = None if p == "all" else _parse_prn(p, f"{w}.prn")
         alpha = r.num("alpha", _REQUIRED, lo=0.0, hi=1.0)
-        delay = r.num("delay_chips", _REQUIRED, lo=0.0, hi=MAX_MULTIPATH_DELAY_CHIPS)
         phase = r.num("phase_deg", 0.0)
+        if "reflector" in table:
+            r.str_("reflector", _REQUIRED, ("ground",))
+            for key in ("delay_chips", "doppler_offset_hz"):
+                if key in table:
+                    raise ScenarioError(f"{w}.{key}: not with reflector (the geometry gives it)")
+            height = r.num("antenna_height_m", _REQUIRED, lo=0.0, lo_open=True, hi=1000.0)
+            r.check_unknown()
+            out.append(Multipath(prn, alpha, 0.0, phase, 0.0, height))
+            continue
+        delay = r.num("delay_chips", _REQUIRED, lo=0.0, hi=MAX_MULTIPATH_DELAY_CHIPS)
         dop = r.num("doppler_offset_hz", 0.0, lo=-500.0, hi=500.0)
         r.check_unknown()
         out.append(Multipath(prn, alpha, delay, phase, dop))

@@ -239,16 +239,20 @@ class IfGenerator:
                                                  rx=rx)
             d = delays[row.k]
             x = _week_seconds_between(self.sc.week, self.sc.sow, sat.nav.week, sat.nav.t0)
-            u_ms = (x + s - d.d_code) * 1000.0  # code epochs since the first nav bit
+            d_code, d_carr = d.d_code, d.d_carr
+            if row.height_m:  # ground reflection: the excess path of the image antenna
+                tau = row.ground_delay_s(d.el)
+                d_code, d_carr = d_code + tau, d_carr + tau
+            u_ms = (x + s - d_code) * 1000.0  # code epochs since the first nav bit
             if row.delay_chips:
                 u_ms = u_ms - row.delay_chips / 10230.0
             ms = np.floor(u_ms).astype(np.int64)
             chip0[i] = ((u_ms - ms) * 10230.0)[:-1]
             ms0[i] = ms[:-1]
-            du = np.diff(s) - np.diff(d.d_code)
+            du = np.diff(s) - np.diff(d_code)
             dchip[i] = du * CHIP_RATE_B3I / self.n_per_node
-            phi = sig.if_hz * s - F_B3I * d.d_carr
-            dphi = sig.if_hz * np.diff(s) - F_B3I * np.diff(d.d_carr)
+            phi = sig.if_hz * s - F_B3I * d_carr
+            dphi = sig.if_hz * np.diff(s) - F_B3I * np.diff(d_carr)
             if row.phase_cycles or row.doppler_hz:
                 phi = phi + row.phase_cycles + row.doppler_hz * s
                 dphi = dphi + row.doppler_hz * np.diff(s)
