@@ -260,8 +260,8 @@ def _add_run(sub) -> None:
     p.add_argument("--rate", type=float, default=5.0, metavar="HZ",
                    help="solution output rate [Hz] (default 5)")
     p.add_argument("--cold", action="store_true",
-                   help="cold start: ignore the sidecar's satellite list and Dopplers, search "
-                   "--prn (default all 63) over +-5 kHz")
+                   help="cold start (every mode): ignore the sidecar's satellite list and "
+                   "Dopplers, search --prn (default all 63) over +-5 kHz")
     p.add_argument("--approx-pos", type=_approx_pos, default=None, metavar="LAT,LON,H",
                    help="scalar mode, with --ephemeris and the file's start time: search the "
                    "satellites visible from this approximate position [deg, deg, m] around "
@@ -427,7 +427,8 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     try:
         res = run_deep(source, out, config=cfg, imu_path=args.imu, truth_path=args.truth,
                        nav_path=args.ephemeris, assist=not args.no_assist, prns=prns,
-                       progress=not args.no_progress, duration_s=args.duration)
+                       progress=not args.no_progress, duration_s=args.duration,
+                       search=not args.cold)
     except ValueError as exc:  # e.g. a filter rate that does not divide the IMU rate
         raise UsageError(str(exc)) from None
     r = res.result

@@ -49,6 +49,7 @@ from ..integration.assumptions import deep_beliefs, sidecar_truth
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
+from ..receiver.run_scalar import search_assistance
 from .vector_loop import DeepConfig, DeepReceiver, DeepResult, check_imu_span
 
 __all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
@@ -125,8 +126,13 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
              imu_path: str | Path | None = None, truth_path: str | Path | None = None,
              nav_path: str | Path | None = None, assist: bool = True, prns=None,
              stem: str | None = None, progress: bool = True,
-             duration_s: float | None = None) -> DeepRunSummary:
+             duration_s: float | None = None,
+             search: bool | dict[int, float | None] = True) -> DeepRunSummary:
     """Run the deep receiver over ``source`` and write the solution files (module notes).
+
+    ``search`` is the start-up's acquisition assistance, the same rule as scalar mode's
+    (:func:`~sdr_di.receiver.run_scalar.search_assistance`: True, the sidecar's list around
+    its Dopplers; False, a cold search of ``prns``, default all 63).
 
     Raises
     ------
@@ -189,7 +195,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", NavDataWarning)
             res = rx.run(source, imu, prns=prns, nav=nav, truth=truth, progress=cb,
-                         duration_s=duration_s)
+                         duration_s=duration_s,
+                         assist=search_assistance(source, prns, search))
     finally:
         if bar is not None:
             bar.close()

@@ -444,7 +444,8 @@ class DeepReceiver:
     # ------------------------------------------------------------------------------------
     def run(self, source: IfSource, imu, *, prns=None, nav=None, truth=None,
             progress: Callable[[float, int, int], None] | None = None,
-            duration_s: float | None = None) -> DeepResult:
+            duration_s: float | None = None,
+            assist: dict[int, float | None] | None = None) -> DeepResult:
         """Run the deep receiver over ``source`` with the IMU record ``imu``.
 
         Parameters
@@ -464,6 +465,11 @@ class DeepReceiver:
             ``progress(seconds_processed, n_channels, n_used)`` about once per second.
         duration_s : float, optional
             Stop after this many seconds of the file.
+        assist : dict, optional
+            ``{prn: Doppler [Hz] or None}``: the start-up's search assistance, as
+            :meth:`~sdr_di.receiver.scalar.ScalarReceiver.run` takes it (the sidecar's list
+            in ``sdr-di run``, the same search as scalar mode's); None: a cold search of
+            ``prns``.
 
         Raises
         ------
@@ -562,7 +568,7 @@ class DeepReceiver:
 
         t0 = time.perf_counter()
         rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=_EPOCH_S,
-               stop_sample=stop)
+               stop_sample=stop, assist=assist)
         t_scalar = time.perf_counter() - t0
         if "sample" not in hand:
             found = [c.prn for c in rx.channels.values() if c.n_acquisitions > 0]

@@ -116,6 +116,33 @@ def sidecar_assistance(source: IfSource) -> dict[int, float | None]:
     return out
 
 
+def search_assistance(source: IfSource, prns=None,
+                      assist: bool | dict[int, float | None] = True
+                      ) -> dict[int, float | None] | None:
+    """The acquisition assistance of a run: the rule every ``sdr-di run`` mode shares.
+
+    Parameters
+    ----------
+    source : IfSource
+        The IF samples (its sidecar list, :func:`sidecar_assistance`).
+    prns : iterable of int, optional
+        An explicit PRN list: kept, with the sidecar's Dopplers where it has them.
+    assist : bool or dict
+        True: the sidecar's list; a dict ``{prn: Doppler [Hz] or None}``: that assistance;
+        False: none.
+
+    Returns
+    -------
+    dict or None
+        ``{prn: Doppler at sample 0 [Hz] or None}``; None for a cold search of ``prns``.
+    """
+    aid = dict(assist) if isinstance(assist, dict) else \
+        sidecar_assistance(source) if assist else {}
+    if prns is not None:  # an explicit list: the sidecar's Dopplers where it has them
+        aid = {p: aid.get(p) for p in prns}
+    return aid or None
+
+
 def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: float = 5.0,
                stem: str | None = None, progress: bool = True,
                receiver: ScalarReceiver | None = None,
@@ -196,12 +223,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
                                 f"{len(ephemerides)} eph")
 
     try:
-        aid = dict(assist) if isinstance(assist, dict) else \
-            sidecar_assistance(source) if assist else {}
-        if prns is not None:  # an explicit list: the sidecar's Dopplers where it has them
-            aid = {p: aid.get(p) for p in prns}
         rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=1.0 / rate_hz,
-               assist=aid or None)
+               assist=search_assistance(source, prns, assist))
         if not any(r.detected for r in rx.acquisition_results) and not any(
                 c.tracking for c in rx.channels.values()):
             raise NoSatelliteError(f"{source.path}: no satellite found by acquisition "
