@@ -106,6 +106,7 @@ def test_variant_rows_one_row_per_label_with_spread_over_runs():
     assert set(nan_figures("ekf@loose")) == {f"ekf@loose.{q}_{s}" for q in
                                              ("att_deg", "vel_mps", "pos_m")
                                              for s in ("rmse", "max")}
+    assert "ekf.win_pos_m_max" in nan_figures("ekf", "win_")
 
 
 def test_errors_csv_columns(tmp_path):

@@ -4,8 +4,9 @@ One code path for both kinds of cluster: without a scheduler address a
 :class:`distributed.LocalCluster` of worker *processes* (one thread each) is started on the
 local cores for the campaign and closed after it; with ``scheduler="tcp://host:port"`` the
 campaign connects a :class:`distributed.Client` to that scheduler. Either way runs are
-submitted as tasks of :func:`~.execute.execute_run` and collected with
-:func:`distributed.as_completed`.
+submitted as tasks of :func:`~.execute.execute_run` through :func:`~.tasks.run_tasks`, the
+task engine a study uses too (a campaign is a study's one-cell case, without pairing:
+``docs/studies.md``).
 
 Decisions
 ---------

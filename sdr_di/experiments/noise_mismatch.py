@@ -130,7 +130,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
         except SdrDiError as exc:
             fig.update(nan_figures(name))
             if spans:
-                fig.update(nan_figures(f"{name}.win_"))
+                fig.update(nan_figures(name, "win_"))
             fig[f"{name}.error"] = f"{type(exc).__name__}: {exc}"
             continue
         m = res.metrics()

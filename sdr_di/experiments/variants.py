@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -144,10 +144,9 @@ def loop_config(params: dict, **fixed: Any) -> dict:
     return cfg
 
 
-def nan_figures(label: str, suffixes: Iterable[str] = ("",)) -> dict:
-    """``{label}.{q}_{s}{suffix}`` = NaN for every quantity and statistic (a failed run)."""
-    return {f"{label}.{q}_{s}{x}": math.nan for q, _ in QUANTITIES for s in STATS
-            for x in suffixes}
+def nan_figures(label: str, infix: str = "") -> dict:
+    """``{label}.{infix}{q}_{s}`` = NaN for every quantity and statistic (a failed run)."""
+    return {f"{label}.{infix}{q}_{s}": math.nan for q, _ in QUANTITIES for s in STATS}
 
 
 def write_errors_csv(path: Path, res: Any, extra: dict[str, np.ndarray] | None = None) -> Path:
