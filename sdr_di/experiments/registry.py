@@ -53,6 +53,7 @@ BUILTIN: dict[str, str] = {
     "outage": "sdr_di.experiments.outage",
     "weak-signal": "sdr_di.experiments.weak_signal",
     "compare": "sdr_di.experiments.compare",
+    "jamming": "sdr_di.experiments.jamming",
 }
 
 _REGISTERED: dict[str, Experiment] = {}
