@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextvars
 import dataclasses
+import fcntl
 import hashlib
 import json
 import math
@@ -233,8 +234,8 @@ def file_keys(sc: Scenario) -> tuple[str, str]:
 
 def _cached_files(sc: Scenario, cache: Path) -> dict:
     """The files of ``sc`` from ``cache``, generating what is missing (module notes of
-    :data:`FILE_CACHE`); concurrent workers each generate into a folder of their own and
-    the first rename wins."""
+    :data:`FILE_CACHE`). Workers on one host take turns on an IF file (a lock file); each
+    generates into a folder of its own, renamed into place when complete."""
     import shutil
     import uuid
 
@@ -246,16 +247,21 @@ def _cached_files(sc: Scenario, cache: Path) -> dict:
     k_if, k_imu = file_keys(sc)
     if_dir = cache / f"s{sc.seed}-if-{k_if}"
     imu_path = cache / f"s{sc.seed}-imu-{k_imu}.csv"
-    if not (if_dir / "files.json").is_file():
-        tmp = cache / f"tmp-{uuid.uuid4().hex}"
-        paths = generate_files(sc, tmp, name="run", progress=False)
-        if not imu_path.exists():
-            os.replace(paths["imu"], imu_path)
-        (tmp / "files.json").write_text(json.dumps({k: Path(v).name for k, v in paths.items()}))
-        try:
-            os.rename(tmp, if_dir)
-        except OSError:             # another worker's rename came first: same content
-            shutil.rmtree(tmp, ignore_errors=True)
+    # one generator per file: a worker that finds another generating the same IF file
+    # waits for it (an advisory lock beside the file) instead of generating it twice
+    with open(cache / f"s{sc.seed}-if-{k_if}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (if_dir / "files.json").is_file():
+            tmp = cache / f"tmp-{uuid.uuid4().hex}"
+            paths = generate_files(sc, tmp, name="run", progress=False)
+            if not imu_path.exists():
+                os.replace(paths["imu"], imu_path)
+            (tmp / "files.json").write_text(json.dumps({k: Path(v).name
+                                                        for k, v in paths.items()}))
+            try:
+                os.rename(tmp, if_dir)
+            except OSError:         # a worker without the lock (other host) came first
+                shutil.rmtree(tmp, ignore_errors=True)
     names = json.loads((if_dir / "files.json").read_text())
     paths = {k: if_dir / v for k, v in names.items()}
     if not imu_path.exists():
