@@ -224,6 +224,15 @@ CASES: list[tuple[str, list[str]]] = [
     ("generate-assume", [*GD, "--assume", "{d}/assume_osc.toml", "--out", "{d}/o"]),
     ("generate-oscillator-preset", [*GD, "--scenario", "{d}/osc_preset.toml", "--out",
                                    "{d}/o"]),
+    # -- interference and the jamming experiment (issue 15) ----------------------------------
+    ("generate-jammer-unknown-type", [*GD, "--scenario", "{d}/jam_type.toml", "--out", "{d}/o"]),
+    ("generate-jammer-negative-bandwidth", [*GD, "--scenario", "{d}/jam_bw.toml", "--out",
+                                           "{d}/o"]),
+    ("generate-jammer-js-out-of-range", [*GD, "--scenario", "{d}/jam_js.toml", "--out",
+                                        "{d}/o"]),
+    ("generate-jammer-band-outside", [*GD, "--scenario", "{d}/jam_band.toml", "--out", "{d}/o"]),
+    ("campaign-jamming-bits", ["campaign", "jamming", "--runs", "2", "--param", "bits=5",
+                               "--out", "{d}/c"]),
     ("lc-out-under-file", [*LC, "--out", "{d}/afile/sub"]),
     ("lc-scenario-missing", [*LC, "--scenario", "{d}/nope.toml"]),
     ("lc-scenario-not-toml", [*LC, "--scenario", "{d}/bad.toml"]),
@@ -348,6 +357,14 @@ def make_workdir(d: Path, generated: Path) -> None:
         DEFAULT_SCENARIO.read_text().replace(
             '"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/')
         + '\n[oscillator]\npreset = "rubidium"\n')
+    for name, table in (("jam_type", 'type = "pulse"\njs_db = 30.0\n'),
+                        ("jam_bw", 'type = "noise"\njs_db = 30.0\nbandwidth_hz = -1.0e6\n'),
+                        ("jam_js", 'type = "cw"\njs_db = 120.0\n'),
+                        ("jam_band", ('type = "noise"\njs_db = 30.0\nbandwidth_hz = 2.0e6\n'
+                                      'offset_hz = 1.2e6\n'))):
+        (d / f"{name}.toml").write_text(DEFAULT_SCENARIO.read_text().replace(
+            '"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/')
+            + "\n[[interference]]\n" + table)
     for folder, name, text in (("camp_corrupt", "campaign.json", '{"experiment": "x", '),
                                ("camp_list", "campaign.json", "[1, 2]"),
                                ("res_corrupt", "result.json", "\x00\x01"),
