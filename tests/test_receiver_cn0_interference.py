@@ -1,18 +1,11 @@
 """Post-correlation noise estimation (issue 15 item 2): the scalar receiver's C/N0 follows the
 effective C/N0 under a band-limited noise jammer, centred or near the code spectrum's nulls.
 
-With the generator's ``[[interference]]``: a centred noise jammer in a 10 MHz 16-bit file,
-the receiver's C/N0 against the sidecar's ``effective_cn0_dbhz`` (continuous B3I spectrum;
-at 10 MHz the sampled replica's spectrum matches it near the centre: its aliases fall on the
-nulls at multiples of 10.23 MHz). Near the band edges of a low-rate file the aliases make
-the receiver see more of a jammer than the continuous theory, so the null case below uses a
-25 MHz file and the sampled code's own spectrum.
-
-The jammer is added in numpy to a generated 16-bit file (no quantization loss of its own);
-the theory is ``1 / (C/N0)_eff = 1 / (C/N0) + (J/C) kappa`` with ``kappa`` the overlap of the
-jammer's spectrum and the sampled replica code's (both normalized to unit power), i.e. a drop
-of ``10 log10(1 + (J / P_n) f_s kappa)`` dB from the clean file's C/N0 (``P_n`` the noise power
-per sample). ``PostCorrelationNoise`` itself is checked on synthetic noise-correlator sums.
+With the generator's ``[[interference]]``: a centred noise jammer in a 5 MHz 16-bit file, the
+receiver's C/N0 against the sidecar's ``effective_cn0_dbhz`` (whose kappa is the one of the
+file as sampled, aliases included). The null case below needs a band that holds the first
+null (+-10.23 MHz): a 25 MHz file, with the jammer added in numpy and the sampled code's own
+spectrum as theory.
 """
 
 import json
@@ -147,19 +140,19 @@ def test_cn0_follows_the_effective_cn0_under_a_noise_jammer(clean_file, offset_h
 
 
 def test_cn0_within_1p5_db_of_the_sidecar_effective_cn0(tmp_path):
-    """Generator's noise jammer (J/S 32 dB, 2 MHz, centred; theory about 7.6 dB below the
-    nominal 45 dB-Hz) on 16-bit output at 10 MHz, 1 s, one satellite."""
+    """Generator's noise jammer (J/S 29 dB, 1 MHz, centred; theory about 7 dB below the
+    nominal 45 dB-Hz) on 16-bit output at 5 MHz, 1 s, one satellite."""
     sc0 = load_scenario(DEFAULT_SCENARIO)
     raw = json.loads(json.dumps(sc0.raw, default=str))
     raw["scenario"]["duration_s"] = 1.0
-    raw["signal"].update(sampling_rate_hz=10e6, sample_format="iq_int16",
+    raw["signal"].update(sampling_rate_hz=5e6, sample_format="iq_int16",
                          quantization_bits=16)
     raw["satellites"]["cn0_dbhz"] = 45.0
     prn = next(s.prn for s in make_generator(parse_scenario(raw, base_dir=sc0.source.parent))
                .sats if s.is_d1)
     raw["satellites"]["prns"] = [f"C{prn:02d}"]
-    raw["interference"] = [{"type": "noise", "offset_hz": 0.0, "bandwidth_hz": 2e6,
-                            "js_db": 32.0}]
+    raw["interference"] = [{"type": "noise", "offset_hz": 0.0, "bandwidth_hz": 1e6,
+                            "js_db": 29.0}]
     sc = parse_scenario(raw, base_dir=sc0.source.parent)
     meta = generate_files(sc, tmp_path, name="jam", progress=False)["metadata"]
     side = json.loads(Path(meta).read_text())
