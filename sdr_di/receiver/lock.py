@@ -269,46 +269,40 @@ class PostCorrelationNoise:
         """Add noise-correlator sums (complex, scalars or sequences of the same length) of
         ``n_samples`` samples each (a scalar or a sequence) [stored units]."""
         if np.ndim(prompt) == 0:
-            self._put((early,), (prompt,), (late,), (n_samples,))
-        elif len(prompt) <= 32:     # a scalar channel's block: plain Python is cheaper
-            n = n_samples if np.ndim(n_samples) else [n_samples] * len(prompt)
-            self._put(early, prompt, late, n)
+            early, prompt, late, n_samples = (early,), (prompt,), (late,), (n_samples,)
+        elif np.ndim(n_samples) == 0:
+            n_samples = [n_samples] * len(prompt)
+        if len(prompt) <= 32:     # a channel's block: plain Python is cheaper than numpy
+            vals = [(e.real * e.real + e.imag * e.imag + p.real * p.real + p.imag * p.imag
+                     + l.real * l.real + l.imag * l.imag) / (3.0 * n)
+                    for e, p, l, n in zip(early, prompt, late, n_samples) if n > 0]
         else:
             e = np.asarray(early, np.complex128)
             p = np.asarray(prompt, np.complex128)
             l = np.asarray(late, np.complex128)
-            n = np.broadcast_to(np.asarray(n_samples, float), p.shape)
+            n = np.asarray(n_samples, float)
             ok = n > 0
             e, p, l, n = e[ok], p[ok], l[ok], n[ok]
-            v = (e.real ** 2 + e.imag ** 2 + p.real ** 2 + p.imag ** 2 + l.real ** 2
-                 + l.imag ** 2) / (3.0 * n)
-            for x in v.tolist():
-                self._push(x)
-
-    def _put(self, early, prompt, late, n_samples) -> None:
-        for e, p, l, n in zip(early, prompt, late, n_samples):
-            if n > 0:
-                self._push((e.real * e.real + e.imag * e.imag + p.real * p.real
-                            + p.imag * p.imag + l.real * l.real + l.imag * l.imag) / (3.0 * n))
-
-    def _push(self, x: float) -> None:
-        """One value into the ring, with running sums of the values and their squares
-        (summed afresh at every wrap, so that rounding does not accumulate)."""
-        v, i = self._v, self._i
-        if self.count == v.size:
-            old = float(v[i])
-            self._s -= old
-            self._s2 -= old * old
+            vals = (e.real ** 2 + e.imag ** 2 + p.real ** 2 + p.imag ** 2 + l.real ** 2
+                    + l.imag ** 2) / (3.0 * n)
+        m = len(vals)
+        if m == 0:
+            return
+        v, size = self._v, self._v.size
+        if m >= size:
+            v[:] = vals[m - size:]
+            self._i, self.count = 0, size
         else:
-            self.count += 1
-        v[i] = x
-        self._s += x
-        self._s2 += x * x
-        self._i = i + 1
-        if self._i == v.size:
-            self._i = 0
-            self._s = float(np.sum(v))
-            self._s2 = float(np.dot(v, v))
+            i, j = self._i, self._i + m
+            if j <= size:
+                v[i:j] = vals
+            else:
+                v[i:] = vals[:size - i]
+                v[:j - size] = vals[size - i:]
+            self._i, self.count = j % size, min(size, self.count + m)
+        held = v[:self.count]
+        self._s = float(np.sum(held))
+        self._s2 = float(np.dot(held, held))
 
     def clear(self) -> None:
         """Forget every value."""
