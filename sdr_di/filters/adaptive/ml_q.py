@@ -37,7 +37,6 @@ Change of the measurement count N
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
 
 from ...errors import FilterError
 from .._linalg import floor_pd
@@ -113,6 +112,9 @@ class MLProcessNoiseUKF(AdaptiveRule):
         m = y.size
         lim = self._chi2.get(m)
         if lim is None:
+            # imported here: scipy.stats costs every run ~0.5 s to import
+            from scipy.stats import chi2
+
             lim = self._chi2[m] = float(chi2.ppf(0.9545, m))
         return filt.nis <= lim
 
