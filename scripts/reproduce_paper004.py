@@ -6,10 +6,17 @@ Usage::
     python scripts/reproduce_paper004.py [--out DIR] [--reuse] [--all-filters]
                                          [--filters ekf rae-aukf ff-aukf] [--duration 60]
                                          [--filter-rate 50] [--no-plots]
+                                         [--scenario TOML] [--fs HZ] [--seed N]
 
-1. Generates the default scenario (``signals/default.toml``: 60 s, 25 MHz, 4-bit, 7
-   satellites, 40 dB-Hz, the paper-004 motion and MEMS IMU) into ``--out`` (default
-   ``signals/out/paper004``), or reuses the file there with ``--reuse``.
+One run is one seed: a ranking of the filters needs the paired study over seeds and
+conditions, ``sdr-di study studies/paper004.toml`` (docs/studies.md); the script says which
+run of that study's baseline cell its run is, if any (``--fs 2.5e6 --seed S`` with S one of
+the study's seeds, printed).
+
+1. Generates ``--scenario`` (default ``signals/default.toml``: 60 s, 25 MHz, 4-bit, 7
+   satellites, 40 dB-Hz, the paper-004 motion and MEMS IMU; ``--fs`` and ``--seed`` override
+   its sampling rate and seed) into ``--out`` (default ``signals/out/paper004``), or reuses
+   the file there with ``--reuse``.
 2. Runs the deep receiver (``sdr_di.deep``) once per filter on the same IF and IMU files:
    scalar start-up, hand-over, vector loop with the integration filter at ``--filter-rate``;
    the broadcast navigation file named by the sidecar is the assistance data (paper 004 feeds
@@ -45,6 +52,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from sdr_di.deep import DeepConfig, DeepReceiver
+from sdr_di.experiments.filter_figures import parse_filter_spec
 from sdr_di.filters import FILTER_NAMES
 from sdr_di.io.imu_files import read_imu, read_truth
 from sdr_di.orbits.rinex_nav import load_nav
@@ -60,19 +68,49 @@ PAPER_ADAPT_S = {"rae-aukf": 0.2935, "ff-aukf": 0.1851}
 TARGET_FF = {"pos_m_rmse": 0.32, "vel_mps_rmse": 0.011, "att_deg_rmse": 0.012}
 
 
-def _generate(out: Path, duration: float, reuse: bool) -> Path:
-    bin_ = out / "default.bin"
-    if reuse and bin_.exists() and (out / "default.json").exists():
+def _scenario(path: Path | None, duration: float, fs: float | None, seed: int | None):
+    """The scenario of the run: ``path`` (default scenario) with the CLI overrides."""
+    from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
+
+    over = {"duration_s": duration}
+    if fs is not None:
+        over["sampling_rate_hz"] = fs
+    if seed is not None:
+        over["seed"] = seed
+    return load_scenario(path or DEFAULT_SCENARIO).with_overrides(**over)
+
+
+def _generate(out: Path, sc, reuse: bool) -> Path:
+    bin_ = out / f"{sc.name}.bin"
+    if reuse and bin_.exists() and bin_.with_suffix(".json").exists():
         print(f"reusing {bin_}")
         return bin_
-    from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
     from sdr_di.sim.generate import generate_files
 
-    sc = load_scenario(DEFAULT_SCENARIO).with_overrides(duration_s=duration)
     t0 = time.perf_counter()
     generate_files(sc, out, progress=True)
-    print(f"generated {duration:g} s in {time.perf_counter() - t0:.1f} s -> {bin_}")
+    print(f"generated {sc.duration_s:g} s in {time.perf_counter() - t0:.1f} s -> {bin_}")
     return bin_
+
+
+def _study_note(sc) -> str:
+    """Where this single run stands in ``studies/paper004.toml`` (its baseline cell)."""
+    from sdr_di.experiments.campaign import run_seed
+    from sdr_di.experiments.study_spec import load_study
+
+    spec = load_study(REPO / "studies" / "paper004.toml")
+    seeds = [run_seed(spec.base_seed, i) for i in range(spec.runs)]
+    base = spec.cells[0]
+    fs_study = base.params.get("sampling_rate_hz")
+    fs = sc.signal.sampling_rate_hz
+    where = (f"run {seeds.index(sc.seed)} of the paper004 study's baseline cell" if
+             sc.seed in seeds and fs_study == fs
+             and base.params.get("duration_s") == sc.duration_s else
+             f"one seed, like one run of the paper004 study (whose baseline cell runs at "
+             f"{fs_study / 1e6:g} MHz with seeds {', '.join(map(str, seeds))})")
+    return (f"This single run (seed {sc.seed}, {fs / 1e6:g} MHz) is {where}. A ranking of "
+            "the filters needs the paired study over seeds: sdr-di study "
+            "studies/paper004.toml --out DIR (docs/studies.md).")
 
 
 def _fmt(v, nd=4):
@@ -88,11 +126,19 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--filter-rate", type=float, default=50.0)
     ap.add_argument("--no-plots", action="store_true")
+    ap.add_argument("--scenario", type=Path, default=None,
+                    help="scenario TOML (default signals/default.toml)")
+    ap.add_argument("--fs", type=float, default=None, help="sampling rate [Hz] (default: "
+                    "the scenario's)")
+    ap.add_argument("--seed", type=int, default=None, help="seed (default: the scenario's)")
     args = ap.parse_args(argv)
     filters = list(FILTER_NAMES) if args.all_filters else args.filters
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    bin_ = _generate(out, args.duration, args.reuse)
+    sc = _scenario(args.scenario, args.duration, args.fs, args.seed)
+    note = _study_note(sc)
+    print(note, flush=True)
+    bin_ = _generate(out, sc, args.reuse)
     meta = json.loads(bin_.with_suffix(".json").read_text())
     imu = read_imu(out / meta["imu_file"])
     truth = read_truth(out / meta["truth_file"])[0]
@@ -102,7 +148,7 @@ def main(argv=None) -> int:
     results = {}
     for f in filters:
         src = open_source(bin_)
-        name, options = _variant(f)
+        name, options = parse_filter_spec("reproduce_paper004", f)
         rx = DeepReceiver(DeepConfig(filter=name, filter_rate_hz=args.filter_rate,
                                      filter_options=options))
         t0 = time.perf_counter()
@@ -162,25 +208,8 @@ def main(argv=None) -> int:
                   f"(paper {PAPER_ADAPT_S[f]} s)")
     if not args.no_plots:
         _plots(out, results)
+    print(note)
     return 0
-
-
-def _variant(text: str) -> tuple[str, dict]:
-    """``"ff-aukf:q_states=nominal,window=50"`` -> ``("ff-aukf", {"q_states": "nominal",
-    "window": 50})`` (filter options of :func:`sdr_di.filters.make_filter`)."""
-    name, _, rest = text.partition(":")
-    options = {}
-    for item in filter(None, rest.split(",")):
-        key, _, val = item.partition("=")
-        for kind in (int, float):
-            try:
-                options[key] = kind(val)
-                break
-            except ValueError:
-                continue
-        else:
-            options[key] = {"true": True, "false": False}.get(val.lower(), val)
-    return name, options
 
 
 def _plots(out: Path, results: dict) -> None:
