@@ -194,6 +194,28 @@ class Channel:
         self._candidate: dict | None = None
         self._frozen = False
         self.time_valid = False
+        self._new_arc()
+
+    def _new_arc(self) -> None:
+        """A new carrier-phase arc (the counters are restarted by the caller): the Costas
+        half cycle of the arc is unknown again."""
+        self._half_cycle = 0.0  # [cycles] added to the reported phase: 0.5 if data inverted
+        self._half_known = False
+
+    def _note_polarity(self, pol: int) -> None:
+        """A preamble came out with polarity ``pol`` (+1 upright, -1 inverted).
+
+        The arc's half-cycle correction follows the polarity; when it changes the reported
+        carrier phase moves by 0.5 cycle, a discontinuity counted in ``slip_count`` (the first
+        resolution of an inverted arc, or a half-cycle slip of the Costas loop). The
+        correction belongs to the arc, not to the frame synchronization: losing the frame
+        (two missing preambles) keeps it.
+        """
+        corr = 0.5 if pol < 0 else 0.0
+        if corr != self._half_cycle:
+            self.slip_count += 1
+        self._half_cycle = corr
+        self._half_known = True
 
     @property
     def state(self) -> ChannelState:
@@ -505,6 +527,7 @@ class Channel:
         self._pull_in_ms = 0
         self._prev_p = None
         self._drop_bit_sync()
+        self._new_arc()
         self.slip_count += 1
 
     def _drop_bit_sync(self) -> None:
@@ -694,6 +717,7 @@ class Channel:
                 self._accept_subframe(cand)
             self._frame = {"idx": off + SUBFRAME_BITS, "pol": pol, "misses": 0,
                            "expect": d["t_start"] + period}
+            self._note_polarity(pol)
             self._set_time(d)
             self._accept_subframe(d)
             self._trim_bits(off + SUBFRAME_BITS)
@@ -739,11 +763,8 @@ class Channel:
         period = SUBFRAME_BITS * self.bit_ms * 1e-3
         found = 1 if head == _PREAMBLE else -1 if head == _PREAMBLE_INV else 0
         if found:
-            if fr["pol"] == 0:
-                fr["pol"] = found  # polarity unknown (after an outage): take it
-            elif found != fr["pol"]:
-                fr["pol"] = found  # half-cycle slip of the Costas loop
-                self.slip_count += 1
+            fr["pol"] = found
+            self._note_polarity(found)  # counts a half-cycle slip of the Costas loop
         d = None
         if found:
             try:
@@ -844,7 +865,7 @@ class Channel:
         chips = th + (s - start) * rate / self.fs
         wraps = math.floor(chips / _LF)
         code_phase = chips - wraps * _LF
-        cphase = dph + (s - start) * fd / self.fs
+        cphase = dph + (s - start) * fd / self.fs + self._half_cycle
         week = None
         sow = math.nan
         tv = bool(self.time_valid and self._time is not None)
@@ -854,14 +875,12 @@ class Channel:
             w = math.floor(t / _WEEK)
             sow = t - w * _WEEK
             week = None if sf_week is None else int(sf_week + w)
-            if self._frame is not None and self._frame["pol"] < 0:
-                cphase += 0.5
         return ChannelObservation(
             prn=self.prn, sample_index=s, t_tx_week=week, t_tx_sow=sow, doppler_hz=f_est,
             carrier_phase_cycles=cphase, cn0_dbhz=self.cn0_dbhz, code_lock=self.code_lock,
             carrier_lock=self.carrier_lock, time_valid=tv, code_phase_chips=code_phase,
             state=self.state.name, slip_count=self.slip_count,
-            half_cycle_resolved=tv and self._frame is not None and self._frame["pol"] != 0)
+            half_cycle_resolved=self._half_known)
 
     def __repr__(self) -> str:
         return (f"Channel(prn={self.prn}, {self.nav}, state={self.state.name}, "

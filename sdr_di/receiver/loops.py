@@ -44,6 +44,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 __all__ = [
     "CarrierLoop",
     "CodeLoop",
@@ -51,6 +53,7 @@ __all__ = [
     "dll_nelp",
     "fll_atan",
     "fll_natural_frequency",
+    "pll_doppler_noise_hz",
     "pll_natural_frequency",
 ]
 
@@ -245,3 +248,56 @@ class CodeLoop:
             self._int += dt * w0 * w0 * code_err_chips
             self.rate_corr_cps = self._int + LOOP2_A2 * w0 * code_err_chips
         return self.rate_corr_cps
+
+
+def pll_doppler_noise_hz(cn0_dbhz: float, coherent_s: float, pll_bw_hz: float) -> float:
+    """Standard deviation [Hz] of :attr:`CarrierLoop.vel_hz` (the Doppler the receiver
+    reports) from thermal noise alone, for a locked pure PLL on a static signal.
+
+    The discriminator noise is the Costas atan's,
+    ``sigma_phi^2 = (1 + 1 / (2 T C/N0)) / (2 T C/N0)`` [rad^2] per update of coherent time
+    ``T``, white; it drives the closed loop exactly as :meth:`CarrierLoop.update` does (the
+    discriminator sees the NCO phase averaged over the interval, the NCO runs at the
+    commanded frequency), and the steady-state variance of the frequency integrator is the
+    solution of the discrete Lyapunov equation of that linear loop.
+
+    Parameters
+    ----------
+    cn0_dbhz : float
+        Carrier-to-noise density ratio [dB-Hz].
+    coherent_s : float
+        Coherent integration time = update interval ``T`` [s].
+    pll_bw_hz : float
+        PLL noise bandwidth [Hz] (> 0, ``B T`` below about 0.2).
+
+    Returns
+    -------
+    float
+        [Hz] (multiply by the wavelength for the pseudorange-rate noise [m/s]).
+    """
+    from scipy.linalg import solve_discrete_lyapunov  # here: scipy costs start-up time
+
+
+    if not (pll_bw_hz > 0.0 and coherent_s > 0.0 and math.isfinite(cn0_dbhz)):
+        raise ValueError("pll_doppler_noise_hz needs pll_bw_hz > 0, coherent_s > 0 and a "
+                         "finite C/N0")
+    t = float(coherent_s)
+    snr = 2.0 * t * 10.0 ** (cn0_dbhz / 10.0)
+    var_cycles = (1.0 + 1.0 / snr) / snr / _TWO_PI ** 2
+    w0 = pll_natural_frequency(pll_bw_hz)
+    # state [NCO phase error sign-flipped (cycles), acc, vel, commanded freq]; true phase 0:
+    # e = -(ph + f T / 2) + n
+    e_x = np.array([-1.0, 0.0, 0.0, -0.5 * t])
+    ph = np.array([1.0, 0.0, 0.0, t])                              # ph' = ph + f T
+    acc = np.array([0.0, 1.0, 0.0, 0.0]) + t * w0 ** 3 * e_x       # acc' = acc + T w0^3 e
+    vel = np.array([0.0, 0.0, 1.0, 0.0]) + t * (acc + PLL3_A3 * w0 ** 2 * e_x)
+    f = vel + PLL3_B3 * w0 * e_x                                   # f' = vel' + b3 w0 e
+    a = np.vstack([ph, acc, vel, f])
+    # noise input (e = n), through the same three lines
+    b_acc = t * w0 ** 3
+    b_vel = t * (b_acc + PLL3_A3 * w0 ** 2)
+    b = np.array([0.0, b_acc, b_vel, b_vel + PLL3_B3 * w0])
+    if np.max(np.abs(np.linalg.eigvals(a))) >= 1.0:
+        raise ValueError(f"unstable loop: B T = {pll_bw_hz * t:g}")
+    p = solve_discrete_lyapunov(a, np.outer(b, b) * var_cycles)
+    return float(math.sqrt(p[2, 2]))

@@ -39,9 +39,14 @@ tracking, *without* the IF: the integral of the NCO Doppler (whose smoothed valu
 ``doppler_hz``). It increases with positive
 Doppler, i.e. it decreases as the range grows (a RINEX-style phase observable is
 ``-carrier_phase_cycles`` up to an integer). The Costas loop's half-cycle ambiguity is
-resolved by the preamble polarity once frame-synchronized (0.5 cycle is added when the data
-came out inverted); every discontinuity (re-acquisition, return to pull-in, half-cycle
-correction) increments ``ChannelObservation.slip_count``.
+resolved by the preamble polarity once frame-synchronized: 0.5 cycle is added, for the rest of
+the arc (a loss of the frame alone keeps it), when the data came out inverted. Every
+discontinuity of the reported phase increments ``ChannelObservation.slip_count``:
+re-acquisition, return to pull-in, and a change of the half-cycle correction (the first
+resolution of an inverted arc, which moves the phase reported so far by 0.5 cycle, or a
+later preamble of the other polarity: a half-cycle slip of the Costas loop). A D2 satellite
+(a preamble every 0.6 s) is resolved within about a second of tracking, a D1 one (every 6 s)
+only after several seconds: phases of one ``slip_count`` belong to one continuous arc.
 """
 
 from __future__ import annotations
@@ -108,9 +113,9 @@ class ChannelObservation:
     slip_count : int
         Carrier-phase discontinuities so far (module notes).
     half_cycle_resolved : bool
-        The preamble polarity has resolved the Costas loop's half-cycle ambiguity of
-        ``carrier_phase_cycles`` (False before frame synchronization and after a return to
-        tracking until the next preamble).
+        A preamble's polarity has resolved the Costas loop's half-cycle ambiguity of
+        ``carrier_phase_cycles`` in the current arc (False from every (re)start of tracking
+        or return to pull-in until the next preamble; kept when only the frame is lost).
     """
 
     prn: int
