@@ -4,6 +4,7 @@ The files are generated at a low sample rate (2.5-4 MHz instead of 25 MHz) to ke
 fast; the full-rate figures come from ``scripts/check_scalar.py`` (closing notes).
 """
 
+import csv
 import json
 import re
 from pathlib import Path
@@ -12,10 +13,14 @@ import numpy as np
 import pytest
 
 from sdr_di.cli import main
+from sdr_di.constants import LAMBDA_B3I
+from sdr_di.io.solution_files import read_solution_csv
 from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.receiver.accuracy import solution_vs_truth
+from sdr_di.receiver.loops import pll_doppler_noise_hz
 from sdr_di.receiver.run_scalar import open_source, run_scalar
 from sdr_di.receiver.scalar import ScalarReceiver
+from sdr_di.receiver.tracking import TrackingConfig
 from sdr_di.signal.fields import PARAMS
 
 DUR = "37"  # one D1 frame (subframes 1-3 at 30-48 s would need 48 s; 18 s is enough for
@@ -30,6 +35,31 @@ def _gen(out: Path, *args) -> Path:
 @pytest.fixture(scope="module")
 def complex_file(tmp_path_factory):
     return _gen(tmp_path_factory.mktemp("cplx"), "--fs", "2.5e6")
+
+
+def _velocity_rmse_bound(pvt_csv: Path, channels_csv: Path) -> float:
+    """What the velocity RMSE of a run may reach from thermal noise [m/s].
+
+    The velocity comes from the carrier loops' Doppler (D1 satellites: 10 ms coherent PLL
+    updates at ``track_pll_bw_hz``), whose thermal noise at the weakest channel's C/N0 is
+    :func:`~sdr_di.receiver.loops.pll_doppler_noise_hz` (0.022 m/s at 40 dB-Hz). Independent
+    equal errors on the satellites map to the velocity's 3D RMS through PDOP (exactly with 4
+    satellites, whatever the weights; the low-rate files of these tests have the
+    ephemerides of only 4 satellites for most of their fixes, PDOP ~4.8): expected
+    RMSE = sigma_rate x RMS(PDOP), ~0.105 m/s here, so a fixed 0.1 m/s fails about every
+    other noise realization. The factor 1.3 covers the spread of an RMSE over ~90 fixes
+    0.2 s apart (the Doppler noise decorrelates within ~0.05 s; relative standard deviation
+    about 1/sqrt(2 x 90) = 7.5 %, so 1.3 is 4 of them); a carrier problem (a half-cycle
+    jump moves one fix by ~3 m/s) or a noisier loop still exceeds it.
+    """
+    with open(channels_csv) as f:
+        cn0 = min(float(r["cn0_dbhz"]) for r in csv.DictReader(f))
+    cfg = TrackingConfig()
+    sigma_rate = LAMBDA_B3I * pll_doppler_noise_hz(cn0, cfg.coherent_ms_d1 * 1e-3,
+                                                   cfg.track_pll_bw_hz)
+    sol = read_solution_csv(pvt_csv)
+    pdop = np.asarray(sol["pdop"], float)[np.asarray(sol["status"]) == "fix"]
+    return 1.3 * sigma_rate * float(np.sqrt(np.mean(pdop ** 2)))
 
 
 def _prns(d: Path) -> list[int]:
@@ -73,7 +103,8 @@ def test_scalar_run_tracks_decodes_and_fixes(complex_file):
     acc = solution_vs_truth(res.files["pvt"], d / "default_truth.csv")
     assert acc["n_fixes"] > 50
     assert acc["pos_rmse_m"] < 3.0, acc
-    assert acc["vel_rmse_mps"] < 0.1, acc
+    bound = _velocity_rmse_bound(res.files["pvt"], res.files["channels"])
+    assert acc["vel_rmse_mps"] < bound, (acc, bound)
 
 
 def test_foreign_real_int16_file_with_options(tmp_path, capsys):
@@ -91,7 +122,9 @@ def test_foreign_real_int16_file_with_options(tmp_path, capsys):
     out = capsys.readouterr().out
     assert rc == 0, out
     acc = solution_vs_truth(d / "run" / "default_pvt.csv", d / "default_truth.csv")
-    assert acc["n_fixes"] > 50 and acc["pos_rmse_m"] < 3.0 and acc["vel_rmse_mps"] < 0.1, acc
+    bound = _velocity_rmse_bound(d / "run" / "default_pvt.csv", d / "run" / "default_channels.csv")
+    assert acc["n_fixes"] > 50 and acc["pos_rmse_m"] < 3.0, acc
+    assert acc["vel_rmse_mps"] < bound, (acc, bound)
 
 
 def start_sow(d: Path) -> float:
