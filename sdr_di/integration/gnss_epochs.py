@@ -17,6 +17,28 @@ instant (over 20 ms, 0.2 mm of position and well below 1 mm/s of velocity at 3 m
 the measurement is applied at the interval's end, where the filter's error state is (it
 changes by far less than the measurement noise in 20 ms).
 
+Screening and innovation gate (loose and tight; deep has its own, in its pre-filters): the
+scalar receiver keeps a channel in its observables until its lock detector declares the
+loss, a few hundred ms after the signal is gone; over those epochs the channel's Doppler,
+hence its pseudorange rate, is noise (measured at a tunnel entry: rate innovations of 7-20
+sigma against R, C/N0 reported NaN or 10-15 dB-Hz, the lock flags still set). One such epoch
+let through moved the velocity by 0.45 m/s and the accelerometer-bias estimate by ~10 mg,
+and the INS then coasted 10 s on them (docs/coupling.md, *Tunnel and 3 satellites*). So:
+
+* screen: a channel counts only with a finite C/N0 at or above ``min_cn0_dbhz`` (default
+  20 dB-Hz, below which the scalar loops do not hold lock) and in carrier lock (a finite
+  carrier phase in the observables); a loose fix counts only if every satellite in it does;
+* gate: each remaining measurement is tested against its innovation covariance
+  ``S = H P H^T + R`` (``P``: the filter's covariance at the start of the interval, one
+  20 ms prediction earlier than the update's, which changes ``S`` by far less than ``R``):
+  tight, per channel, ``y_i^2 / S_ii`` of its pseudorange and of its rate against the
+  chi-square 1-dof quantile at ``1 - gate_alpha`` (default 1e-4: 15.1, about 3.9 sigma), a
+  channel failing either is dropped; loose, the fix's NIS ``y^T S^-1 y`` against the 6-dof
+  quantile (27.9). With a consistent ``S`` a good measurement is rejected once in 10^4.
+* recovery: if the gate has left no measurement for ``gate_reset_epochs`` (5: 1 s at 5 Hz)
+  epochs in a row while the screen passed some, the next such epoch is taken ungated (an
+  INS that has drifted beyond its own ``P`` would otherwise reject every fix for good).
+
 Channel columns (``used``, ``cn0``): the PRNs the scalar receiver handed over, then any it
 acquired later, in that order. A row shows the latest measurement epoch's channels (loose:
 the satellites of the fix; tight: those in ``z``), also on the filter intervals between two
@@ -121,10 +143,17 @@ class ScalarEpochSource:
         IF sampling rate [Hz].
     profile : dict
         Seconds per stage; this source adds ``measure``.
+    min_cn0_dbhz : float or None, optional
+        Screen: lowest C/N0 of a usable channel [dB-Hz] (module notes); None: no C/N0 test.
+    gate_alpha : float, optional
+        Innovation gate: probability of rejecting a good measurement (0 disables the gate).
+    gate_reset_epochs : int, optional
+        Epochs in a row with everything gated out before one is taken ungated.
     """
 
     def __init__(self, epochs: list[GnssEpoch], prns, imu_t: np.ndarray, imu_epoch,
-                 fs: float, profile: dict) -> None:
+                 fs: float, profile: dict, *, min_cn0_dbhz: float | None = 20.0,
+                 gate_alpha: float = 1e-4, gate_reset_epochs: int = 5) -> None:
         self.epochs = epochs
         self.prns = tuple(int(p) for p in prns)
         self.col = {p: i for i, p in enumerate(self.prns)}
@@ -141,6 +170,12 @@ class ScalarEpochSource:
         self._iono_prev = None
         self._flag = 0
         self.last: GnssEpoch | None = None
+        self.min_cn0_dbhz = None if min_cn0_dbhz is None else float(min_cn0_dbhz)
+        self.gate_alpha = float(gate_alpha)
+        self.gate_reset_epochs = int(gate_reset_epochs)
+        self._gated_in_a_row = 0
+        self.n_screened = 0              # channel-epochs (tight) / fixes (loose) screened out
+        self.n_gated = 0                 # channel-epochs (tight) / fixes (loose) gated out
         self.navigation: dict = {"ephemerides": {}, "ionosphere": []}
 
     # ------------------------------------------------------------------------------------
@@ -181,6 +216,53 @@ class ScalarEpochSource:
             self._next += 1
         return found
 
+    def screened(self, ep: GnssEpoch) -> np.ndarray:
+        """Mask over ``ep.obs`` of the channels passing the screen (module notes): C/N0
+        finite and at least ``min_cn0_dbhz``, carrier lock (finite carrier phase)."""
+        obs = ep.obs
+        cn0 = np.asarray(obs.cn0_dbhz, float)
+        ok = np.ones(cn0.shape, bool)
+        if self.min_cn0_dbhz is not None:
+            ok &= np.isfinite(cn0) & (np.nan_to_num(cn0, nan=-np.inf) >= self.min_cn0_dbhz)
+        cph = getattr(obs, "carrier_phase_m", None)
+        if cph is not None:
+            ok &= np.isfinite(np.asarray(cph, float))
+        return ok
+
+    def gate_limit(self, dof: int) -> float:
+        """Chi-square quantile at ``1 - gate_alpha`` with ``dof`` degrees of freedom."""
+        from scipy.stats import chi2
+
+        return float(chi2.ppf(1.0 - self.gate_alpha, dof))
+
+    def innovation_covariance(self, loop: IntegrationLoop, m: Measurements) -> np.ndarray:
+        """``S = H P H^T + R`` of ``m`` with the filter's current ``P`` (module notes)."""
+        loop.set_geometry(*m.geometry)
+        kf = loop.kf
+        H = kf.measurement_model.H(kf.x)
+        return H @ kf.P @ H.T + m.R
+
+    def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+             m: Measurements) -> Measurements:
+        """``m`` less the measurements failing the innovation gate (subclasses); returns
+        ``m`` unchanged by default."""
+        return m
+
+    def _gated(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+               m: Measurements) -> Measurements:
+        """Innovation gate with the recovery rule (module notes)."""
+        if m.z is None or not m.z.size or self.gate_alpha <= 0.0:
+            return m
+        g = self.gate(loop, iv, ep, m)
+        if g.z is not None and g.z.size:
+            self._gated_in_a_row = 0
+            return g
+        self._gated_in_a_row += 1
+        if self._gated_in_a_row > self.gate_reset_epochs:
+            self._gated_in_a_row = 0
+            return m
+        return g
+
     # ---- MeasurementSource ------------------------------------------------------------
     def measure(self, loop: IntegrationLoop, iv: Interval) -> Measurements:
         """The interval's measurement (None ``z`` between epochs)."""
@@ -190,7 +272,7 @@ class ScalarEpochSource:
         if ep is not None:
             self.last = ep
             self._note_navigation(ep, iv.k1 / self.fs)
-            m = self.measurement(loop, iv, ep)
+            m = self._gated(loop, iv, ep, self.measurement(loop, iv, ep))
             self._used = m.used.copy()
             self._cn0 = np.full(self.n_channels, math.nan)
             for prn, c in zip(ep.obs.prn, ep.obs.cn0_dbhz):

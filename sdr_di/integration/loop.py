@@ -96,12 +96,15 @@ class Measurements:
     used : (n_ch,) bool array
         Channels in the measurement vector (loose and tight: of the latest GNSS epoch, also
         on the intervals between epochs).
+    channels : (n,) int array or None
+        PRNs in ``z``'s order (tight; None where not needed).
     """
 
     z: np.ndarray | None
     R: np.ndarray | None
     geometry: tuple
     used: np.ndarray
+    channels: np.ndarray | None = None
 
     @property
     def n_used(self) -> int:

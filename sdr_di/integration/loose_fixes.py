@@ -4,7 +4,9 @@ Measurement (papers 000/003 eq 13, :class:`~sdr_di.integration.measurements.
 LooseMeasurementModel`): ``z = [v_INS - v_GNSS (E, N, U) [m/s], position INS - GNSS (N, E,
 U) [m]]`` at the fix's BDT (receiver time minus the fix's clock bias / c), the INS
 interpolated to it (:mod:`~sdr_di.integration.gnss_epochs`). Only valid fixes with a valid
-velocity are used; an epoch with fewer than 4 satellites gives no fix, and the INS coasts.
+velocity are used, and only if every satellite of the fix passes the channel screen and the
+fix its 6-dof innovation gate (:mod:`~sdr_di.integration.gnss_epochs`); an epoch with fewer
+than 4 satellites gives no fix, and the INS coasts.
 
 ``R`` from the fix's formal covariances (:mod:`~sdr_di.receiver.pvt`)::
 
@@ -66,10 +68,25 @@ class LooseFixSource(ScalarEpochSource):
         if not (sol.valid and sol.velocity_valid and np.all(np.isfinite(sol.cov_v))):
             return Measurements(z=None, R=None, geometry=(),
                                 used=np.zeros(self.n_channels, bool))
+        screen = self.screened(ep)
+        bad = {int(p) for p, ok in zip(ep.obs.prn, screen) if not ok}
+        if bad & {int(p) for p in sol.prns}:
+            self.n_screened += 1
+            return Measurements(z=None, R=None, geometry=(),
+                                used=np.zeros(self.n_channels, bool))
         llh, v_n = self.ins_at(iv, self.imu_time(sol.week, sol.sow))
         z = loose_measurement(llh, v_n, sol.llh, sol.v_n)
         return Measurements(z=z, R=fix_covariance(sol), geometry=(iv.nav1.llh,),
                             used=self.used_mask(sol.prns))
+
+    def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+             m: Measurements) -> Measurements:
+        """The whole fix out when its NIS ``y^T S^-1 y`` exceeds the 6-dof quantile."""
+        S = self.innovation_covariance(loop, m)
+        if float(m.z @ np.linalg.solve(S, m.z)) <= self.gate_limit(m.z.size):
+            return m
+        self.n_gated += 1
+        return Measurements(z=None, R=None, geometry=(), used=np.zeros(self.n_channels, bool))
 
     def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
         """The loop's clock follows the latest fix (module notes, clock columns)."""

@@ -15,7 +15,8 @@ the filter estimate the receiver clock (output columns ``clock_bias_m``,
 
 Usable channel: in the scalar receiver's observables (code lock, transmit time known), an
 ephemeris in force, a finite pseudorange rate, elevation at or above the PVT's mask (10
-deg). Channels join and leave ``z`` as the scalar loops gain and lose them; with fewer
+deg), through the screen (C/N0 >= 20 dB-Hz and carrier lock) and the per-channel innovation
+gate of :mod:`~sdr_di.integration.gnss_epochs`. Channels join and leave ``z`` as the scalar loops gain and lose them; with fewer
 than 4 the filter still updates (the INS carries the missing geometry).
 
 ``R = diag(sigma_P^2, sigma_D^2)`` from the PVT's weight model
@@ -56,8 +57,10 @@ class TightRangeSource(ScalarEpochSource):
         none = Measurements(z=None, R=None, geometry=(), used=np.zeros(self.n_channels, bool))
         if sat is None:
             return none
-        idx = np.flatnonzero(sat.ok & np.isfinite(obs.pseudorange_m)
-                             & np.isfinite(obs.pseudorange_rate_mps))
+        ok = sat.ok & np.isfinite(obs.pseudorange_m) & np.isfinite(obs.pseudorange_rate_mps)
+        screen = self.screened(ep)
+        self.n_screened += int((ok & ~screen).sum())
+        idx = np.flatnonzero(ok & screen)
         if idx.size == 0:
             return none
         b = self.epoch_clock_bias(loop, iv, ep)
@@ -74,4 +77,24 @@ class TightRangeSource(ScalarEpochSource):
         var_p, var_d = measurement_variances(el, obs.cn0_dbhz[idx], cfg)
         z = np.r_[P - obs.pseudorange_m[idx], D - obs.pseudorange_rate_mps[idx]]
         return Measurements(z=z, R=np.diag(np.r_[var_p, var_d]), geometry=(iv.nav1.llh, U),
-                            used=self.used_mask(obs.prn[idx]))
+                            used=self.used_mask(obs.prn[idx]), channels=obs.prn[idx])
+
+    def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+             m: Measurements) -> Measurements:
+        """Drop each channel whose pseudorange or rate innovation fails the 1-dof test
+        (module notes of :mod:`~sdr_di.integration.gnss_epochs`)."""
+        S = self.innovation_covariance(loop, m)
+        n = m.z.size // 2
+        r = m.z ** 2 / np.diag(S)
+        keep = (r[:n] <= self.gate_limit(1)) & (r[n:] <= self.gate_limit(1))
+        self.n_gated += int((~keep).sum())
+        if keep.all():
+            return m
+        rows = np.r_[keep, keep]
+        llh, U = m.geometry
+        prns = np.asarray(m.channels)[keep]
+        if not keep.any():
+            return Measurements(z=None, R=None, geometry=(),
+                                used=np.zeros(self.n_channels, bool))
+        return Measurements(z=m.z[rows], R=m.R[np.ix_(rows, rows)], geometry=(llh, U[keep]),
+                            used=self.used_mask(prns), channels=prns)
