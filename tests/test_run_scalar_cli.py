@@ -44,13 +44,19 @@ def _velocity_rmse_bound(pvt_csv: Path, channels_csv: Path) -> float:
     updates at ``track_pll_bw_hz``), whose thermal noise at the weakest channel's C/N0 is
     :func:`~sdr_di.receiver.loops.pll_doppler_noise_hz` (0.022 m/s at 40 dB-Hz). Independent
     equal errors on the satellites map to the velocity's 3D RMS through PDOP (exactly with 4
-    satellites, whatever the weights; the low-rate files of these tests have the
-    ephemerides of only 4 satellites for most of their fixes, PDOP ~4.8): expected
-    RMSE = sigma_rate x RMS(PDOP), ~0.105 m/s here, so a fixed 0.1 m/s fails about every
+    satellites, whatever the weights; the foreign file of this test, default seed, has the
+    ephemerides of only 4 satellites for 90 of its 94 fixes, PDOP ~4.8): expected
+    RMSE = sigma_rate x RMS(PDOP), ~0.107 m/s here, so a fixed 0.1 m/s fails about every
     other noise realization. The factor 1.3 covers the spread of an RMSE over ~90 fixes
     0.2 s apart (the Doppler noise decorrelates within ~0.05 s; relative standard deviation
     about 1/sqrt(2 x 90) = 7.5 %, so 1.3 is 4 of them); a carrier problem (a half-cycle
     jump moves one fix by ~3 m/s) or a noisier loop still exceeds it.
+
+    Limitation: with more than 4 satellites the PVT's elevation weights are not the equal
+    thermal noise's optimal ones and the RMSE exceeds sigma_rate x PDOP (other seeds of this
+    file, 5-6 satellites: 1.08-1.29 times), so the bound only suits 4-satellite runs (the
+    assertion below checks that it applies; the 2.5 MHz complex file has 5 satellites and
+    keeps its fixed 0.1 m/s).
     """
     with open(channels_csv) as f:
         cn0 = min(float(r["cn0_dbhz"]) for r in csv.DictReader(f))
@@ -58,7 +64,9 @@ def _velocity_rmse_bound(pvt_csv: Path, channels_csv: Path) -> float:
     sigma_rate = LAMBDA_B3I * pll_doppler_noise_hz(cn0, cfg.coherent_ms_d1 * 1e-3,
                                                    cfg.track_pll_bw_hz)
     sol = read_solution_csv(pvt_csv)
-    pdop = np.asarray(sol["pdop"], float)[np.asarray(sol["status"]) == "fix"]
+    fix = np.asarray(sol["status"]) == "fix"
+    pdop = np.asarray(sol["pdop"], float)[fix]
+    assert np.mean(np.asarray(sol["n_sats"], float)[fix] == 4) > 0.9, "bound for 4 satellites"
     return 1.3 * sigma_rate * float(np.sqrt(np.mean(pdop ** 2)))
 
 
@@ -103,8 +111,7 @@ def test_scalar_run_tracks_decodes_and_fixes(complex_file):
     acc = solution_vs_truth(res.files["pvt"], d / "default_truth.csv")
     assert acc["n_fixes"] > 50
     assert acc["pos_rmse_m"] < 3.0, acc
-    bound = _velocity_rmse_bound(res.files["pvt"], res.files["channels"])
-    assert acc["vel_rmse_mps"] < bound, (acc, bound)
+    assert acc["vel_rmse_mps"] < 0.1, acc
 
 
 def test_foreign_real_int16_file_with_options(tmp_path, capsys):
