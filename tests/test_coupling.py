@@ -340,3 +340,36 @@ def test_tight_gate_keeps_a_lost_channels_rate_out(cn0):
     assert np.linalg.norm(off["v"], axis=1).max() > 0.05
     _, src0 = _static_tight_setup()
     assert src0.n_gated == 0 and src0.n_screened == 0     # nothing good rejected
+
+
+def test_loose_gate_drops_a_fix_outside_its_innovation_covariance_and_recovers():
+    """Loose: a fix whose NIS ``y^T S^-1 y`` exceeds the 6-dof quantile at 1 - 1e-4 (27.9) is
+    dropped; one within it is kept; after ``gate_reset_epochs`` gated epochs in a row the
+    next is taken ungated (an INS drifted beyond its ``P`` must not lock itself out)."""
+    import types
+
+    from sdr_di.integration.loop import Measurements
+    from sdr_di.integration.loose_fixes import LooseFixSource
+    from sdr_di.integration.measurements import LooseMeasurementModel
+
+    llh = np.array([math.radians(40.0), math.radians(116.0), 100.0])
+    model = LooseMeasurementModel(llh)
+    P = np.diag(np.r_[[1e-6] * 3, [0.01] * 3, [(1 / 6.4e6) ** 2] * 2, 1.0, [1e-10] * 8])
+    kf = types.SimpleNamespace(P=P, x=np.zeros(17), measurement_model=model)
+    loop = types.SimpleNamespace(kf=kf, set_geometry=model.set_epoch)
+    R = np.diag([0.01] * 3 + [1.0] * 3)            # S = 0.02 (m/s)^2, 2 m^2 on the diagonal
+    src = LooseFixSource([], [27], np.arange(3.0), (755, 0.0), 1000.0, {})
+    assert src.gate_limit(6) == pytest.approx(27.86, abs=0.01)
+
+    def m(z):
+        return Measurements(z=np.asarray(z, float), R=R, geometry=(llh,),
+                            used=np.ones(1, bool))
+
+    good = m([0.2, -0.2, 0.1, 1.5, -1.5, 2.0])      # NIS about 9
+    assert src._gated(loop, None, None, good).z is not None
+    bad = m([0.8, 0.0, 0.0, 0.0, 0.0, 0.0])         # NIS 32 (a lost channel's velocity)
+    for _ in range(src.gate_reset_epochs):
+        assert src._gated(loop, None, None, bad).z is None
+    assert src.n_gated == src.gate_reset_epochs
+    assert src._gated(loop, None, None, bad).z is not None      # recovery
+    assert src._gated(loop, None, None, bad).z is None          # the count restarts
