@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 from sdr_di.cli import main
-from sdr_di.constants import C_LIGHT
 from sdr_di.io import rinex_writer as rw
 from sdr_di.orbits.ephemeris import Klobuchar
 from sdr_di.orbits.rinex_nav import crosscheck_with_georinex, load_nav
