@@ -168,10 +168,21 @@ def test_epochs_are_placed_by_their_bdt_and_the_ins_interpolated():
     np.testing.assert_allclose(v, [3.0, 0.0, 0.0])
 
 
-def test_tight_source_pulls_an_ins_error_in_through_the_loop():
-    """Static receiver, five satellites, observables from the PVT's own forward model at the
-    truth (so only the INS error is seen): the tight source in the unchanged integration
-    loop pulls a 20 m north / 0.5 m/s east INS error and a 30 m clock error in."""
+#: Static receiver of the synthetic tight set-ups [rad, rad, m].
+_LLH0 = np.array([math.radians(40.0), math.radians(116.0), 100.0])
+
+
+def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0, p0=None,
+                        bad_epoch_s=None, bad_rate_mps=1.5, bad_channels=(0, 1), cn0=45.0,
+                        **src_kw):
+    """A static receiver at :data:`_LLH0` with five satellites, observables exact (the PVT's
+    forward model at the truth), 5 Hz, through :class:`TightRangeSource` in the integration
+    loop with an EKF. The INS starts ``d_north_m`` north of the truth moving ``v_east_mps``
+    east, the filter's clock at ``clock_bias_m`` (truth 0); ``p0`` is the initial variance
+    diagonal (NaN entries: the IMU spec's bias variances; default: tight around the truth).
+    Optionally one corrupted epoch: ``bad_rate_mps`` added to the rates of ``bad_channels``
+    at ``bad_epoch_s``, their C/N0 set to ``cn0``. Returns the loop's columns and the
+    source."""
     import types
 
     from sdr_di.constants import OMEGA_E
@@ -189,87 +200,7 @@ def test_tight_source_pulls_an_ins_error_in_through_the_loop():
     from sdr_di.receiver.pvt import SatelliteStates, modelled_observables
 
     rate, fs, sow0, week = 200.0, 1000.0, 369000.0, 755
-    llh0 = np.array([math.radians(40.0), math.radians(116.0), 100.0])
-    r0 = llh_to_ecef(*llh0)
-    n = round(12.0 * rate) + 1
-    lat = llh0[0]
-    imu = types.SimpleNamespace(
-        t=np.arange(n) / rate, rate_hz=rate,
-        f_b=np.tile([0.0, 0.0, float(normal_gravity(lat, llh0[2]))], (n, 1)),
-        w_ib_b=np.tile([0.0, OMEGA_E * math.cos(lat), OMEGA_E * math.sin(lat)], (n, 1)))
-    C_n_e = C_e_n(llh0[0], llh0[1]).T
-    dirs = []
-    for az, el in ((10, 70), (100, 40), (190, 35), (280, 50), (45, 20)):
-        a, e = math.radians(az), math.radians(el)
-        dirs.append(C_n_e @ [math.sin(a) * math.cos(e), math.cos(a) * math.cos(e), math.sin(e)])
-    sat_r = r0 + 2.2e7 * np.array(dirs)
-    ns = len(dirs)
-    sat = SatelliteStates(np.ones(ns, bool), sat_r, np.zeros((ns, 3)), np.zeros(ns),
-                          np.zeros(ns), ())
-    epochs = []
-    for k in range(0, round(12.0 * fs), 200):                 # 5 Hz
-        P, D, _, _ = modelled_observables(sat, np.arange(ns), r0, np.zeros(3), 0.0, 0.0,
-                                          sow0 + k / fs, None)
-        obs = Observables(sample_index=k, week=week, sow=sow0 + k / fs,
-                          prn=np.arange(1, ns + 1), t_tx_week=np.full(ns, week),
-                          t_tx_sow=np.full(ns, sow0), pseudorange_m=P,
-                          pseudorange_rate_mps=D, doppler_hz=np.zeros(ns),
-                          carrier_phase_m=np.zeros(ns), cn0_dbhz=np.full(ns, 45.0))
-        epochs.append(GnssEpoch(k, obs, sat, None, None, {}))
-    ins = StrapdownINS(llh0 + [20.0 / 6.37e6, 0.0, 0.0], np.array([0.5, 0.0, 0.0]),
-                       att=np.zeros(3))
-    ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], 1.0 / rate)
-    T = 4 / rate
-    spec = ImuErrorModel()
-    Q = process_noise(T, gyro_random_walk_si=spec.gyro_random_walk_si,
-                      accel_random_walk_si=spec.accel_random_walk_si,
-                      gyro_bias_si=spec.gyro_bias_si, accel_bias_si=spec.accel_bias_si)
-    p0 = np.r_[[1e-3 ** 2] * 3, [1.0] * 3, (30 / 6.4e6) ** 2, (30 / 6.4e6) ** 2, 900.0,
-               [spec.gyro_bias_si ** 2] * 3, [spec.accel_bias_si ** 2] * 3, 2500.0, 1.0]
-    process, model = InsErrorModel(), RangeRateMeasurementModel()
-    kf = make_filter("ekf", process, model, np.zeros(17), np.diag(p0), Q, None, dt=T)
-    loop = IntegrationLoop(
-        imu=imu, t_if=imu.t, i_start=0, k_start=0, n_per=4, fs=fs, stop=10 ** 9, margin=0,
-        ins=ins, clock_bias_m=30.0, clock_drift_mps=0.0, kf=kf, process=process,
-        set_geometry=model.set_geometry, sow_of_sample=lambda k: sow0 + k / fs,
-        output_every=1)
-    src = TightRangeSource(epochs, list(range(1, ns + 1)), imu.t, (week, sow0), fs, {})
-    loop.run(src)
-    cols = loop.columns(ns)
-    assert np.all(cols["n"][9:] == ns)               # the first epoch in (0.18, 0.2] s
-    assert np.all(np.isnan(cols["nis"][:9]))        # no update before the first epoch
-    assert np.isfinite(cols["nis"]).sum() >= 55      # then one per epoch (5 Hz, 12 s)
-    north_m = (cols["llh"][:, 0] - llh0[0]) * 6.37e6
-    assert north_m[8] > 15.0                         # before the first update
-    assert abs(north_m[-1]) < 0.5
-    assert np.linalg.norm(cols["v"][-1]) < 0.05
-    assert abs(cols["b"][-1]) < 0.5                  # truth clock bias 0
-
-
-def _static_tight_setup(bad_epoch_s=None, bad_rate_mps=1.5, bad_channels=(0, 1), cn0=45.0,
-                        **src_kw):
-    """The static five-satellite tight set-up of the test above (exact observables, INS
-    started on the truth), optionally with one corrupted epoch: ``bad_rate_mps`` added to
-    the rates of ``bad_channels`` at ``bad_epoch_s``, their C/N0 set to ``cn0``. Returns
-    the loop's columns and the source."""
-    import types
-
-    from sdr_di.constants import OMEGA_E
-    from sdr_di.filters import make_filter
-    from sdr_di.frames import C_e_n, llh_to_ecef
-    from sdr_di.ins.error_model import InsErrorModel, process_noise
-    from sdr_di.ins.gravity import normal_gravity
-    from sdr_di.ins.imu import ImuErrorModel
-    from sdr_di.ins.mechanization import StrapdownINS
-    from sdr_di.integration.gnss_epochs import GnssEpoch
-    from sdr_di.integration.loop import IntegrationLoop
-    from sdr_di.integration.measurements import RangeRateMeasurementModel
-    from sdr_di.integration.tight_ranges import TightRangeSource
-    from sdr_di.receiver.observables import Observables
-    from sdr_di.receiver.pvt import SatelliteStates, modelled_observables
-
-    rate, fs, sow0, week, dur = 200.0, 1000.0, 369000.0, 755, 8.0
-    llh0 = np.array([math.radians(40.0), math.radians(116.0), 100.0])
+    llh0 = _LLH0
     r0 = llh_to_ecef(*llh0)
     n = round(dur * rate) + 1
     lat = llh0[0]
@@ -300,26 +231,48 @@ def _static_tight_setup(bad_epoch_s=None, bad_rate_mps=1.5, bad_channels=(0, 1),
                           pseudorange_rate_mps=D, doppler_hz=np.zeros(ns),
                           carrier_phase_m=np.zeros(ns), cn0_dbhz=c)
         epochs.append(GnssEpoch(k, obs, sat, None, None, {}))
-    ins = StrapdownINS(llh0.copy(), np.zeros(3), att=np.zeros(3))
+    ins = StrapdownINS(llh0 + [d_north_m / 6.37e6, 0.0, 0.0], np.array([v_east_mps, 0.0, 0.0]),
+                       att=np.zeros(3))
     ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], 1.0 / rate)
     T = 4 / rate
     spec = ImuErrorModel()
     Q = process_noise(T, gyro_random_walk_si=spec.gyro_random_walk_si,
                       accel_random_walk_si=spec.accel_random_walk_si,
                       gyro_bias_si=spec.gyro_bias_si, accel_bias_si=spec.accel_bias_si)
-    p0 = np.r_[[1e-3 ** 2] * 3, [0.01] * 3, (1 / 6.4e6) ** 2, (1 / 6.4e6) ** 2, 1.0,
-               [spec.gyro_bias_si ** 2] * 3, [spec.accel_bias_si ** 2] * 3, 1.0, 0.01]
+    biases = np.r_[[spec.gyro_bias_si ** 2] * 3, [spec.accel_bias_si ** 2] * 3]
+    if p0 is None:
+        p0 = np.r_[[1e-3 ** 2] * 3, [0.01] * 3, (1 / 6.4e6) ** 2, (1 / 6.4e6) ** 2, 1.0,
+                   biases, 1.0, 0.01]
+    p0 = np.where(np.isnan(p0), np.r_[np.zeros(9), biases, 0.0, 0.0], p0)
     process, model = InsErrorModel(), RangeRateMeasurementModel()
     kf = make_filter("ekf", process, model, np.zeros(17), np.diag(p0), Q, None, dt=T)
     loop = IntegrationLoop(
         imu=imu, t_if=imu.t, i_start=0, k_start=0, n_per=4, fs=fs, stop=10 ** 9, margin=0,
-        ins=ins, clock_bias_m=0.0, clock_drift_mps=0.0, kf=kf, process=process,
+        ins=ins, clock_bias_m=clock_bias_m, clock_drift_mps=0.0, kf=kf, process=process,
         set_geometry=model.set_geometry, sow_of_sample=lambda k: sow0 + k / fs,
         output_every=1)
     src = TightRangeSource(epochs, list(range(1, ns + 1)), imu.t, (week, sow0), fs, {},
                            **src_kw)
     loop.run(src)
     return loop.columns(ns), src
+
+
+def test_tight_source_pulls_an_ins_error_in_through_the_loop():
+    """Static receiver, five satellites, observables from the PVT's own forward model at the
+    truth (so only the INS error is seen): the tight source in the unchanged integration
+    loop pulls a 20 m north / 0.5 m/s east INS error and a 30 m clock error in."""
+    wide = np.r_[[1e-3 ** 2] * 3, [1.0] * 3, (30 / 6.4e6) ** 2, (30 / 6.4e6) ** 2, 900.0,
+                 [np.nan] * 6, 2500.0, 1.0]
+    cols, _ = _static_tight_setup(dur=12.0, d_north_m=20.0, v_east_mps=0.5, clock_bias_m=30.0,
+                                  p0=wide)
+    assert np.all(cols["n"][9:] == 5)                # the first epoch in (0.18, 0.2] s
+    assert np.all(np.isnan(cols["nis"][:9]))        # no update before the first epoch
+    assert np.isfinite(cols["nis"]).sum() >= 55      # then one per epoch (5 Hz, 12 s)
+    north_m = (cols["llh"][:, 0] - _LLH0[0]) * 6.37e6
+    assert north_m[8] > 15.0                         # before the first update
+    assert abs(north_m[-1]) < 0.5
+    assert np.linalg.norm(cols["v"][-1]) < 0.05
+    assert abs(cols["b"][-1]) < 0.5                  # truth clock bias 0
 
 
 @pytest.mark.parametrize("cn0", [45.0, math.nan])
