@@ -274,6 +274,20 @@ def load_assumptions(path: str | Path) -> Assumptions:
 
 
 # ------------------------------------------------------------------------------------------
+
+def _fixed_sigmas(a, need: tuple[str, ...], where: str, what: str, needs: str
+                  ) -> tuple[float, ...]:
+    """The ``need`` sigmas of a ``policy = "fixed"`` noise table, in order; a sigma the
+    command has no measurement for, or a missing one, is one error naming the key."""
+    bad = sorted(set(a.sigmas) - set(need))
+    if bad:
+        raise AssumptionsError(f"{where} [measurement_noise].{bad[0]}: not {what}: "
+                               f"{', '.join(need)})")
+    miss = [k for k in need if k not in a.sigmas]
+    if miss:
+        raise AssumptionsError(f"{where} [measurement_noise]: {needs} {', '.join(miss)}")
+    return tuple(a.sigmas[k] for k in need)
+
 def apply_to_lc(settings, a: Assumptions):
     """``LcSettings`` with the assumptions applied over its ``[lc]`` values (module notes).
 
@@ -295,16 +309,9 @@ def apply_to_lc(settings, a: Assumptions):
     if a.bias_time_s is not None:
         kw["bias_time_s"] = a.bias_time_s
     if a.noise_policy == "fixed":
-        need = ("sigma_pos_h_m", "sigma_pos_v_m", "sigma_vel_mps")
-        bad = sorted(set(a.sigmas) - set(need))
-        if bad:
-            raise AssumptionsError(f"{where} [measurement_noise].{bad[0]}: not an lc "
-                                   f"measurement (lc sigmas: {', '.join(need)})")
-        miss = [k for k in need if k not in a.sigmas]
-        if miss:
-            raise AssumptionsError(f"{where} [measurement_noise]: policy 'fixed' for lc needs "
-                                   f"{', '.join(miss)}")
-        kw["assumed_r_sigmas"] = tuple(a.sigmas[k] for k in need)
+        kw["assumed_r_sigmas"] = _fixed_sigmas(
+            a, ("sigma_pos_h_m", "sigma_pos_v_m", "sigma_vel_mps"), where,
+            "an lc measurement (lc sigmas", "policy 'fixed' for lc needs")
     elif a.noise_policy == "cn0":
         kw["assumed_r_sigmas"] = None
     arcmin = 60.0
@@ -359,16 +366,9 @@ def apply_to_deep(cfg, a: Assumptions):
                                "tight (ranges and rates); loose mode uses its fixes' "
                                "covariance")
     if a.noise_policy == "fixed":
-        need = ("sigma_range_m", "sigma_rate_mps")
-        bad = sorted(set(a.sigmas) - set(need))
-        if bad:
-            raise AssumptionsError(f"{where} [measurement_noise].{bad[0]}: not a deep/tight "
-                                   f"measurement (their sigmas: {', '.join(need)})")
-        miss = [k for k in need if k not in a.sigmas]
-        if miss:
-            raise AssumptionsError(f"{where} [measurement_noise]: policy 'fixed' needs "
-                                   f"{', '.join(miss)}")
-        kw["sigma_range_m"], kw["sigma_rate_mps"] = (a.sigmas[k] for k in need)
+        kw["sigma_range_m"], kw["sigma_rate_mps"] = _fixed_sigmas(
+            a, ("sigma_range_m", "sigma_rate_mps"), where,
+            "a deep/tight measurement (their sigmas", "policy 'fixed' needs")
     e, p = a.init_errors, a.p0
     for key, field in (("att_deg", "init_att_err_deg"), ("vel_mps", "init_vel_err_mps"),
                        ("pos_m", "init_pos_err_m")):
