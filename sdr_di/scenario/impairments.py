@@ -145,7 +145,7 @@ def parse_interference(raw: Any, where: str) -> tuple[Interference, ...]:
 
 def parse_multipath(raw: Any, where: str) -> tuple[Multipath, ...]:
     """``[[multipath]]`` array -> replicas (errors name ``where`` and the key)."""
-    from .schema import _REQUIRED, _parse_prn, _Reader
+    from .schema import _REQUIRED, _prn_or_all, _Reader
 
     if not isinstance(raw, list):
         raise ScenarioError(f"{where}: [[multipath]] must be an array of tables")
@@ -153,8 +153,7 @@ def parse_multipath(raw: Any, where: str) -> tuple[Multipath, ...]:
     for i, table in enumerate(raw):
         w = f"{where}: [[multipath]][{i}]"
         r = _Reader(table, w)
-        p = r._get("prn", _REQUIRED)
-        prn = None if p == "all" else _parse_prn(p, f"{w}.prn")
+        prn = _prn_or_all(r, w)
         alpha = r.num("alpha", _REQUIRED, lo=0.0, hi=1.0)
         phase = r.num("phase_deg", 0.0)
         if "reflector" in table:

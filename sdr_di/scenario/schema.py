@@ -286,6 +286,12 @@ def _parse_prn(value: Any, where: str) -> int:
         raise UnknownPrnError(f"{where}: {exc}") from None
 
 
+def _prn_or_all(r: _Reader, where: str) -> int | None:
+    """A table's required ``prn``: a PRN (as :func:`_parse_prn`) or ``"all"`` (None)."""
+    p = r._get("prn", _REQUIRED)
+    return None if p == "all" else _parse_prn(p, f"{where}.prn")
+
+
 def _parse_time(value: Any, scale: str, where: str) -> tuple[int, float]:
     if isinstance(value, _dt.datetime):
         t = value.replace(tzinfo=None)
@@ -456,8 +462,7 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     for i, o in enumerate(outages_raw):
         w = f"{where}: [[outage]][{i}]"
         r = _Reader(o, w)
-        p = r._get("prn", _REQUIRED)
-        prn = None if p == "all" else _parse_prn(p, f"{w}.prn")
+        prn = _prn_or_all(r, w)
         t0 = r.num("start_s", _REQUIRED, lo=0.0)
         t1 = r.num("end_s", _REQUIRED, lo=0.0)
         if t1 <= t0:
