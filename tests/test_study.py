@@ -231,8 +231,25 @@ def test_study_machinery_failures_resumption_and_refusal(tmp_path):
     other = parse_study(_fake_spec(6, bad_seed=seeds[2], div_seed=seeds[3], alpha=0.01))
     with pytest.raises(StudyError, match="different spec"):
         run_study(other, out, runs=2, workers=0)
+    # forced: runs whose cell run key is unchanged are kept (alpha decides no run), a new
+    # cell placed first runs alone, a cell whose parameters changed runs again
     forced = run_study(other, out, runs=2, workers=0, force=True)
-    assert forced.n_run == 4 and forced.n_skipped == 0
+    assert forced.n_run == 0 and forced.n_skipped == 4
+    assert _csv(out / "runs.csv") == [r for r in runs if int(r["seed_index"]) < 2]
+    edited = _fake_spec(6, bad_seed=seeds[2], div_seed=seeds[3])
+    edited["cells"] = [{"name": "new", "cell": "new"}, {"name": "good", "cell": "good"},
+                       {"name": "bad", "cell": "bad", "div_seed": seeds[0]}]
+    third = run_study(parse_study(edited), out, runs=2, workers=0, force=True)
+    assert third.n_run == 4 and third.n_skipped == 2
+    kept = {(r["cell"], r["seed_index"], r["filter"]): r for r in _csv(out / "runs.csv")}
+    for r in runs:
+        if r["cell"] == "good" and int(r["seed_index"]) < 2:
+            assert kept[("good", r["seed_index"], r["filter"])] == r
+    assert kept[("bad", "0", "ukf")]["status"] == "diverged"      # its new parameter took
+    # good's six seeds (kept for a later --runs 6) moved to its new index; old bad's removed
+    assert sorted(p.name for p in (out / "runs").glob("*.json")) == sorted(
+        [f"0_{i}.json" for i in range(2)] + [f"1_{i}.json" for i in range(6)]
+        + [f"2_{i}.json" for i in range(2)])
 
 
 def test_a_killed_worker_loses_only_its_task_which_runs_again_on_resume(tmp_path):

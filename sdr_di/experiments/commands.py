@@ -87,7 +87,7 @@ def add_parsers(subparsers) -> None:
                    help="local worker processes (default: number of cores; 0: run in this "
                    "process, no cluster)")
     p.add_argument("--force", action="store_true",
-                   help="replace a different study's runs in --out")
+                   help="replace a different study's runs in --out (runs of unchanged cells are kept)")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.set_defaults(func=cmd_study)
 

@@ -19,8 +19,11 @@ Execution
 * **Resumption**: ``study.json`` holds the spec hash (:attr:`~.study_spec.StudySpec.hash`).
   Re-running the same spec into the same folder skips every (cell, seed) with a record of
   that hash (except tasks lost with their worker, which run again); a different spec is
-  refused unless ``force`` (which removes the old runs). ``runs`` may grow: the first seeds
-  are the same.
+  refused unless ``force``. A forced rerun keeps every run whose cell run key
+  (:meth:`~.study_spec.StudySpec.run_key`: what decides the cell's runs, not its name, the
+  other cells or the claims) is unchanged, moved under the cell's new index, and removes the
+  others: adding a cell (say, the combination that one-factor results point to) or rewording
+  a claim reruns nothing else. ``runs`` may grow: the first seeds are the same.
 
 Outputs: ``cells.csv``, ``runs.csv``, ``comparisons.csv``, ``study.json``, ``report.html``
 (:mod:`.study_report`); ``docs/studies.md``.
@@ -100,6 +103,33 @@ def _same_study(out: Path, spec: StudySpec) -> bool:
         return False
 
 
+def _keep_unchanged_runs(spec: StudySpec, runs_dir: Path) -> None:
+    """Replace another study's runs by ``spec``'s: keep the finished runs whose cell run key
+    ``spec`` still has (renamed to their cell's index in ``spec`` and marked with its hash),
+    remove the rest (module notes)."""
+    wanted = {spec.run_key(c): c for c in range(len(spec.cells))}
+    old_dir = runs_dir.with_name(runs_dir.name + ".old")
+    shutil.rmtree(old_dir, ignore_errors=True)
+    runs_dir.rename(old_dir)
+    ensure_output_dir(runs_dir)
+    for path in sorted(old_dir.glob("*.json")):
+        try:
+            rec = read_json(path)
+        except (OSError, ValueError):
+            continue
+        if not isinstance(rec, dict) or rec.get("lost"):
+            continue
+        c, i = wanted.get(rec.get("run_key")), rec.get("seed_index")
+        if c is None or not isinstance(i, int):
+            continue
+        files = old_dir / path.stem
+        if files.is_dir():
+            files.rename(runs_dir / f"{c}_{i}")
+        rec.update(cell=spec.cells[c].name, cell_index=c, spec_hash=spec.hash)
+        write_json(_record_path(runs_dir, c, i), rec)
+    shutil.rmtree(old_dir)
+
+
 def _check_folder(spec: StudySpec, out: Path, force: bool) -> None:
     meta_path = out / "study.json"
     if not meta_path.is_file():
@@ -164,7 +194,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
     ensure_output_dir(out)
     runs_dir = out / "runs"
     if force and runs_dir.exists() and not _same_study(out, spec):
-        shutil.rmtree(runs_dir)
+        _keep_unchanged_runs(spec, runs_dir)
     ensure_output_dir(runs_dir)
     cache = out / "cache"
     seeds = [run_seed(spec.base_seed, i) for i in range(runs)]
@@ -181,7 +211,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
                 except (OSError, ValueError):
                     rec = None
                 if isinstance(rec, dict) and rec.get("spec_hash") == spec.hash \
-                        and not rec.get("lost"):
+                        and rec.get("run_key") == spec.run_key(c) and not rec.get("lost"):
                     records[(c, i)] = rec
                     continue
             name = f"study-{c}-{i}"
@@ -196,7 +226,8 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
 
     def done(task: Task, rec: dict) -> None:
         c, i = where[task.name]
-        rec.update(cell=spec.cells[c].name, cell_index=c, seed_index=i, spec_hash=spec.hash)
+        rec.update(cell=spec.cells[c].name, cell_index=c, seed_index=i, spec_hash=spec.hash,
+                   run_key=spec.run_key(c))
         write_run_record(runs_dir, rec, files_dir=runs_dir / f"{c}_{i}",
                          json_path=_record_path(runs_dir, c, i))
         rec.pop("files", None)

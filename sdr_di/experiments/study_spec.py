@@ -42,7 +42,11 @@ coupling mode, filter rate, sampling rate, any parameter of the experiment) with
 The *spec hash* covers everything that decides a run's result (the expanded cells, filters,
 experiment, seeds' base, statistics settings, claims, the content of the scenario files the
 cells read), not ``runs``: adding seeds to a
-finished study reuses its runs.
+finished study reuses its runs. A cell's *run key* (:meth:`StudySpec.run_key`) covers only
+what decides that cell's runs (experiment, filters, seeds' base, the cell's parameters and
+scenario file), not its name, the other cells, the baseline, the statistics or the claims:
+a forced rerun of an edited spec (a cell added, a claim reworded) keeps every run whose run
+key is unchanged.
 """
 
 from __future__ import annotations
@@ -124,6 +128,16 @@ class StudySpec:
                  "cells": [[c.name, c.params] for c in self.cells],
                  "claims": [dataclasses.asdict(c) for c in self.claims],
                  "scenario_files": _scenario_digests(self.cells)}
+        text = json.dumps(canon, sort_keys=True, default=str).encode()
+        return hashlib.sha256(text).hexdigest()[:16]
+
+    def run_key(self, c: int) -> str:
+        """SHA-256 (hex, 16 characters) of what decides the runs of cell ``c`` (module
+        docstring); equal in two specs exactly when the cell's runs would be the same."""
+        cell = self.cells[c]
+        canon = {"experiment": self.experiment, "filters": self.filters,
+                 "base_seed": self.base_seed, "params": cell.params,
+                 "scenario_files": _scenario_digests([cell])}
         text = json.dumps(canon, sort_keys=True, default=str).encode()
         return hashlib.sha256(text).hexdigest()[:16]
 
