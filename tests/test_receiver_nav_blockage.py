@@ -1,0 +1,81 @@
+"""A blockage that starts just before a subframe ends must not leave a wrong ephemeris.
+
+The scalar channel keeps demodulating bits until its lock detector declares the loss, a few
+hundred ms after the signal is gone. D1 words are BCH(15,11) coded, a perfect code: every
+noise word "corrects" to some codeword, so a subframe whose last bits are noise decodes
+without an error and completes the data set with wrong fields. Seen in the count-change
+experiment (7-3-7, seed 0, 2.5 MHz): C10 was blocked 120 ms before the end of its subframe 3,
+the record it then decoded had an argument of perigee 2.4e-5 rad off (1 km of satellite
+position, 40 m of modelled range), and that record stayed in force after the satellite came
+back, so the loose and tight couplings' gates rejected C10 for the rest of the run.
+
+The file (2.5 MHz, two D1 satellites, 19.6 s) starts one second before a D1 frame, so the
+channels decode subframes 1-3, the last one received at t = 19.07 s. The first satellite is
+blocked from 18.9 s (its last ~8 bits are noise), the second is never blocked.
+"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sdr_di.constants import C_LIGHT
+from sdr_di.orbits.broadcast import sat_pos_vel_clock
+from sdr_di.receiver.ifreader import IfSource
+from sdr_di.receiver.scalar import ScalarReceiver
+from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario, parse_scenario
+from sdr_di.sim.generate import generate_files, make_generator
+from sdr_di.timebase import bdt_to_datetime
+
+FS = 2.5e6
+T_BLOCK = 18.9      # the third subframe ends at ~19.07 s of file time
+
+
+@pytest.fixture(scope="module")
+def blocked_run(tmp_path_factory):
+    sc0 = load_scenario(DEFAULT_SCENARIO)
+    d1 = [s.prn for s in make_generator(sc0.with_overrides(duration_s=1.0)).sats
+          if s.is_d1][:2]
+    raw = json.loads(json.dumps(sc0.raw))
+    sow = math.ceil((sc0.sow + 1.0) / 30.0) * 30.0 - 1.0
+    raw["time"] = {"start": bdt_to_datetime(sc0.week, sow).isoformat(), "scale": "BDT"}
+    raw["scenario"]["duration_s"] = 19.6
+    raw["signal"]["sampling_rate_hz"] = FS
+    raw["satellites"]["prns"] = d1
+    raw["outage"] = [{"prn": d1[0], "start_s": T_BLOCK, "end_s": 30.0, "blockage": True}]
+    sc = parse_scenario(raw, source=sc0.source, base_dir=sc0.source.parent)
+    out = tmp_path_factory.mktemp("navblock")
+    meta = generate_files(sc, out, name="nb", progress=False)["metadata"]
+    gen = make_generator(sc)
+    rx = ScalarReceiver(log=False)
+    rx.run(IfSource.from_sidecar(meta), prns=d1)
+    return gen, rx, d1
+
+
+def _model_difference_m(eph, ref) -> tuple[float, float]:
+    """Satellite position [m] and clock [m] difference of two records over the hour
+    around the reference toe (largest over 5 times)."""
+    t = float(ref.toe) + np.linspace(-1800.0, 1800.0, 5)
+    p1, _, c1, _ = sat_pos_vel_clock(eph, t)
+    p2, _, c2, _ = sat_pos_vel_clock(ref, t)
+    return (float(np.max(np.linalg.norm(p1 - p2, axis=1))),
+            float(np.max(np.abs(c1 - c2))) * C_LIGHT)
+
+
+def test_subframe_ending_in_noise_gives_no_ephemeris(blocked_run):
+    gen, rx, (blocked, clear) = blocked_run
+    ref = {s.prn: s.eph for s in gen.sats}
+    # the satellite in view throughout decodes its record, equal to the simulated one
+    eph = rx.channels[clear].ephemeris
+    assert eph is not None, f"C{clear:02d}: no ephemeris decoded"
+    dpos, dclk = _model_difference_m(eph, ref[clear])
+    assert dpos < 0.05 and dclk < 0.05, (dpos, dclk)
+    # the blocked one: its subframe 3 ended in noise; no record rather than a wrong one
+    eph = rx.channels[blocked].ephemeris
+    if eph is not None:
+        dpos, dclk = _model_difference_m(eph, ref[blocked])
+        assert dpos < 0.05 and dclk < 0.05, (
+            f"C{blocked:02d}: decoded record {dpos:.1f} m / {dclk:.1f} m off the simulated one")
+    assert all(d["SOW"] % 30 != 12 for d in rx.channels[blocked].subframes), \
+        "the subframe that ended in noise was kept"
