@@ -250,3 +250,44 @@ def test_correlator_keeps_bit_windows_per_prn_list():
     ref = correlate(x, np.stack([table[3], table[5]]), [10.0, 20.5], 10.23e6, 0.0,
                     [100.0, -200.0], 20_000, 25e6)
     np.testing.assert_array_equal(r1.prompt, ref.prompt)
+
+
+def test_row_split_on_two_threads_is_identical_to_one_call():
+    """KernelThreads.run_rows: rows split between the caller and a worker thread give the
+    same bytes as one call on one thread, whatever the split (receiver.threads notes)."""
+    from sdr_di.receiver.threads import KernelThreads, balanced_cuts
+
+    assert balanced_cuts([1, 1, 1, 1], 2) == [0, 2, 4]
+    assert balanced_cuts([10, 1, 1, 1], 2) == [0, 1, 4]
+    assert balanced_cuts([5], 2) == [0, 1]
+    rng = np.random.default_rng(12)
+    n_rows, n_block = 9, 40_000
+    xs = rng.integers(-8, 8, 2 * n_block).astype(np.int8)
+    bits = bit_windows(padded_replicas(rng.choice(np.array([-1, 1], np.int8), size=(3, L))))
+    tab = rng.integers(0, 3, n_rows).astype(np.int64)
+    n = rng.integers(1_000, 30_000, n_rows).astype(np.int64)
+    start = np.array([rng.integers(0, n_block - m) for m in n], np.int64)
+    theta0, phi0 = rng.uniform(0, L, n_rows), rng.uniform(0, 1, n_rows)
+    dchip = np.full(n_rows, 10.23e6 / 25e6)
+    dphi = rng.uniform(-6e3, 6e3, n_rows) / 25e6
+    arg = np.outer(dphi, np.arange(CARRIER_BLOCK))
+    rot_re, rot_im = np.cos(2 * np.pi * (arg - np.floor(arg))), -np.sin(2 * np.pi * (arg - np.floor(arg)))
+    ridx = np.arange(n_rows, dtype=np.int64)
+
+    def run(threads):
+        out = np.full((n_rows, 3, 2), np.nan)
+
+        def rows_ab(a, b):
+            correlate_epl_bits(xs, 2, bits, tab[a:b], CODE_PAD, L, start[a:b], n[a:b],
+                               theta0[a:b], dchip[a:b], phi0[a:b], dphi[a:b], rot_re, rot_im,
+                               ridx[a:b], 0.5, 1, out[a:b])
+
+        kt = KernelThreads(threads)
+        used = [kt.run_rows(rows_ab, n) for _ in range(2)]
+        return out, used
+
+    one, used1 = run(1)
+    two, used2 = run(2)
+    assert used1 == [1, 1] and used2 == [min(2, KernelThreads().max_threads)] * 2
+    assert np.all(np.isfinite(one))
+    np.testing.assert_array_equal(two, one)

@@ -35,7 +35,6 @@ from ..receiver.correlator import (
     CODE_PAD,
     bit_windows,
     carrier_rotation,
-    kernel_tasks,
     padded_replicas,
     reduce_code_phase,
 )
@@ -312,15 +311,19 @@ class VectorTracking:
             return np.column_stack((a, a if b is None else b)).ravel()
 
         nsamp = pair(rows.nsamp, n_noise)
-        threads = self.kthreads.pick()
-        n_sub = kernel_tasks(2 * n_rows, int(nsamp.max()), threads)
         out = np.empty((2 * n_rows, 3, 2))
-        correlate_epl_bits(self.x_buf, self.n_comp, self.bits, pair(tab_idx), CODE_PAD,
-                           CODE_LENGTH_B3I, pair(rows.starts - self.buf0), nsamp,
-                           pair(th, th_noise), pair(np.repeat(rows.dchip, rows.reps)),
-                           pair(rows.phi), pair(rows.dphi), rot_re, rot_im,
-                           pair(np.arange(n_rows, dtype=np.int64)), self.pre.spacing, n_sub, out)
-        self.kthreads.record(threads, (time.perf_counter() - td) / float(nsamp.sum()))
+        x, n_comp, bits, spacing = self.x_buf, self.n_comp, self.bits, self.pre.spacing
+        tab, start, theta = pair(tab_idx), pair(rows.starts - self.buf0), pair(th, th_noise)
+        dchip, phi = pair(np.repeat(rows.dchip, rows.reps)), pair(rows.phi)
+        dphi, rot_idx = pair(rows.dphi), pair(np.arange(n_rows, dtype=np.int64))
+
+        def rows_ab(a, b):
+            # one task per row (n_sub = 1): a row's sums are the same on any thread
+            correlate_epl_bits(x, n_comp, bits, tab[a:b], CODE_PAD, CODE_LENGTH_B3I,
+                               start[a:b], nsamp[a:b], theta[a:b], dchip[a:b], phi[a:b],
+                               dphi[a:b], rot_re, rot_im, rot_idx[a:b], spacing, 1, out[a:b])
+
+        self.kthreads.run_rows(rows_ab, nsamp)
         epl = out.view(np.complex128)[..., 0]
         nz = epl[1::2]
         a = 0

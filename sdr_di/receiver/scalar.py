@@ -97,7 +97,6 @@ from .correlator import (
     bit_windows,
     carrier_rotation,
     check_prn,
-    kernel_tasks,
     padded_replicas,
 )
 from .ifreader import IfSource
@@ -157,14 +156,15 @@ class _Bank:
         start = par[0].astype(np.int64) - buf0
         nsamp = par[1].astype(np.int64)
         row_slot = np.repeat(np.array(slots, dtype=np.int64), reps)
-        threads = self.threads.pick()
-        n_sub = kernel_tasks(n_rows, int(nsamp.max()), threads)
         out = np.empty((n_rows, 3, 2))
-        t0 = time.perf_counter()
-        correlate_epl_bits(x, n_comp, self.tab, row_slot, CODE_PAD, CODE_LENGTH_B3I, start,
-                           nsamp, par[2], par[3], par[4], par[5], self.rot_re, self.rot_im,
-                           row_slot, self.spacing, n_sub, out)
-        self.threads.record(threads, (time.perf_counter() - t0) / float(nsamp.sum()))
+
+        def rows_ab(a, b):    # rows [a, b), one task per row (receiver.threads notes)
+            correlate_epl_bits(x, n_comp, self.tab, row_slot[a:b], CODE_PAD, CODE_LENGTH_B3I,
+                               start[a:b], nsamp[a:b], par[2, a:b], par[3, a:b], par[4, a:b],
+                               par[5, a:b], self.rot_re, self.rot_im, row_slot[a:b],
+                               self.spacing, 1, out[a:b])
+
+        self.threads.run_rows(rows_ab, nsamp)
         # (re, im) pairs are contiguous: a complex128 view gives Python complex E, P, L
         o = out.view(np.complex128).reshape(n_rows, 3).tolist()
         res = []
