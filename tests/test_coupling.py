@@ -174,14 +174,17 @@ _LLH0 = np.array([math.radians(40.0), math.radians(116.0), 100.0])
 
 def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0, p0=None,
                         bad_epoch_s=None, bad_rate_mps=1.5, bad_channels=(0, 1), cn0=45.0,
-                        **src_kw):
+                        background=False, **src_kw):
     """A static receiver at :data:`_LLH0` with five satellites, observables exact (the PVT's
     forward model at the truth), 5 Hz, through :class:`TightRangeSource` in the integration
     loop with an EKF. The INS starts ``d_north_m`` north of the truth moving ``v_east_mps``
     east, the filter's clock at ``clock_bias_m`` (truth 0); ``p0`` is the initial variance
     diagonal (NaN entries: the IMU spec's bias variances; default: tight around the truth).
     Optionally one corrupted epoch: ``bad_rate_mps`` added to the rates of ``bad_channels``
-    at ``bad_epoch_s``, their C/N0 set to ``cn0``. Returns the loop's columns and the
+    at ``bad_epoch_s``, their C/N0 set to ``cn0``. ``background``: as loose and tight mode
+    run it, the loop on a second thread (``BackgroundLoop``) waits for the epochs that
+    another thread records, with a column for an extra channel (PRN 40) that is never
+    seen and dropped at the end (``keep_columns``). Returns the loop's columns and the
     source."""
     import types
 
@@ -251,9 +254,32 @@ def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0
         ins=ins, clock_bias_m=clock_bias_m, clock_drift_mps=0.0, kf=kf, process=process,
         set_geometry=model.set_geometry, sow_of_sample=lambda k: sow0 + k / fs,
         output_every=1)
-    src = TightRangeSource(epochs, list(range(1, ns + 1)), imu.t, (week, sow0), fs, {},
+    if not background:
+        src = TightRangeSource(epochs, list(range(1, ns + 1)), imu.t, (week, sow0), fs, {},
+                               **src_kw)
+        loop.run(src)
+        return loop.columns(ns), src
+    import threading
+    import time
+
+    from sdr_di.integration.gnss_epochs import GnssEpochRecorder
+    from sdr_di.integration.loop import BackgroundLoop
+
+    rec = GnssEpochRecorder(None, None)
+    src = TightRangeSource(rec, list(range(1, ns + 1)) + [40], imu.t, (week, sow0), fs, {},
                            **src_kw)
-    loop.run(src)
+
+    def produce():
+        for ep in epochs:
+            time.sleep(0.1)               # slower than the loop: it catches up and waits
+            rec.append(ep)
+        rec.close()
+
+    producer = threading.Thread(target=produce)
+    producer.start()
+    BackgroundLoop(loop, src).join()
+    producer.join()
+    src.keep_columns(range(1, ns + 1), loop.rows)
     return loop.columns(ns), src
 
 
@@ -293,6 +319,31 @@ def test_tight_gate_keeps_a_lost_channels_rate_out(cn0):
     assert np.linalg.norm(off["v"], axis=1).max() > 0.05
     _, src0 = _static_tight_setup()
     assert src0.n_gated == 0 and src0.n_screened == 0     # nothing good rejected
+
+
+def test_loop_behind_the_receiver_gives_the_rows_of_a_loop_after_it():
+    """Loose and tight mode run the loop on a second thread while the scalar receiver still
+    records epochs: the loop waits for each epoch it needs, so its rows are those of a loop
+    run over the finished list, bit for bit (with a corrupted epoch, so the gate acts)."""
+    seq, s_seq = _static_tight_setup(dur=4.0, bad_epoch_s=2.0)
+    bg, s_bg = _static_tight_setup(dur=4.0, bad_epoch_s=2.0, background=True)
+    assert s_bg.prns == s_seq.prns and s_bg.n_gated == s_seq.n_gated == 2
+    assert seq.keys() == bg.keys()
+    for k in seq:
+        assert seq[k].shape == bg[k].shape, k
+        assert np.array_equal(seq[k], bg[k], equal_nan=True), k
+
+
+def test_gate_quantile_is_scipys_chi2_ppf():
+    """The gate's chi-square quantile (computed without importing scipy.stats) is the value
+    ``scipy.stats.chi2.ppf`` gives, bit for bit."""
+    from scipy.stats import chi2
+
+    from sdr_di.integration.gnss_epochs import _chi2_quantile
+
+    for p in (1 - 1e-4, 1 - 1e-2, 0.5):
+        for dof in (1, 2, 6, 14):
+            assert _chi2_quantile(p, dof) == float(chi2.ppf(p, dof))
 
 
 def test_loose_gate_drops_a_fix_outside_its_innovation_covariance_and_recovers():

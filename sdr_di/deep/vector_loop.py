@@ -116,7 +116,7 @@ from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..integration.assumptions import FixedNoiseSource
 from ..integration.gnss_epochs import GnssEpochRecorder
-from ..integration.loop import IntegrationLoop
+from ..integration.loop import BackgroundLoop, IntegrationLoop
 from ..integration.loose_fixes import LooseFixSource
 from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
 from ..integration.metrics import summarize
@@ -563,12 +563,22 @@ class DeepReceiver:
                 recorder.record(sample, obs)
                 # lost channels are searched around, and timed from, the last fix
                 rx.predictor = FixPredictor(engine, fs, source.carrier_hz)
+                # the integration loop runs behind the receiver, on a second thread
+                hand["coupled"] = self._start_scalar_coupled_loop(
+                    source, imu, off, n_per, stop, rx, engine, hand, recorder, truth)
                 return False
             return False
 
         t0 = time.perf_counter()
-        rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=_EPOCH_S,
-               stop_sample=stop, assist=assist)
+        try:
+            rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=_EPOCH_S,
+                   stop_sample=stop, assist=assist)
+        except BaseException:
+            recorder.close()
+            if "coupled" in hand:
+                hand["coupled"]["thread"].abort()
+            raise
+        recorder.close()
         t_scalar = time.perf_counter() - t0
         if "sample" not in hand:
             found = [c.prn for c in rx.channels.values() if c.n_acquisitions > 0]
@@ -578,8 +588,7 @@ class DeepReceiver:
                  f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
                  "ephemeris and a valid fix"))
         if cfg.mode != "deep":
-            return self._scalar_coupled_loop(source, imu, off, n_per, stop, rx, engine,
-                                             hand, recorder.epochs, truth, t_scalar, t_all)
+            return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
         return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
                                  hand, truth, progress, t_scalar, t_all)
 
@@ -659,14 +668,16 @@ class DeepReceiver:
             nav_change=col["nav"], navigation=navigation, mode=self.config.mode)
 
     # ------------------------------------------------------------------------------------
-    def _scalar_coupled_loop(self, source, imu, off, n_per, stop, rx, engine, hand, epochs,
-                             truth, t_scalar, t_all) -> DeepResult:
-        """Loose or tight mode after the scalar receiver's whole run (module notes).
+    def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, rx, engine, hand,
+                                   recorder, truth) -> dict:
+        """Loose or tight mode: start the loop at the hand-over (module notes).
 
         Same hand-over grid point, INS alignment, clock and filter as :meth:`_vector_loop`;
         the loop's measurement source is :class:`~sdr_di.integration.loose_fixes.
         LooseFixSource` or :class:`~sdr_di.integration.tight_ranges.TightRangeSource` over
-        the recorded epochs.
+        the epochs the scalar receiver records; the loop runs on a second thread behind the
+        receiver (:class:`~sdr_di.integration.loop.BackgroundLoop`), with a channel column
+        for every channel of the receiver until :meth:`_finish_scalar_coupled_loop`.
         """
         cfg = self.config
         fs = source.sampling_rate_hz
@@ -683,12 +694,12 @@ class DeepReceiver:
         loose = cfg.mode == "loose"
         model = LooseMeasurementModel() if loose else RangeRateMeasurementModel()
         kf, process, meas = self._make_filter(T, sol, llh_fix, att_sig, model)
-        later = sorted({int(p) for ep in epochs for p in ep.obs.prn} - set(hand["prns"]))
-        prns = tuple(hand["prns"]) + tuple(later)
-        prof = {"scalar": t_scalar, "measure": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
+        others = sorted(set(int(p) for p in rx.channels) - set(hand["prns"]))
+        prns = tuple(hand["prns"]) + tuple(others)
+        prof = {"scalar": 0.0, "measure": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
         imu_epoch = (clock.week, clock.sow(0) + off)     # BDT of IMU t = 0 (module notes)
         src_cls = LooseFixSource if loose else TightRangeSource
-        src = src_cls(epochs, prns, imu.t, imu_epoch, fs, prof)
+        src = src_cls(recorder, prns, imu.t, imu_epoch, fs, prof)
         n1 = round(fs * 1e-3)            # deep's margin, so that the windows are the same
         loop = IntegrationLoop(
             imu=imu, t_if=t_if, i_start=i_h, k_start=k_grid0, n_per=n_per, fs=fs, stop=stop,
@@ -698,10 +709,24 @@ class DeepReceiver:
             output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
             profile=prof)
         adapt0 = kf.adaptation_time_s
-        loop.run(src if loose or cfg.noise_policy == "cn0" else FixedNoiseSource(
-            src, cfg.sigma_range_m, cfg.sigma_rate_mps))
-        return self._result(loop, clock, prns, kf, adapt0, k_grid0, prof, t_all,
-                            src.navigation)
+        thread = BackgroundLoop(loop, src if loose or cfg.noise_policy == "cn0" else
+                                FixedNoiseSource(src, cfg.sigma_range_m, cfg.sigma_rate_mps))
+        return {"thread": thread, "loop": loop, "src": src, "clock": clock, "kf": kf,
+                "adapt0": adapt0, "k_grid0": k_grid0, "prof": prof}
+
+    def _finish_scalar_coupled_loop(self, hand, epochs, t_scalar, t_all) -> DeepResult:
+        """Loose or tight mode: wait for the loop (:meth:`_start_scalar_coupled_loop`),
+        keep the channel columns of the handed-over PRNs and of those the receiver acquired
+        later, in that order."""
+        run = hand["coupled"]
+        run["thread"].join()
+        loop, src, prof = run["loop"], run["src"], run["prof"]
+        prof["scalar"] = t_scalar
+        later = sorted({int(p) for ep in epochs for p in ep.obs.prn} - set(hand["prns"]))
+        prns = tuple(hand["prns"]) + tuple(later)
+        src.keep_columns(prns, loop.rows)
+        return self._result(loop, run["clock"], prns, run["kf"], run["adapt0"],
+                            run["k_grid0"], prof, t_all, src.navigation)
 
     # ------------------------------------------------------------------------------------
     def _handover_channels(self, rx: ScalarReceiver, navdata: NavDataInForce, hand: dict,

@@ -48,7 +48,9 @@ epochs, when ``z`` is None and the filter only predicts.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import threading
 import time
 
 import numpy as np
@@ -60,6 +62,17 @@ from ..receiver.pvt import PvtEngine, PvtSolution, SatelliteStates, satellite_st
 from .loop import IntegrationLoop, Interval, Measurements
 
 __all__ = ["GnssEpoch", "GnssEpochRecorder", "ScalarEpochSource"]
+
+
+@functools.lru_cache(maxsize=64)
+def _chi2_quantile(p: float, dof: int) -> float:
+    """Chi-square quantile ``F^-1(p)`` with ``dof`` degrees of freedom: ``2 P^-1(dof/2, p)``
+    (inverse regularized lower incomplete gamma), the formula ``scipy.stats.chi2.ppf``
+    evaluates, so the same value, without importing ``scipy.stats`` (about 0.6 s of every
+    loose/tight run's start, a sixth of its integration loop on a 25 s file)."""
+    from scipy.special import gammaincinv
+
+    return float(2.0 * gammaincinv(dof / 2.0, p))
 
 
 @dataclasses.dataclass
@@ -93,6 +106,10 @@ class GnssEpoch:
 class GnssEpochRecorder:
     """Records the scalar receiver's epochs after the hand-over (module notes).
 
+    The epochs are also a stream: the integration loop may consume them on another thread
+    while the scalar receiver is still producing them (:meth:`wait_for`; the producer calls
+    :meth:`close` when it has recorded its last epoch). A recorded epoch is never changed.
+
     Parameters
     ----------
     engine : PvtEngine
@@ -105,6 +122,24 @@ class GnssEpochRecorder:
     def __init__(self, engine: PvtEngine, navdata) -> None:
         self.engine, self.navdata = engine, navdata
         self.epochs: list[GnssEpoch] = []
+        self.closed = False
+        self._cond = threading.Condition()
+
+    def close(self) -> None:
+        """No more epochs: wakes a consumer waiting in :meth:`wait_for`."""
+        with self._cond:
+            self.closed = True
+            self._cond.notify_all()
+
+    def wait_for(self, i: int) -> bool:
+        """Block until epoch ``i`` is recorded (True) or the recorder is closed without it
+        (False)."""
+        if i < len(self.epochs):
+            return True
+        with self._cond:
+            while i >= len(self.epochs) and not self.closed:
+                self._cond.wait()
+            return i < len(self.epochs)
 
     def record(self, sample: int, channels: list) -> GnssEpoch:
         """PVT of the epoch at ``sample`` from the channel observations; kept and returned."""
@@ -120,8 +155,13 @@ class GnssEpochRecorder:
                 except SdrDiError:
                     continue
                 nav[int(prn)] = (int(e.week), float(e.toe), int(e.AODE), src)
-        ep = GnssEpoch(int(sample), obs, sat, self.navdata.klobuchar, sol, nav)
-        self.epochs.append(ep)
+        return self.append(GnssEpoch(int(sample), obs, sat, self.navdata.klobuchar, sol, nav))
+
+    def append(self, ep: GnssEpoch) -> GnssEpoch:
+        """Keep ``ep`` (after the last one) and wake a waiting consumer; returns ``ep``."""
+        with self._cond:
+            self.epochs.append(ep)
+            self._cond.notify_all()
         return ep
 
 
@@ -131,10 +171,11 @@ class ScalarEpochSource:
 
     Parameters
     ----------
-    epochs : list of GnssEpoch
-        The recorded epochs, in time order.
+    epochs : list of GnssEpoch or GnssEpochRecorder
+        The recorded epochs, in time order; a recorder: its epochs, waited for as the
+        scalar receiver records them (:meth:`GnssEpochRecorder.wait_for`).
     prns : sequence of int
-        Channel columns.
+        Channel columns (:meth:`keep_columns` narrows them after the run).
     imu_t : (n,) array
         IMU sample times [s].
     imu_epoch : (int, float)
@@ -154,7 +195,8 @@ class ScalarEpochSource:
     def __init__(self, epochs: list[GnssEpoch], prns, imu_t: np.ndarray, imu_epoch,
                  fs: float, profile: dict, *, min_cn0_dbhz: float | None = 20.0,
                  gate_alpha: float = 1e-4, gate_reset_epochs: int = 5) -> None:
-        self.epochs = epochs
+        self._wait = epochs.wait_for if isinstance(epochs, GnssEpochRecorder) else None
+        self.epochs = epochs.epochs if isinstance(epochs, GnssEpochRecorder) else epochs
         self.prns = tuple(int(p) for p in prns)
         self.col = {p: i for i, p in enumerate(self.prns)}
         self.n_channels = len(self.prns)
@@ -206,7 +248,8 @@ class ScalarEpochSource:
         skipped (at most one per interval while ``gnss_rate_hz`` <= the filter rate)."""
         t1 = self.imu_t[iv.i1]
         found = None
-        while self._next < len(self.epochs):
+        while (self._next < len(self.epochs) if self._wait is None
+               else self._wait(self._next)):
             ep = self.epochs[self._next]
             t = self.imu_time(*self.bdt_of(ep, self.epoch_clock_bias(loop, iv, ep)))
             if t > t1:
@@ -231,9 +274,7 @@ class ScalarEpochSource:
 
     def gate_limit(self, dof: int) -> float:
         """Chi-square quantile at ``1 - gate_alpha`` with ``dof`` degrees of freedom."""
-        from scipy.stats import chi2
-
-        return float(chi2.ppf(1.0 - self.gate_alpha, dof))
+        return _chi2_quantile(1.0 - self.gate_alpha, int(dof))
 
     def innovation_covariance(self, loop: IntegrationLoop, m: Measurements) -> np.ndarray:
         """``S = H P H^T + R`` of ``m`` with the filter's current ``P`` (module notes)."""
@@ -286,6 +327,19 @@ class ScalarEpochSource:
     def measurement(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> Measurements:
         """``z``, ``R``, geometry and channels of epoch ``ep`` (subclasses)."""
         raise NotImplementedError
+
+    def keep_columns(self, prns, rows: dict) -> None:
+        """Narrow the channel columns to ``prns`` (a subset of :attr:`prns`, any order), in
+        the source and in the loop's ``rows`` (``used``, ``cn0``): a loop run behind the
+        scalar receiver starts with a column for every channel of the receiver, since which
+        of them will be acquired later is known only at the end."""
+        idx = [self.col[int(p)] for p in prns]
+        for key in ("used", "cn0"):
+            rows[key] = [np.asarray(r)[idx] for r in rows[key]]
+        self.prns = tuple(int(p) for p in prns)
+        self.col = {p: i for i, p in enumerate(self.prns)}
+        self.n_channels = len(self.prns)
+        self._used, self._cn0 = self._used[idx], self._cn0[idx]
 
     def used_mask(self, prns) -> np.ndarray:
         """Channel mask of ``prns``."""

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 import time
 from collections.abc import Callable
 from typing import Protocol
@@ -40,7 +41,8 @@ from ..constants import C_LIGHT
 from ..ins.error_model import NavState
 from .metrics import nav_errors
 
-__all__ = ["IntegrationLoop", "Interval", "MeasurementSource", "Measurements"]
+__all__ = ["BackgroundLoop", "IntegrationLoop", "Interval", "MeasurementSource",
+           "Measurements"]
 
 #: Columns of :attr:`IntegrationLoop.rows` (one entry per solution row).
 ROW_KEYS = ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve", "pe", "used", "cn0",
@@ -210,11 +212,13 @@ class IntegrationLoop:
         self.rows: dict = {k: [] for k in ROW_KEYS}
         self._nis = [0.0, 0]
         self._next_progress = 0.0
+        self.stop_requested = False      # set from another thread: end after this interval
 
     # ------------------------------------------------------------------------------------
     def run(self, source: MeasurementSource) -> None:
-        """Run the loop until the IMU or the IF data ends (module notes)."""
-        while (iv := self.next_interval()) is not None:
+        """Run the loop until the IMU or the IF data ends (module notes), or until
+        :attr:`stop_requested` is set."""
+        while not self.stop_requested and (iv := self.next_interval()) is not None:
             self.propagate_ins(iv)
             m = source.measure(self, iv)
             if m is None:
@@ -337,3 +341,46 @@ class IntegrationLoop:
         out["cn0"] = arr("cn0", n_ch)
         return out
 
+
+
+class BackgroundLoop:
+    """:meth:`IntegrationLoop.run` on a second thread.
+
+    Loose and tight mode run the loop behind the scalar receiver, which does not depend on
+    the filter: the source waits for each GNSS epoch as the receiver records it
+    (:class:`~sdr_di.integration.gnss_epochs.GnssEpochRecorder`), and the loop's Python
+    work overlaps the receiver's correlation kernels, which release the GIL. The rows are
+    the same as those of a loop run after the receiver: the loop sees the same epochs in
+    the same order, whenever they arrive.
+
+    Parameters
+    ----------
+    loop : IntegrationLoop
+    source : MeasurementSource
+    """
+
+    def __init__(self, loop: IntegrationLoop, source: MeasurementSource) -> None:
+        self.loop, self.source = loop, source
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="sdr-di integration loop",
+                                        daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            self.loop.run(self.source)
+        except BaseException as e:  # noqa: BLE001 - re-raised on the caller's thread
+            self.error = e
+
+    def join(self) -> None:
+        """Wait for the loop to end; re-raise its exception here."""
+        self._thread.join()
+        if self.error is not None:
+            raise self.error
+
+    def abort(self) -> None:
+        """End the loop after its current interval and wait for it (the caller failed; the
+        loop's own exception, if any, is dropped). The source must not be left waiting:
+        close its epoch stream first."""
+        self.loop.stop_requested = True
+        self._thread.join()
