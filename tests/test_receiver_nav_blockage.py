@@ -12,8 +12,12 @@ back, so the loose and tight couplings' gates rejected C10 for the rest of the r
 The file (2.5 MHz, two D1 satellites, 19.6 s) starts one second before a D1 frame, so the
 channels decode subframes 1-3, the last one received at t = 19.07 s. The first satellite is
 blocked from 18.9 s (its last ~8 bits are noise), the second is never blocked.
+
+Second line of defence (:class:`~sdr_di.receiver.navdata.NavDataInForce`): a wrong first copy
+of a data set is replaced once two later copies agree against it.
 """
 
+import dataclasses
 import json
 import math
 
@@ -22,9 +26,11 @@ import pytest
 
 from sdr_di.constants import C_LIGHT
 from sdr_di.orbits.broadcast import sat_pos_vel_clock
+from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.receiver.ifreader import IfSource
+from sdr_di.receiver.navdata import BROADCAST, NavDataInForce
 from sdr_di.receiver.scalar import ScalarReceiver
-from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario, parse_scenario
+from sdr_di.scenario import DEFAULT_SCENARIO, REPO_ROOT, load_scenario, parse_scenario
 from sdr_di.sim.generate import generate_files, make_generator
 from sdr_di.timebase import bdt_to_datetime
 
@@ -79,3 +85,25 @@ def test_subframe_ending_in_noise_gives_no_ephemeris(blocked_run):
             f"C{blocked:02d}: decoded record {dpos:.1f} m / {dclk:.1f} m off the simulated one")
     assert all(d["SOW"] % 30 != 12 for d in rx.channels[blocked].subframes), \
         "the subframe that ended in noise was kept"
+
+
+def test_two_agreeing_copies_replace_a_wrong_first_copy():
+    nav = load_nav(REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz")
+    good = next(r for r in nav.records[10] if r.toe == 367200.0)
+    wrong = dataclasses.replace(good, omega=good.omega - 2.4e-5)   # the count-change copy
+    sow = 367200.0 + 1800.0
+    nd = NavDataInForce(nav)
+    assert nd.offer_ephemeris(wrong, 18.2)
+    assert nd.select_with_source(10, good.week, sow) == (wrong, BROADCAST)
+    # one good copy against the wrong one: undecided, the first stays (counted)
+    copy1 = dataclasses.replace(good)
+    assert not nd.offer_ephemeris(copy1, 48.2) and nd.n_conflicts == 1
+    assert not nd.offer_ephemeris(copy1, 48.4)      # the same copy offered again is no vote
+    assert nd.select(10, good.week, sow) is wrong and nd.n_conflicts == 1
+    # a second good copy agrees with the first: two against one
+    copy2 = dataclasses.replace(good)
+    assert nd.offer_ephemeris(copy2, 78.2)
+    assert nd.select_with_source(10, good.week, sow) == (copy2, BROADCAST)
+    # and a copy of the wrong one now is a single dissent again
+    assert not nd.offer_ephemeris(dataclasses.replace(wrong), 108.2)
+    assert nd.select(10, good.week, sow) is copy2

@@ -18,9 +18,13 @@ Validity checks on a decoded record (the same for every mode)
   :class:`~sdr_di.orbits.rinex_nav.NavData`, is used until a healthy one is decoded);
 * **data-set change** by (week, toe, AODE): a record with the data-set identity of the one in
   force changes nothing (a second copy whose other fields differ is a decoding error the BCH
-  code missed, counted in ``n_conflicts`` and ignored); a record whose toe is *older* than
-  the one in force is stale and rejected (``n_rejected``); a newer toe, or the same toe with
-  another AODE (a new upload), replaces it;
+  code missed, counted in ``n_conflicts`` and ignored), unless a later copy (another decoded
+  object, not the same one offered again) agrees with that differing one: two copies
+  against one replace the record in force, so a wrong first copy
+  (bits decoded after the signal was gone; :mod:`~sdr_di.receiver.channel` notes) is
+  corrected by the next frame instead of staying in force for the data set's life; a
+  record whose toe is *older* than the one in force is stale and rejected (``n_rejected``);
+  a newer toe, or the same toe with another AODE (a new upload), replaces it;
 * **toe age** at use: a decoded record is in force while ``|t - toe|`` is within
   ``max_age_s`` (:data:`~sdr_di.orbits.rinex_nav.DEFAULT_MAX_AGE_S`, GEO
   :data:`~sdr_di.orbits.rinex_nav.DEFAULT_MAX_AGE_GEO_S`), as for the assistance records.
@@ -122,6 +126,7 @@ class NavDataInForce:
         self.events: list[NavEvent] = []
         self.n_conflicts = 0
         self.n_rejected = 0
+        self._challenger: dict[int, Ephemeris] = {}  # a differing copy of the set in force
         if decoded:
             self.offer_decoded(decoded)
 
@@ -147,12 +152,20 @@ class NavDataInForce:
             return True
         if cur is not None:
             if (cur.week, cur.toe, cur.AODE) == (eph.week, eph.toe, eph.AODE):
-                if cur != eph:
-                    self.n_conflicts += 1
-                return False
+                if cur == eph:
+                    self._challenger.pop(prn, None)  # two copies agree with the one in force
+                    return False
+                ch = self._challenger.get(prn)
+                if ch is eph:               # the same decoded copy offered again
+                    return False
+                self.n_conflicts += 1
+                if ch != eph:
+                    self._challenger[prn] = eph
+                    return False
             if _toe_abs(eph) < _toe_abs(cur):
                 self.n_rejected += 1
                 return False
+        self._challenger.pop(prn, None)
         self._decoded[prn] = eph
         self.events.append(NavEvent(t_s, "ephemeris", prn, eph.toe, eph.week, eph.AODE))
         return True
