@@ -283,7 +283,9 @@ def test_row_split_on_two_threads_is_identical_to_one_call():
                                ridx[a:b], 0.5, 1, out[a:b])
 
         kt = KernelThreads(threads)
-        used = [kt.run_rows(rows_ab, n) for _ in range(2)]
+        calls = []
+        used = [kt.run_rows(rows_ab, n, before=b) for b in (None, lambda: calls.append(1))]
+        assert calls == [1]          # `before` runs once, on the caller
         return out, used
 
     one, used1 = run(1)

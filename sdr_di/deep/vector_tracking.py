@@ -39,7 +39,7 @@ from ..receiver.correlator import (
     reduce_code_phase,
 )
 from ..receiver.ifreader import IfSource
-from ..receiver.lock import NOISE_SAMPLES, PostCorrelationNoise, noise_code_phase
+from ..receiver.lock import NOISE_SAMPLES, PostCorrelationNoise, noise_code_phases
 from ..receiver.navdata import NavDataInForce
 from ..receiver.observables import ReceiverTime
 from ..receiver.scalar import ScalarReceiver
@@ -226,7 +226,9 @@ class VectorTracking:
         rows = self.command_ncos(iv)
         if not self.load_samples(rows):
             return None
-        E, P, L = self.correlate(rows)
+        # the filter's predict does not need this interval's correlations: it runs on this
+        # thread while the kernel's worker thread correlates (receiver.threads notes)
+        E, P, L = self.correlate(rows, before=lambda: loop.predict_filter(iv))
         return self.prefilter(iv, rows, E, P, L)
 
     def command_ncos(self, iv: Interval) -> _EpochRows:
@@ -289,54 +291,69 @@ class VectorTracking:
         self.profile["read"] += time.perf_counter() - tc
         return True
 
-    def correlate(self, rows: _EpochRows):
+    def correlate(self, rows: _EpochRows, before=None):
         """Early, prompt, late of every epoch of every channel: one call of the receiver's
         kernel on the stored samples (bit-window replicas, one rotation row per epoch), NH
         code wiped off. Returns ``(E, P, L)`` complex (n_rows,). The same call runs each
         epoch's noise correlator (its first ``NOISE_SAMPLES`` samples, far from the
         prompt's code phase: :mod:`~sdr_di.receiver.lock` notes), whose sums go to the
-        channels' :class:`~sdr_di.receiver.lock.PostCorrelationNoise`."""
+        channels' :class:`~sdr_di.receiver.lock.PostCorrelationNoise`. ``before``: work
+        for this thread while the kernel's worker starts (:meth:`~sdr_di.receiver.threads.
+        KernelThreads.run_rows`; its time is not counted here)."""
         td = time.perf_counter()
+        t_before = [0.0]
+
+        def timed_before():
+            tb = time.perf_counter()
+            before()
+            t_before[0] += time.perf_counter() - tb
         n_rows = rows.starts.size
-        tab_idx = np.repeat(self.chan_idx, rows.reps)
-        rot_re, rot_im = carrier_rotation(rows.dphi)
         th = reduce_code_phase(rows.theta, CODE_LENGTH_B3I)
         n_noise = np.minimum(rows.nsamp, NOISE_SAMPLES)
-        th_noise = np.array([noise_code_phase(t, e)
-                             for t, e in zip(th.tolist(), rows.epoch.tolist())])
+        th_noise = noise_code_phases(th, rows.epoch)
 
         def pair(a, b=None):
             # each epoch's noise row right after it: the kernel's threads take contiguous
-            # halves of the rows, which then hold equal work
-            return np.column_stack((a, a if b is None else b)).ravel()
+            # parts of the rows, which then hold equal work
+            out = np.empty(2 * a.size, a.dtype)
+            out[0::2] = a
+            out[1::2] = a if b is None else b
+            return out
 
         nsamp = pair(rows.nsamp, n_noise)
         out = np.empty((2 * n_rows, 3, 2))
         x, n_comp, bits, spacing = self.x_buf, self.n_comp, self.bits, self.pre.spacing
-        tab, start, theta = pair(tab_idx), pair(rows.starts - self.buf0), pair(th, th_noise)
-        dchip, phi = pair(np.repeat(rows.dchip, rows.reps)), pair(rows.phi)
-        dphi, rot_idx = pair(rows.dphi), pair(np.arange(n_rows, dtype=np.int64))
+        tab, start = pair(np.repeat(self.chan_idx, rows.reps)), pair(rows.starts - self.buf0)
+        theta, dchip = pair(th, th_noise), pair(np.repeat(rows.dchip, rows.reps))
+        phi, dphi = pair(rows.phi), pair(rows.dphi)
+        rot_idx = pair(np.arange(n_rows, dtype=np.int64))
 
         def rows_ab(a, b):
-            # one task per row (n_sub = 1): a row's sums are the same on any thread
+            # one task per row (n_sub = 1): a row's sums are the same on any thread; the
+            # carrier rotation tables of the part's epochs are made here, on its thread
+            # (elementwise: the same values as made all at once)
+            e0 = a // 2
+            rot_re, rot_im = carrier_rotation(rows.dphi[e0:(b + 1) // 2])
             correlate_epl_bits(x, n_comp, bits, tab[a:b], CODE_PAD, CODE_LENGTH_B3I,
                                start[a:b], nsamp[a:b], theta[a:b], dchip[a:b], phi[a:b],
-                               dphi[a:b], rot_re, rot_im, rot_idx[a:b], spacing, 1, out[a:b])
+                               dphi[a:b], rot_re, rot_im, rot_idx[a:b] - e0, spacing, 1,
+                               out[a:b])
 
-        self.kthreads.run_rows(rows_ab, nsamp)
+        self.kthreads.run_rows(rows_ab, nsamp, None if before is None else timed_before)
         epl = out.view(np.complex128)[..., 0]
         nz = epl[1::2]
         a = 0
+        nz_e, nz_p, nz_l, nn = (nz[:, 0].tolist(), nz[:, 1].tolist(), nz[:, 2].tolist(),
+                                n_noise.tolist())    # Python numbers: cheaper per value
         for c, cnt in zip(self.chans, rows.reps):
             if cnt:
-                c.noise.add(nz[a:a + cnt, 0], nz[a:a + cnt, 1], nz[a:a + cnt, 2],
-                            n_noise[a:a + cnt])
+                c.noise.add(nz_e[a:a + cnt], nz_p[a:a + cnt], nz_l[a:a + cnt], nn[a:a + cnt])
             a += cnt
         epl = epl[0::2]
         E = epl[:, 0] * rows.nh
         P = epl[:, 1] * rows.nh
         L = epl[:, 2] * rows.nh
-        self.profile["correlate"] += time.perf_counter() - td
+        self.profile["correlate"] += time.perf_counter() - td - t_before[0]
         return E, P, L
 
     def prefilter(self, iv: Interval, rows: _EpochRows, E, P, L) -> Measurements:

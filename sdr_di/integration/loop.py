@@ -67,6 +67,9 @@ class Interval:
         body Right-Front-Up, over the interval.
     clock_bias_m : float
         Clock bias predicted to ``k1`` with the drift, before the feedback [m].
+    predicted : bool
+        The filter's predict over the interval is done (:meth:`IntegrationLoop.
+        predict_filter`).
     """
 
     i0: int
@@ -78,6 +81,7 @@ class Interval:
     f_mean: np.ndarray | None = None
     w_mean: np.ndarray | None = None
     clock_bias_m: float = math.nan
+    predicted: bool = False
 
 
 @dataclasses.dataclass
@@ -261,13 +265,25 @@ class IntegrationLoop:
         iv.clock_bias_m = self.clock_bias_m + self.clock_drift_mps * self.T
         self.profile["ins"] += time.perf_counter() - ta
 
+    def predict_filter(self, iv: Interval) -> None:
+        """Process model over the interval and the filter's predict, once per interval. It
+        needs only the propagated INS, so a measurement source may call it while its
+        correlators run (deep: :meth:`~sdr_di.deep.vector_tracking.VectorTracking.
+        correlate`); :meth:`filter_step` calls it otherwise."""
+        if iv.predicted:
+            return
+        ta = time.perf_counter()
+        self.process.set_interval(iv.nav0, iv.nav1, iv.f_mean, iv.w_mean)
+        self.kf.predict(self.T)
+        iv.predicted = True
+        self.profile["filter"] += time.perf_counter() - ta
+
     def filter_step(self, iv: Interval, m: Measurements) -> None:
         """Process model over the interval, predict, and update with ``m`` when it has a
         measurement ``z`` (paper 004 eq 13-25); accumulates the NIS per measurement."""
+        self.predict_filter(iv)
         ta = time.perf_counter()
         kf = self.kf
-        self.process.set_interval(iv.nav0, iv.nav1, iv.f_mean, iv.w_mean)
-        kf.predict(self.T)
         if m.z is not None:
             self.set_geometry(*m.geometry)
             kf.update(m.z, m.R)

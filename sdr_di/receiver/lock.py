@@ -74,6 +74,7 @@ __all__ = [
     "cn0_m2m4",
     "m2m4_powers",
     "noise_code_phase",
+    "noise_code_phases",
     "prompt_signal_power",
 ]
 
@@ -232,6 +233,15 @@ def noise_code_phase(theta: float, epoch: int) -> float:
     span = CODE_LENGTH_B3I - 2 * NOISE_MIN_LAG_CHIPS
     t = theta + NOISE_MIN_LAG_CHIPS + (int(epoch) * _NOISE_LAG_STEP) % span
     return t - CODE_LENGTH_B3I if t >= CODE_LENGTH_B3I else t
+
+
+def noise_code_phases(theta: np.ndarray, epoch: np.ndarray) -> np.ndarray:
+    """:func:`noise_code_phase` of arrays of code phases [chips] and epochs (the same
+    float64 operations in the same order: the same values)."""
+    span = CODE_LENGTH_B3I - 2 * NOISE_MIN_LAG_CHIPS
+    t = (np.asarray(theta, np.float64) + NOISE_MIN_LAG_CHIPS) + \
+        (np.asarray(epoch, np.int64) * _NOISE_LAG_STEP) % span
+    return np.where(t >= CODE_LENGTH_B3I, t - CODE_LENGTH_B3I, t)
 
 
 class PostCorrelationNoise:

@@ -22,6 +22,7 @@ vector loop.
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -32,6 +33,9 @@ import numpy as np
 
 __all__ = ["KernelThreads", "balanced_cuts"]
 
+#: Interpreter switch interval while the caller runs ``before`` in :meth:`KernelThreads.
+#: run_rows` [s] (default 5 ms: a worker would wait that long for the GIL to start).
+_SWITCH_S = 1e-4
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
 
@@ -87,6 +91,8 @@ class KernelThreads:
         self.cost = {1: 0.0, self.max_threads: 0.0}
         self._warm: set[int] = set()
         self._calls = 0
+        self._before_s = 0.0     # smoothed duration of run_rows' `before` [s]
+        self._sample_s = 0.0     # smoothed kernel time per sample on one thread [s]
 
     def pick(self) -> int:
         """Thread count for the next call. Numba's own thread count of the calling thread is
@@ -120,25 +126,58 @@ class KernelThreads:
         old = self.cost[threads]
         self.cost[threads] = cost if old == 0.0 else 0.7 * old + 0.3 * cost
 
-    def run_rows(self, call: Callable[[int, int], None], nsamp) -> int:
+    def run_rows(self, call: Callable[[int, int], None], nsamp,
+                 before: Callable[[], None] | None = None) -> int:
         """Run ``call(a, b)`` (a ``nogil`` kernel on rows ``[a, b)``, writing its own rows'
         outputs) over all rows: on the calling thread alone, or split into contiguous parts
-        of equal sample counts (``nsamp`` per row) between it and the worker threads
-        (module notes). Records the cost per sample; returns the thread count used."""
+        between it and the worker threads (module notes). Records the cost per sample;
+        returns the thread count used.
+
+        ``before``: work for the calling thread that does not need the rows' results (the
+        deep loop's filter predict); it runs while the workers start on their parts, and
+        the calling thread's part is shortened by its measured duration, so that all
+        parts end together.
+        """
         ns = np.asarray(nsamp)
         n = ns.size
         threads = self.pick()
         t0 = time.perf_counter()
         if threads == 1 or n < 2:
+            if before is not None:
+                before()
             call(0, n)
         else:
-            cuts = balanced_cuts(ns, threads)
+            tot = max(float(ns.sum()), 1.0)
+            # the caller's part: its equal share less what `before` takes, in samples
+            lead = 0.0 if before is None or self._sample_s <= 0.0 else \
+                min(self._before_s / self._sample_s, tot / threads)
+            cum = np.cumsum(ns, dtype=np.float64)
+            share = tot / threads - lead
+            c1 = min(int(np.searchsorted(cum, share, side="left")) + 1, n) if share > 0 else 0
+            cuts = [0] + [c1 + c for c in balanced_cuts(ns[c1:], threads - 1)]
             pool = _pool(threads - 1)
             futs = [pool.submit(call, cuts[j], cuts[j + 1]) for j in range(1, threads)
                     if cuts[j + 1] > cuts[j]]
             try:
+                if before is not None:
+                    # `before` holds the GIL: a short switch interval lets the workers take
+                    # it for the few Python steps before their kernels release it
+                    switch = sys.getswitchinterval()
+                    sys.setswitchinterval(min(switch, _SWITCH_S))
+                    tb = time.perf_counter()
+                    try:
+                        before()
+                    finally:
+                        sys.setswitchinterval(switch)
+                    dt = time.perf_counter() - tb
+                    self._before_s = dt if self._before_s == 0.0 else \
+                        0.8 * self._before_s + 0.2 * dt
                 if cuts[1] > 0:
+                    tm = time.perf_counter()
                     call(0, cuts[1])
+                    per = (time.perf_counter() - tm) / float(cum[cuts[1] - 1])
+                    self._sample_s = per if self._sample_s == 0.0 else \
+                        0.8 * self._sample_s + 0.2 * per
             finally:
                 for f in futs:
                     f.result()
