@@ -37,8 +37,14 @@ that started tracking) and prints the wall-time ratio against 0.5.
 MODE`` (``run_deep``: scalar start-up, hand-over, integration loop, solution files; the
 sidecar's IMU, truth and ephemeris) in a fresh process per run, with ``--filter`` (default
 ekf); prints per mode the process wall and CPU time, the real-time factor (file seconds per
-wall second, and per CPU second), the scalar receiver's and the loop's share of the run,
-the hand-over time and the peak RSS. ``all`` = scalar (assisted), deep, loose and tight.
+wall second, and per CPU second), the scalar receiver's and the loop's share of the run
+(loose and tight: the loop thread's share of the CPU and the loop's tail after the
+receiver), the hand-over time and the peak RSS. ``all`` = scalar (assisted), deep, loose
+and tight, then issue 17's target 4 per file: loose and tight wall time against the
+scalar run's (best of ``--repeat`` each; target at most 1.15), the CPU ratio and the CPU
+shares (scalar receiver, loop thread)::
+
+    python scripts/bench.py run --mode all --durations 60 --bits 4 --repeat 2
 
 ``acquire``: acquisition time per PRN at 25 MHz, normal (40 x 1 ms) and long (400 x 1 ms)
 searches, over +-5 kHz and +-1 kHz around a predicted Doppler.
@@ -150,24 +156,63 @@ def _run_mode(path: Path, out: Path, mode: str, filt: str) -> dict:
 
 
 def _bench_modes(files: list[Path], modes: tuple[str, ...], args: argparse.Namespace,
-                 out: Path) -> None:
-    """Real-time factor of the integration modes on ``files`` (module notes)."""
+                 out: Path) -> dict[Path, dict[str, dict]]:
+    """Real-time factor of the integration modes on ``files`` (module notes); returns
+    ``{file: {mode: best run}}`` (least wall time: ``wall``, ``cpu``, ``profile``)."""
     print(f"integration modes, filter {args.filter}: x real time = file seconds per process "
           "wall second; per CPU s = file seconds per CPU second (user + sys, all threads); "
-          "scalar: share of the run in the scalar receiver (deep: start-up only; loose and "
-          "tight: the whole file), loop: in the integration loop")
+          "scalar: share of the run's wall time in the scalar receiver (deep: start-up only; "
+          "loose and tight: the whole file), loop: in the integration loop's stages (loose "
+          "and tight: on a second thread, overlapping the receiver); loop CPU: the loop "
+          "thread's share of the process CPU; tail: wall seconds the loop ran on after the "
+          "receiver had finished")
     print(f"{'mode':>6} {'file s':>6} {'wall s':>7} {'CPU s':>6} {'x real time':>11} "
-          f"{'per CPU s':>9} {'scalar':>7} {'loop':>6} {'hand-over s':>11} {'peak RSS MiB':>12}")
+          f"{'per CPU s':>9} {'scalar':>7} {'loop':>6} {'loop CPU':>8} {'tail s':>6} "
+          f"{'hand-over s':>11} {'peak RSS MiB':>12}")
+    best: dict[Path, dict[str, dict]] = {}
     for f in files:
         for mode in modes:
             for _ in range(args.repeat):
                 r = _run_mode(f, out / f"run_{mode}", mode, args.filter)
                 p = r["profile"]
                 wall, d, tot = r["process_wall_s"], p["processed_s"], max(p["total"], 1e-9)
+                cpu = max(r["cpu_s"], 1e-9)
+                lcpu = (f"{100 * p['loop_cpu'] / cpu:7.1f}%" if "loop_cpu" in p
+                        else f"{'-':>8}")
+                tail = f"{p['loop_wait']:6.2f}" if "loop_wait" in p else f"{'-':>6}"
                 print(f"{mode:>6} {d:6.1f} {wall:7.2f} {r['cpu_s']:6.1f} {d / wall:11.2f} "
-                      f"{d / max(r['cpu_s'], 1e-9):9.2f} {100 * p['scalar'] / tot:6.1f}% "
-                      f"{100 * p['loop'] / tot:5.1f}% {r['handover_s']:11.2f} "
+                      f"{d / cpu:9.2f} {100 * p['scalar'] / tot:6.1f}% "
+                      f"{100 * p['loop'] / tot:5.1f}% {lcpu} {tail} {r['handover_s']:11.2f} "
                       f"{r['maxrss'] / 2**20:12.1f}")
+                b = best.setdefault(f, {})
+                if mode not in b or wall < b[mode]["wall"]:
+                    b[mode] = {"wall": wall, "cpu": r["cpu_s"], "profile": p}
+    return best
+
+
+#: Issue 17's target 4: the largest wall-time ratio of loose and tight to the scalar run.
+_MODES_TARGET_RATIO = 1.15
+
+
+def _print_target4(f: Path, scalar: dict, modes: dict[str, dict], repeat: int) -> None:
+    """Target 4 for file ``f``: loose and tight against the scalar run (best of
+    ``repeat`` each), wall and CPU ratios, and where their time goes."""
+    print(f"target 4 ({f.name}, best of {repeat}; scalar {scalar['wall']:.2f} s wall, "
+          f"{scalar['cpu']:.1f} s CPU): ratio to scalar, target <= {_MODES_TARGET_RATIO:g}")
+    for mode in ("loose", "tight"):
+        b = modes.get(mode)
+        if b is None:
+            continue
+        p = b["profile"]
+        ratio = b["wall"] / scalar["wall"]
+        lcpu = p.get("loop_cpu", 0.0)
+        print(f"  {mode}: {b['wall']:.2f} s wall = {ratio:.3f} x scalar "
+              f"({'met' if ratio <= _MODES_TARGET_RATIO else 'NOT met'}), CPU "
+              f"{b['cpu']:.1f} s = {b['cpu'] / max(scalar['cpu'], 1e-9):.3f} x scalar; CPU "
+              f"shares: scalar receiver {100 * (b['cpu'] - lcpu) / max(b['cpu'], 1e-9):.0f}%, "
+              f"loop thread {100 * lcpu / max(b['cpu'], 1e-9):.0f}% (" + ", ".join(
+                  f"{k} {p.get(k, 0.0):.2f} s" for k in ("ins", "filter", "measure", "output"))
+              + f" wall in the thread); loop tail {p.get('loop_wait', 0.0):.2f} s")
 
 
 #: Issue 17's scalar target: file seconds per wall second of the whole process, and the
@@ -238,8 +283,7 @@ def bench_run(args: argparse.Namespace) -> None:
                 files.append(sub / "bench.bin")
         modes = ("deep", "loose", "tight") if args.mode == "all" else (
             () if args.mode == "scalar" else (args.mode,))
-        if modes:
-            _bench_modes(files, modes, args, out)
+        mode_best = _bench_modes(files, modes, args, out) if modes else {}
         searches = () if args.mode not in ("scalar", "all") else (
             ("cold", "assisted") if args.search == "both" else (args.search,))
         if args.mode == "all":
@@ -278,6 +322,9 @@ def bench_run(args: argparse.Namespace) -> None:
                       f"{g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, {g['tracked']} of "
                       f"{g['n_sat']} channels tracking, exit {g['rc']}; sdr-di / GNSS-SDR wall "
                       f"= {b['wall'] / g['wall_s']:.2f} (target <= {_RUN_TARGET_GNSS_SDR:g})")
+        if args.mode == "all":
+            for f, b in best.items():
+                _print_target4(f, b, mode_best.get(f, {}), args.repeat)
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
         print(f"load average {load:.2f} at the end")
     finally:

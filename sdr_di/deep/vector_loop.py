@@ -719,9 +719,12 @@ class DeepReceiver:
         keep the channel columns of the handed-over PRNs and of those the receiver acquired
         later, in that order."""
         run = hand["coupled"]
+        t0 = time.perf_counter()
         run["thread"].join()
         loop, src, prof = run["loop"], run["src"], run["prof"]
         prof["scalar"] = t_scalar
+        prof["loop_wait"] = time.perf_counter() - t0   # the loop's tail after the receiver
+        prof["loop_cpu"] = run["thread"].cpu_s          # CPU of the loop's thread
         later = sorted({int(p) for ep in epochs for p in ep.obs.prn} - set(hand["prns"]))
         prns = tuple(hand["prns"]) + tuple(later)
         src.keep_columns(prns, loop.rows)

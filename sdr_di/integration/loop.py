@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -369,28 +370,50 @@ class BackgroundLoop:
     the same as those of a loop run after the receiver: the loop sees the same epochs in
     the same order, whenever they arrive.
 
+    GIL: while the loop thread runs, a receiver thread returning from a kernel waits for
+    the GIL until the loop thread is made to drop it, after the interpreter's switch
+    interval (5 ms by default: up to 5 ms after each of the receiver's ~100 kernel calls per
+    second of file, which would put the loop's work back on the receiver's path). The
+    switch interval is :attr:`switch_interval_s` while the thread runs, restored by
+    :meth:`join` / :meth:`abort`.
+
     Parameters
     ----------
     loop : IntegrationLoop
     source : MeasurementSource
+
+    Attributes
+    ----------
+    cpu_s : float
+        CPU time of the loop thread [s] (user + system), set when it ends.
     """
+
+    #: Interpreter switch interval while the loop thread runs [s].
+    switch_interval_s = 2e-4
 
     def __init__(self, loop: IntegrationLoop, source: MeasurementSource) -> None:
         self.loop, self.source = loop, source
         self.error: BaseException | None = None
+        self.cpu_s = 0.0
+        self._switch = sys.getswitchinterval()
+        sys.setswitchinterval(min(self._switch, self.switch_interval_s))
         self._thread = threading.Thread(target=self._run, name="sdr-di integration loop",
                                         daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
+        c0 = time.thread_time()
         try:
             self.loop.run(self.source)
         except BaseException as e:  # noqa: BLE001 - re-raised on the caller's thread
             self.error = e
+        finally:
+            self.cpu_s = time.thread_time() - c0
 
     def join(self) -> None:
         """Wait for the loop to end; re-raise its exception here."""
         self._thread.join()
+        sys.setswitchinterval(self._switch)
         if self.error is not None:
             raise self.error
 
@@ -400,3 +423,4 @@ class BackgroundLoop:
         close its epoch stream first."""
         self.loop.stop_requested = True
         self._thread.join()
+        sys.setswitchinterval(self._switch)
