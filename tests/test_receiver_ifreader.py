@@ -330,3 +330,31 @@ def test_read_ahead_serves_the_same_values(tmp_path, fmt):
     assert served == 3
     copy = pickle.loads(pickle.dumps(src))
     np.testing.assert_array_equal(copy.read_stored(100, 900)[0], ref.read_stored(100, 900)[0])
+
+
+@pytest.mark.parametrize("fmt", ["iq_int8", "real_int16", "iq_int4"])
+def test_read_stored_power_equals_mean_power_of_the_values(tmp_path, fmt, monkeypatch):
+    """read_stored_power: the values of read_stored and mean_power's value bit for bit,
+    whether the read-ahead's block sums serve it (8-bit) or not; blocks of 64 values so
+    that the ranges start and end inside blocks and across them."""
+    from sdr_di.receiver import ifreader
+    from sdr_di.receiver._numba_correlate_bits import mean_power
+
+    monkeypatch.setattr(ifreader, "_POWER_BLOCK", 64)
+    rng = np.random.default_rng(7)
+    n = 20_000
+    (tmp_path / "p.bin").write_bytes(encode(fmt, random_values(rng, fmt, n)))
+    src = IfSource(tmp_path / "p.bin", 25e6, 0.0, fmt, check_format=False)
+    ref = IfSource(tmp_path / "p.bin", 25e6, 0.0, fmt, check_format=False)
+    ref.read_ahead = False
+    summed_ahead = 0
+    for s, m in [(0, 3000), (2601, 3000), (4101, 3001), (6000, 10), (6003, 4000),
+                 (300, 50), (n - 700, 700)]:
+        ahead = src._ahead
+        got, nc, pw = src.read_stored_power(s, m)
+        exp, nc_ref = ref.read_stored(s, m)
+        np.testing.assert_array_equal(got, exp)
+        assert nc == nc_ref and pw == float(mean_power(exp, nc_ref))
+        if ahead is not None and ahead[0] <= s and s + m <= sum(ahead[:2]):
+            summed_ahead += ahead[2].result()[1] is not None
+    assert summed_ahead == (3 if get_format(fmt).name in ("iq_int8", "iq_int4") else 0)

@@ -30,7 +30,7 @@ from ..errors import SdrDiError
 from ..frames import llh_to_ecef
 from ..integration.loop import IntegrationLoop, Interval, Measurements
 from ..integration.measurements import RangeRateMeasurementModel
-from ..receiver._numba_correlate_bits import correlate_epl_bits, mean_power
+from ..receiver._numba_correlate_bits import correlate_epl_bits
 from ..receiver.correlator import (
     CODE_PAD,
     bit_windows,
@@ -45,6 +45,7 @@ from ..receiver.observables import ReceiverTime
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.threads import KernelThreads
 from ..signal.codes import NH20, b3i_code
+from ._numba_epoch_rows import epoch_rows
 from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
@@ -180,6 +181,9 @@ class VectorTracking:
         self.bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
                                           for c in chans]))
         self.chan_idx = np.arange(self.n_channels, dtype=np.int64)
+        self.chan_order = np.array([c.idx for c in chans], np.int64)
+        self.is_d1 = np.array([c.is_d1 for c in chans], bool)
+        self.nh20 = NH20.astype(np.float64)
         self.kthreads = KernelThreads()
         self.threads_before = numba.get_num_threads()
         self.meas_all = RangeRateMeasurementModel()     # every channel: the feedback's H
@@ -259,19 +263,19 @@ class VectorTracking:
         if self.dp_prev is None:
             self.dp_prev = dp1
         dp_prev = self.dp_prev
-        parts = [_epoch_rows(c, float(cmd.chips0[c.idx]), float(dchip[c.idx]),
-                             float(dp_prev[c.idx]), float(dp1[c.idx]), k0, k1)
-                 for c in self.chans]
+        # every channel's rows in one kernel call (_epoch_rows is its plain form)
+        chans, idx = self.chans, self.chan_order
+        nxt = np.array([c.next_start for c in chans], np.int64)
+        ep = np.array([c.epoch for c in chans], np.int64)
+        ph = np.array([c.phase for c in chans], np.float64)
+        reps, *cols = epoch_rows(nxt, ep, ph, cmd.chips0[idx], dchip[idx], dp_prev[idx],
+                                 dp1[idx], self.is_d1, self.nh20, CODE_LENGTH_B3I, k0, k1)
+        for c, s, e, p in zip(chans, nxt.tolist(), ep.tolist(), ph.tolist()):
+            c.next_start, c.epoch, c.phase = s, e, p
         self.dp_prev = dp1
         self._pred, self._P1, self._Pc1 = pred, P1, Pc1
-        rows = _EpochRows(reps=[len(p[0]) for p in parts],
-                          starts=np.concatenate([p[0] for p in parts]),
-                          nsamp=np.concatenate([p[1] for p in parts]),
-                          theta=np.concatenate([p[2] for p in parts]),
-                          phi=np.concatenate([p[3] for p in parts]),
-                          dphi=np.concatenate([p[4] for p in parts]),
-                          nh=np.concatenate([p[5] for p in parts]),
-                          epoch=np.concatenate([p[6] for p in parts]), dchip=dchip)
+        rows = _EpochRows(reps=reps.tolist(), starts=cols[0], nsamp=cols[1], theta=cols[2],
+                          phi=cols[3], dphi=cols[4], nh=cols[5], epoch=cols[6], dchip=dchip)
         self.profile["nco"] += time.perf_counter() - tb
         return rows
 
@@ -285,9 +289,8 @@ class VectorTracking:
             return False
         if need0 < self.buf0 or need1 > self.buf1:
             n_read = min(max(self.chunk, need1 - need0), self.stop - need0)
-            self.x_buf, self.n_comp = self.source.read_stored(need0, n_read)
+            self.x_buf, self.n_comp, self.npow = self.source.read_stored_power(need0, n_read)
             self.buf0, self.buf1 = need0, need0 + n_read
-            self.npow = mean_power(self.x_buf, self.n_comp)
         self.profile["read"] += time.perf_counter() - tc
         return True
 

@@ -286,3 +286,18 @@ def mean_power(xs, n_comp):
         acc += v * v
     n = xs.size // n_comp
     return acc / n if n > 0 else 0.0
+
+
+@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"}, boundscheck=False)
+def block_sum_squares(xs, block, out):
+    """Sums of ``xs**2`` over consecutive blocks of ``block`` values (the last block may be
+    shorter), float64 accumulation, into ``out`` (``ceil(xs.size / block)``,). For 8-bit
+    values every partial sum is an integer below 2**53, hence exact in any order: sums of
+    these sums equal :func:`mean_power`'s accumulator bit for bit."""
+    nb = (xs.size + block - 1) // block
+    for b in range(nb):
+        acc = 0.0
+        for k in range(b * block, min((b + 1) * block, xs.size)):
+            v = float(xs[k])
+            acc += v * v
+        out[b] = acc

@@ -128,6 +128,9 @@ def _byte_tables(name: str, rf_channel: int) -> tuple[int, np.ndarray, np.ndarra
     return byte, values, pairs
 
 _CHECK_WINDOW_BYTES = 65536
+#: Values per block of the read-ahead's sums of squares (:meth:`IfSource.read_stored_power`;
+#: a block's sum of 8-bit squares stays below 2**31).
+_POWER_BLOCK = 65536
 _CHECK_MIN_PAIRS = 4096
 
 
@@ -445,10 +448,60 @@ class IfSource:
         out = self._take_ahead(start_sample, n, n_comp)
         if out is None:
             out = self._read_stored_now(start_sample, n, n_comp)
+        self._after_read(start_sample, n, n_comp)
+        return out, n_comp
+
+    def _after_read(self, start_sample: int, n: int, n_comp: int) -> None:
+        """Schedule the read-ahead after a read of ``[start_sample, start_sample + n)``."""
         if self.read_ahead and n > 0 and start_sample + n < self._n:
             a0 = start_sample + n - n // 2
             self._schedule_ahead(a0, min(n + n // 2, self._n - a0), n_comp)
-        return out, n_comp
+
+    def read_stored_power(self, start_sample: int, n: int) -> tuple[np.ndarray, int, float]:
+        """:meth:`read_stored` and the mean power per sample of the values it returns
+        (``sum(values**2) / n`` [stored units^2], :func:`~sdr_di.receiver.
+        _numba_correlate_bits.mean_power`'s value, bit for bit).
+
+        For 8-bit values served from the read-ahead, the read-ahead thread has summed the
+        squares over blocks of :data:`_POWER_BLOCK` values; only the partial blocks at the
+        ends are summed here. The sums are integers below 2**53 and so exact in any order:
+        the value is the same as summing here. Other formats are summed here.
+        """
+        from ._numba_correlate_bits import block_sum_squares, mean_power
+
+        n_comp = 2 if self.format.is_complex else 1
+        hit = None
+        if not self.spectrum_inverted:
+            hit = self._take_ahead(int(start_sample), int(n), n_comp, with_power=True)
+        if hit is None:
+            x, n_comp = self.read_stored(start_sample, n)
+            return x, n_comp, float(mean_power(x, n_comp))
+        x, sums, i0 = hit
+        self._after_read(int(start_sample), int(n), n_comp)
+        i1 = i0 + x.size
+        b0 = -(-i0 // _POWER_BLOCK)
+        b1 = i1 // _POWER_BLOCK
+        if sums is None or b1 <= b0:
+            return x, n_comp, float(mean_power(x, n_comp))
+        edge = np.zeros(2)
+        head, tail = x[:b0 * _POWER_BLOCK - i0], x[b1 * _POWER_BLOCK - i0:]
+        block_sum_squares(head, max(head.size, 1), edge[:1])
+        block_sum_squares(tail, max(tail.size, 1), edge[1:])
+        total = float(np.sum(sums[b0:b1])) + float(edge[0]) + float(edge[1])
+        m = x.size // n_comp
+        return x, n_comp, (total / m if m > 0 else 0.0)
+
+    def _read_ahead_job(self, start_sample: int, n: int, n_comp: int):
+        """The read-ahead thread's work: the values, and their block sums of squares when
+        they are 8-bit (:meth:`read_stored_power`)."""
+        from ._numba_correlate_bits import block_sum_squares
+
+        buf = self._read_stored_now(start_sample, n, n_comp)
+        sums = None
+        if buf.dtype == np.int8:
+            sums = np.empty(-(-buf.size // _POWER_BLOCK))
+            block_sum_squares(buf, _POWER_BLOCK, sums)
+        return buf, sums
 
     def _read_stored_now(self, start_sample: int, n: int, n_comp: int) -> np.ndarray:
         """:meth:`read_stored` of a checked range, read now (a fresh array)."""
@@ -483,11 +536,13 @@ class IfSource:
             from concurrent.futures import ThreadPoolExecutor
 
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="if-read-ahead")
-        self._ahead = (start_sample, n, self._pool.submit(self._read_stored_now, start_sample,
+        self._ahead = (start_sample, n, self._pool.submit(self._read_ahead_job, start_sample,
                                                           n, n_comp))
 
-    def _take_ahead(self, start_sample: int, n: int, n_comp: int) -> np.ndarray | None:
-        """The requested range from the pending read-ahead, or None (which is dropped)."""
+    def _take_ahead(self, start_sample: int, n: int, n_comp: int, with_power: bool = False):
+        """The requested range from the pending read-ahead, or None (which is dropped).
+        ``with_power``: ``(values, block sums of squares or None, index of the first value
+        in the read-ahead buffer)`` instead of the values."""
         ahead, self._ahead = self._ahead, None
         if ahead is None:
             return None
@@ -496,10 +551,12 @@ class IfSource:
             fut.cancel()
             return None
         try:
-            buf = fut.result()
+            buf, sums = fut.result()
         except Exception:  # noqa: BLE001 - read again in the caller's thread, which raises
             return None
         i = (start_sample - a0) * n_comp
+        if with_power:
+            return buf[i:i + n * n_comp], sums, i
         return buf[i:i + n * n_comp]
 
     def __getstate__(self) -> dict:

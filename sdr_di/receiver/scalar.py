@@ -83,7 +83,7 @@ import numpy as np
 
 from ..constants import CODE_LENGTH_B3I
 from ..orbits.ephemeris import Ephemeris
-from ._numba_correlate_bits import correlate_epl_bits, mean_power
+from ._numba_correlate_bits import correlate_epl_bits
 from .acquisition import (
     AcquisitionResult,
     acquire_source,
@@ -520,11 +520,10 @@ class ScalarReceiver:
                 # read afresh from the earliest sample still needed: re-reading the short
                 # overlap (< 2 coherent blocks) is cheaper than concatenating the new chunk
                 n_read = min(max(chunk, need_end - t_now), stop - t_now)
-                x, n_comp = source.read_stored(t_now, n_read)
+                # with the input noise power per sample, for the channels' C/N0 estimators
+                x, n_comp, npow = source.read_stored_power(t_now, n_read)
                 buf0 = t_now
                 buf1 = t_now + n_read
-                # input noise power per sample, for the channels' C/N0 estimators
-                npow = float(mean_power(x, n_comp))
                 for c in chans:
                     c.noise_power_per_sample = npow
                 prof["read"] += time.perf_counter() - t0

@@ -22,6 +22,7 @@ vector loop.
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -31,12 +32,17 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
-__all__ = ["KernelThreads", "balanced_cuts"]
+__all__ = ["KernelThreads", "balanced_cuts", "split_stats"]
 
+#: Environment variable fixing the thread count of every automatic :class:`KernelThreads`
+#: (benchmarks: ``scripts/bench_deep.py --kernel-threads``).
+ENV_THREADS = "SDR_DI_KERNEL_THREADS"
 #: Interpreter switch interval while the caller runs ``before`` in :meth:`KernelThreads.
 #: run_rows` [s] (default 5 ms: a worker would wait that long for the GIL to start).
 _SWITCH_S = 1e-4
 _POOL: ThreadPoolExecutor | None = None
+#: Process-wide CPU accounting of the split calls (:func:`split_stats`).
+_STATS = {"calls": 0, "caller_cpu_s": 0.0, "worker_cpu_s": 0.0, "wait_cpu_s": 0.0}
 _POOL_LOCK = threading.Lock()
 
 
@@ -52,6 +58,16 @@ def _pool(workers: int) -> ThreadPoolExecutor:
             _POOL = ThreadPoolExecutor(max_workers=workers, initializer=_one_numba_thread,
                                        thread_name_prefix="sdr-di-kernel")
         return _POOL
+
+
+def split_stats() -> dict:
+    """CPU accounting of :meth:`KernelThreads.run_rows`' split calls in this process:
+    ``calls``, ``caller_cpu_s`` (the caller's part and its ``before`` work), ``worker_cpu_s``
+    (the workers' parts) and ``wait_cpu_s``, the sum over calls of the slowest worker's CPU
+    time beyond the caller's: what the caller waits on idle cores. The main thread's CPU time
+    plus ``wait_cpu_s`` estimates a run's wall time on idle cores, whatever the load it was
+    measured under."""
+    return dict(_STATS)
 
 
 def balanced_cuts(weights, parts: int) -> list[int]:
@@ -77,7 +93,8 @@ class KernelThreads:
     Parameters
     ----------
     threads : int, optional
-        Fixed thread count (clipped to numba's); default None: automatic.
+        Fixed thread count (clipped to numba's); default None: automatic, unless the
+        environment variable :data:`ENV_THREADS` gives one.
 
     Attributes
     ----------
@@ -87,12 +104,14 @@ class KernelThreads:
 
     def __init__(self, threads: int | None = None) -> None:
         self.max_threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
+        if threads is None and os.environ.get(ENV_THREADS, "").strip():
+            threads = int(os.environ[ENV_THREADS])
         self.fixed = None if threads is None else max(1, min(int(threads), self.max_threads))
         self.cost = {1: 0.0, self.max_threads: 0.0}
         self._warm: set[int] = set()
         self._calls = 0
-        self._before_s = 0.0     # smoothed duration of run_rows' `before` [s]
-        self._sample_s = 0.0     # smoothed kernel time per sample on one thread [s]
+        self._before_s = 0.0     # smoothed CPU time of run_rows' `before` [s]
+        self._sample_s = 0.0     # smoothed kernel CPU time per sample on one thread [s]
 
     def pick(self) -> int:
         """Thread count for the next call. Numba's own thread count of the calling thread is
@@ -148,38 +167,50 @@ class KernelThreads:
             call(0, n)
         else:
             tot = max(float(ns.sum()), 1.0)
-            # the caller's part: its equal share less what `before` takes, in samples
+            # the caller's part: with `before` (T_b) and the kernel (K) shared so that all
+            # parts end together, (K - T_b) / threads, in samples
             lead = 0.0 if before is None or self._sample_s <= 0.0 else \
-                min(self._before_s / self._sample_s, tot / threads)
+                min(self._before_s / self._sample_s, tot)
             cum = np.cumsum(ns, dtype=np.float64)
-            share = tot / threads - lead
+            share = (tot - lead) / threads
             c1 = min(int(np.searchsorted(cum, share, side="left")) + 1, n) if share > 0 else 0
             cuts = [0] + [c1 + c for c in balanced_cuts(ns[c1:], threads - 1)]
             pool = _pool(threads - 1)
-            futs = [pool.submit(call, cuts[j], cuts[j + 1]) for j in range(1, threads)
+
+            def timed(a, b):
+                tc = time.thread_time()
+                call(a, b)
+                return time.thread_time() - tc
+
+            futs = [pool.submit(timed, cuts[j], cuts[j + 1]) for j in range(1, threads)
                     if cuts[j + 1] > cuts[j]]
+            main_cpu = 0.0
             try:
                 if before is not None:
                     # `before` holds the GIL: a short switch interval lets the workers take
                     # it for the few Python steps before their kernels release it
                     switch = sys.getswitchinterval()
                     sys.setswitchinterval(min(switch, _SWITCH_S))
-                    tb = time.perf_counter()
+                    tb = time.thread_time()
                     try:
                         before()
                     finally:
                         sys.setswitchinterval(switch)
-                    dt = time.perf_counter() - tb
+                    dt = time.thread_time() - tb
+                    main_cpu += dt
                     self._before_s = dt if self._before_s == 0.0 else \
                         0.8 * self._before_s + 0.2 * dt
                 if cuts[1] > 0:
-                    tm = time.perf_counter()
-                    call(0, cuts[1])
-                    per = (time.perf_counter() - tm) / float(cum[cuts[1] - 1])
+                    dt = timed(0, cuts[1])
+                    main_cpu += dt
+                    per = dt / float(cum[cuts[1] - 1])
                     self._sample_s = per if self._sample_s == 0.0 else \
                         0.8 * self._sample_s + 0.2 * per
             finally:
-                for f in futs:
-                    f.result()
+                worker_cpu = [f.result() for f in futs]
+            _STATS["calls"] += 1
+            _STATS["caller_cpu_s"] += main_cpu
+            _STATS["worker_cpu_s"] += sum(worker_cpu)
+            _STATS["wait_cpu_s"] += max(0.0, max(worker_cpu, default=0.0) - main_cpu)
         self.record(threads, (time.perf_counter() - t0) / max(float(ns.sum()), 1.0))
         return threads
