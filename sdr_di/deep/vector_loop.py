@@ -871,7 +871,9 @@ def _offer_subframe_klobuchar(rx: ScalarReceiver, navdata: NavDataInForce, t_s: 
 def _handover_decoder(sc, epoch: int, ms0: int) -> ChannelNavDecoder:
     """Navigation decoder of a handed-over channel: the scalar channel ``sc``'s assembler
     and the bits of its subframe in progress (its epoch counter moved to the loop's
-    numbering, in which ``sc``'s next epoch is ``epoch``)."""
+    numbering, in which ``sc``'s next epoch is ``epoch``); its subframes still held for
+    the lock confirmation go to the assembler now (``Channel.release_unconfirmed``)."""
+    sc.release_unconfirmed()
     dec = ChannelNavDecoder(sc.prn, sc.is_d1, ms0, sc.assembler)
     runs = sc.demodulated_bits()
     if runs:

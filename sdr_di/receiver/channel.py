@@ -841,6 +841,14 @@ class Channel:
         while self._unconfirmed and self._unconfirmed[0]["epoch"] + sub_ms <= window_start:
             self._use_subframe(self._unconfirmed.pop(0))
 
+    def release_unconfirmed(self) -> None:
+        """Pass on the held subframes unconfirmed: at the deep hand-over, where this channel
+        stops in lock and the vector loop's decoder, with its own C/N0 test, goes on with the
+        same assembler (without this, a subframe 2 ended less than 0.12 s before the
+        hand-over was lost and the data set waited a whole frame)."""
+        while self._unconfirmed:
+            self._use_subframe(self._unconfirmed.pop(0))
+
     def _use_subframe(self, d: dict) -> None:
         self.subframes.append(d)
         if len(self.subframes) > 50:
