@@ -27,7 +27,7 @@ from sdr_di.errors import FilterError, ImuDataError
 from sdr_di.frames import llh_to_ecef
 from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.scenario import REPO_ROOT
-from sdr_di.sim.generate import broadcast_iono
+from sdr_di.signal.navmsg import assistance_klobuchar
 from sdr_di.sim.geometry import ReceiverPath, satellite_delays
 
 NAV = REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
@@ -42,7 +42,7 @@ def nav():
 # ---- NCO model ------------------------------------------------------------------------------
 def test_predicted_pseudoranges_equal_the_generator_delays(nav):
     """The vector loop's forward model is the generator's light-time/atmosphere model."""
-    iono = broadcast_iono(nav)[0]
+    iono = assistance_klobuchar(nav)[0]
     r = llh_to_ecef(math.radians(40.0), math.radians(116.0), 100.0)
     v = np.array([3.0, -20.0, 0.5])
     path = ReceiverPath(np.array([0.0, 2.0]), np.stack([r - v, r + v]), np.stack([v, v]))

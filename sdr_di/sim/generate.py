@@ -31,10 +31,9 @@ from ..ins.imu import ImuErrorModel
 from ..io.atomic import OutputSet, check_output_dir, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
 from ..io.sidecar import file_fingerprint, write_sidecar
-from ..orbits.ephemeris import Klobuchar
 from ..orbits.rinex_nav import load_nav
 from ..scenario.schema import Scenario
-from ..signal.navmsg import broadcast_klobuchar
+from ..signal.navmsg import assistance_klobuchar
 from ..timebase import bdt_minus_utc, bdt_to_datetime
 from .geometry import ReceiverPath
 from .ifgen import SYNTHESIS_VERSION, IfGenerator, build_satellites
@@ -66,29 +65,15 @@ def imu_model(sc: Scenario) -> ImuErrorModel:
     return ImuErrorModel.from_spec(sc.imu)
 
 
-def broadcast_iono(nav) -> tuple[Klobuchar | None, str]:
-    """Klobuchar coefficients to simulate with, and where they come from.
-
-    The file's BDS coefficients (``BDSA``/``BDSB``) when present; otherwise the same header's
-    GPS coefficients (``GPSA``/``GPSB``: the same eight-parameter Klobuchar set with the same
-    broadcast scale factors, describing the same day's ionosphere), applied with the BDS
-    model; otherwise none. Whatever is used is also what the D1/D2 messages broadcast, so a
-    receiver decoding the message removes exactly the simulated delay model (coefficients
-    rounded to their ICD LSB, :func:`~sdr_di.signal.navmsg.broadcast_klobuchar`).
-    """
-    if nav.iono is not None:
-        return broadcast_klobuchar(nav.iono), "BDSA/BDSB"
-    if nav.iono_gps is not None:
-        return broadcast_klobuchar(nav.iono_gps), "GPSA/GPSB (file has no BDS coefficients)"
-    return None, "none (file has no Klobuchar coefficients)"
-
-
 def make_generator(sc: Scenario, truth=None) -> IfGenerator:
     """Build the IF generator of a scenario (loads ephemeris, selects satellites)."""
     nav = load_nav(sc.satellites.ephemeris)
     truth = simulate_truth(sc) if truth is None else truth
     path = ReceiverPath(truth.t, truth.r_e, truth.v_e)
-    iono, source = broadcast_iono(nav) if sc.signal.ionosphere == "klobuchar" else (None, "off")
+    # the header's coefficients as broadcast (BDS, else GPS lines): what the D1/D2 messages
+    # carry, so a receiver decoding them removes exactly the simulated delay model
+    iono, source = (assistance_klobuchar(nav) if sc.signal.ionosphere == "klobuchar"
+                    else (None, "off"))
     sats = build_satellites(sc, nav, path, iono)
     gen = IfGenerator(sc, sats, path, iono)
     clock = scenario_clock(sc, truth)  # [receiver_clock] line + [oscillator] (truth)
