@@ -145,7 +145,9 @@ class GnssEpochRecorder:
         """PVT of the epoch at ``sample`` from the channel observations; kept and returned."""
         sol = self.engine.process(channels, sample)
         obs = self.engine.last_observables
-        sat = satellite_states(obs, self.navdata) if obs.n else None
+        # the PVT's own satellite states (the engine's ephemerides are this navdata)
+        sat = self.engine.last_satellites if self.engine.ephemerides is self.navdata else (
+            satellite_states(obs, self.navdata) if obs.n else None)
         nav = {}
         for i, prn in enumerate(obs.prn):
             if sat is not None and sat.ok[i]:
@@ -183,7 +185,8 @@ class ScalarEpochSource:
     fs : float
         IF sampling rate [Hz].
     profile : dict
-        Seconds per stage; this source adds ``measure``.
+        Seconds per stage; this source adds ``measure`` and ``epoch_wait`` (behind the
+        receiver: waiting for its next epoch, left out of ``measure``).
     min_cn0_dbhz : float or None, optional
         Screen: lowest C/N0 of a usable channel [dB-Hz] (module notes); None: no C/N0 test.
     gate_alpha : float, optional
@@ -205,6 +208,8 @@ class ScalarEpochSource:
         self.fs = fs
         self.profile = profile
         profile.setdefault("measure", 0.0)
+        if self._wait is not None:
+            profile.setdefault("epoch_wait", 0.0)
         self._next = 0
         self._used = np.zeros(self.n_channels, bool)
         self._cn0 = np.full(self.n_channels, math.nan)
@@ -248,8 +253,7 @@ class ScalarEpochSource:
         skipped (at most one per interval while ``gnss_rate_hz`` <= the filter rate)."""
         t1 = self.imu_t[iv.i1]
         found = None
-        while (self._next < len(self.epochs) if self._wait is None
-               else self._wait(self._next)):
+        while self._have(self._next):
             ep = self.epochs[self._next]
             t = self.imu_time(*self.bdt_of(ep, self.epoch_clock_bias(loop, iv, ep)))
             if t > t1:
@@ -258,6 +262,15 @@ class ScalarEpochSource:
                 found = ep
             self._next += 1
         return found
+
+    def _have(self, i: int) -> bool:
+        """Epoch ``i`` exists (behind the receiver: waiting for it, the wait timed)."""
+        if i < len(self.epochs) or self._wait is None:
+            return i < len(self.epochs)
+        ta = time.perf_counter()
+        ok = self._wait(i)
+        self.profile["epoch_wait"] += time.perf_counter() - ta
+        return ok
 
     def screened(self, ep: GnssEpoch) -> np.ndarray:
         """Mask over ``ep.obs`` of the channels passing the screen (module notes): C/N0
@@ -308,6 +321,7 @@ class ScalarEpochSource:
     def measure(self, loop: IntegrationLoop, iv: Interval) -> Measurements:
         """The interval's measurement (None ``z`` between epochs)."""
         ta = time.perf_counter()
+        wait0 = self.profile.get("epoch_wait", 0.0)
         ep = self._take_epoch(loop, iv)
         m = None
         if ep is not None:
@@ -321,7 +335,8 @@ class ScalarEpochSource:
                     self._cn0[self.col[int(prn)]] = c
         if m is None:
             m = Measurements(z=None, R=None, geometry=(), used=self._used)
-        self.profile["measure"] += time.perf_counter() - ta
+        self.profile["measure"] += (time.perf_counter() - ta
+                                    - (self.profile.get("epoch_wait", 0.0) - wait0))
         return m
 
     def measurement(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> Measurements:

@@ -793,15 +793,17 @@ def modelled_observables(sat: SatelliteStates, idx: np.ndarray, r_rx: np.ndarray
 
 
 def solve(obs: Observables, ephemerides: Mapping[int, Ephemeris] | Any,
-          iono: Klobuchar | None, x0: Any = None, config: PvtConfig | None = None
-          ) -> PvtSolution:
+          iono: Klobuchar | None, x0: Any = None, config: PvtConfig | None = None,
+          *, sat: SatelliteStates | None = None) -> PvtSolution:
     """Position, then velocity (when the position has a finite solution) of one epoch.
 
-    Parameters as :func:`solve_position`; returns the complete :class:`PvtSolution`.
+    Parameters as :func:`solve_position` (``sat``: the satellite states of ``obs`` with
+    ``ephemerides``, computed here when None); returns the complete :class:`PvtSolution`.
     """
     if obs.n == 0:
         return solve_position(obs, ephemerides, iono, x0, config)
-    sat = satellite_states(obs, ephemerides)
+    if sat is None:
+        sat = satellite_states(obs, ephemerides)
     sol = solve_position(obs, ephemerides, iono, x0, config, sat=sat)
     if np.all(np.isfinite(sol.r_e)):
         sol = solve_velocity(obs, ephemerides, sol, iono, config, sat=sat)
@@ -848,6 +850,8 @@ class PvtEngine:
         self.last_fix: PvtSolution | None = None
         #: Observables of the last :meth:`process` call (None before the first).
         self.last_observables: Observables | None = None
+        #: Their satellite states (None before the first call, or without observables).
+        self.last_satellites: SatelliteStates | None = None
 
     def process(self, channels: list[ChannelObservationLike],
                 sample_index: int | None = None) -> PvtSolution:
@@ -858,7 +862,9 @@ class PvtEngine:
         """
         obs = self.builder(channels, sample_index)
         self.last_observables = obs
-        sol = solve(obs, self.ephemerides, self.iono, self.last_fix, self.config)
+        self.last_satellites = satellite_states(obs, self.ephemerides) if obs.n else None
+        sol = solve(obs, self.ephemerides, self.iono, self.last_fix, self.config,
+                    sat=self.last_satellites)
         if sol.valid:
             self.last_fix = sol
         return sol
