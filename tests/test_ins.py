@@ -135,3 +135,16 @@ def test_default_trajectory_error_free_imu_within_10_cm():
     err = np.linalg.norm(enu, axis=1)
     assert err.max() < 0.1, err.max()
     assert np.abs(sol.v_n - tr.v_n).max() < 0.01
+
+
+def test_cross_rows_is_np_cross_bit_for_bit():
+    """``cross_rows`` (the error model's cross products of rows) gives ``np.cross``'s values
+    bit for bit, broadcasting a 3-vector against rows and rows against rows."""
+    from sdr_di.ins.rotation import cross_rows
+
+    rng = np.random.default_rng(3)
+    for sa, sb in [((3,), (35, 3)), ((35, 3), (35, 3)), ((35, 3), (3,)), ((3,), (3,))]:
+        for _ in range(50):
+            a = rng.normal(size=sa) * 10.0 ** rng.uniform(-6, 6)
+            b = rng.normal(size=sb) * 10.0 ** rng.uniform(-6, 6)
+            assert np.array_equal(cross_rows(a, b), np.cross(a, b))

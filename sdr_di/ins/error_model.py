@@ -79,6 +79,7 @@ from ..filters.models import ProcessModel, numerical_jacobian
 from ..frames import radii_of_curvature, skew
 from ..oscillator import two_state_coefficients
 from .gravity import normal_gravity
+from .rotation import cross_rows
 
 __all__ = [
     "N_STATES",
@@ -247,7 +248,7 @@ def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.n
     # velocity (eq 2, line 2)
     Cf = Cb @ f_b
     dv_dot = (np.einsum("pij,j->pi", I - At, Cf) + np.einsum("pij,pj->pi", At, nab @ Cb.T)
-              - np.cross(2.0 * wie_c + wen_c, dv) - np.cross(2.0 * d_wie + d_wen, v_t))
+              - cross_rows(2.0 * wie_c + wen_c, dv) - cross_rows(2.0 * d_wie + d_wen, v_t))
     g_c = float(normal_gravity(lat_c, h_c))
     dv_dot[:, 2] -= g_c - normal_gravity(lat_t, h_t)
     # position (eq 2, lines 3-5)
