@@ -293,3 +293,27 @@ def test_row_split_on_two_threads_is_identical_to_one_call():
     assert used1 == [1, 1] and used2 == [min(2, KernelThreads().max_threads)] * 2
     assert np.all(np.isfinite(one))
     np.testing.assert_array_equal(two, one)
+
+
+def _split_in_child():
+    from sdr_di.receiver.threads import KernelThreads
+
+    parts = []
+    KernelThreads(2).run_rows(lambda a, b: parts.append((a, b)), np.ones(10))
+    return sorted(parts)
+
+
+def test_row_split_works_in_a_forked_child():
+    """A child forked after the parent started the kernel worker makes its own worker (the
+    inherited pool has no threads: submitting to it would wait forever)."""
+    import multiprocessing as mp
+
+    import numba
+
+    from sdr_di.receiver.threads import _pool
+
+    if numba.config.NUMBA_NUM_THREADS < 2 or "fork" not in mp.get_all_start_methods():
+        pytest.skip("needs two numba threads and fork")
+    _pool(1).submit(lambda: None).result()
+    with mp.get_context("fork").Pool(1) as p:
+        assert p.apply_async(_split_in_child).get(timeout=30) == [(0, 5), (5, 10)]

@@ -116,10 +116,14 @@ def cn0_known_noise(prompts: np.ndarray, noise_power, t_coh_s) -> float:
             return math.nan
         return 10.0 * math.log10(pd / (noise_power * t_coh_s))
     p = np.asarray(prompts)
-    nb = np.broadcast_to(np.asarray(noise_power, float), p.shape)
-    tb = np.broadcast_to(np.asarray(t_coh_s, float), p.shape)
-    pd = float(np.sum(p.real * p.real + p.imag * p.imag - nb))
-    den = float(np.sum(nb * tb))
+    nb = np.asarray(noise_power, float)
+    tb = np.asarray(t_coh_s, float)
+    if nb.shape != p.shape:          # (per-prompt arrays, the usual case, need no view)
+        nb = np.broadcast_to(nb, p.shape)
+    if tb.shape != p.shape:
+        tb = np.broadcast_to(tb, p.shape)
+    pd = float((p.real * p.real + p.imag * p.imag - nb).sum())
+    den = float((nb * tb).sum())
     if not (pd > 0.0 and den > 0.0):
         return math.nan
     return 10.0 * math.log10(pd / den)
@@ -244,6 +248,11 @@ def noise_code_phases(theta: np.ndarray, epoch: np.ndarray) -> np.ndarray:
     return np.where(t >= CODE_LENGTH_B3I, t - CODE_LENGTH_B3I, t)
 
 
+def _is_scalar(x) -> bool:
+    """``np.ndim(x) == 0`` without converting a list to an array."""
+    return x.ndim == 0 if isinstance(x, np.ndarray) else not hasattr(x, "__len__")
+
+
 class PostCorrelationNoise:
     """Post-correlation noise power per sample from noise-correlator sums (module notes).
 
@@ -278,9 +287,9 @@ class PostCorrelationNoise:
     def add(self, early, prompt, late, n_samples) -> None:
         """Add noise-correlator sums (complex, scalars or sequences of the same length) of
         ``n_samples`` samples each (a scalar or a sequence) [stored units]."""
-        if np.ndim(prompt) == 0:
+        if _is_scalar(prompt):
             early, prompt, late, n_samples = (early,), (prompt,), (late,), (n_samples,)
-        elif np.ndim(n_samples) == 0:
+        elif _is_scalar(n_samples):
             n_samples = [n_samples] * len(prompt)
         if len(prompt) <= 32:     # a channel's block: plain Python is cheaper than numpy
             vals = [(e.real * e.real + e.imag * e.imag + p.real * p.real + p.imag * p.imag

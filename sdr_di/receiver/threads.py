@@ -41,6 +41,7 @@ ENV_THREADS = "SDR_DI_KERNEL_THREADS"
 #: run_rows` [s] (default 5 ms: a worker would wait that long for the GIL to start).
 _SWITCH_S = 1e-4
 _POOL: ThreadPoolExecutor | None = None
+_POOL_PID = 0
 #: Process-wide CPU accounting of the split calls (:func:`split_stats`).
 _STATS = {"calls": 0, "caller_cpu_s": 0.0, "worker_cpu_s": 0.0, "wait_cpu_s": 0.0}
 _POOL_LOCK = threading.Lock()
@@ -52,11 +53,13 @@ def _one_numba_thread() -> None:
 
 def _pool(workers: int) -> ThreadPoolExecutor:
     """The process's kernel worker threads (created on first use, kept for later calls)."""
-    global _POOL
+    global _POOL, _POOL_PID
     with _POOL_LOCK:
-        if _POOL is None or _POOL._max_workers < workers:
+        # a forked child inherits the pool object but not its threads: make its own
+        if _POOL is None or _POOL._max_workers < workers or _POOL_PID != os.getpid():
             _POOL = ThreadPoolExecutor(max_workers=workers, initializer=_one_numba_thread,
                                        thread_name_prefix="sdr-di-kernel")
+            _POOL_PID = os.getpid()
         return _POOL
 
 
