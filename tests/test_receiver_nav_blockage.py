@@ -28,7 +28,7 @@ from sdr_di.constants import C_LIGHT
 from sdr_di.orbits.broadcast import sat_pos_vel_clock
 from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.receiver.ifreader import IfSource
-from sdr_di.receiver.navdata import BROADCAST, NavDataInForce
+from sdr_di.receiver.navdata import BROADCAST, RINEX, NavDataInForce
 from sdr_di.receiver.scalar import ScalarReceiver
 from sdr_di.scenario import DEFAULT_SCENARIO, REPO_ROOT, load_scenario, parse_scenario
 from sdr_di.sim.generate import generate_files, make_generator
@@ -92,7 +92,7 @@ def test_two_agreeing_copies_replace_a_wrong_first_copy():
     good = next(r for r in nav.records[10] if r.toe == 367200.0)
     wrong = dataclasses.replace(good, omega=good.omega - 2.4e-5)   # the count-change copy
     sow = 367200.0 + 1800.0
-    nd = NavDataInForce(nav)
+    nd = NavDataInForce()     # no assistance record: nothing to check the first copy against
     assert nd.offer_ephemeris(wrong, 18.2)
     assert nd.select_with_source(10, good.week, sow) == (wrong, BROADCAST)
     # one good copy against the wrong one: undecided, the first stays (counted)
@@ -107,3 +107,44 @@ def test_two_agreeing_copies_replace_a_wrong_first_copy():
     # and a copy of the wrong one now is a single dissent again
     assert not nd.offer_ephemeris(dataclasses.replace(wrong), 108.2)
     assert nd.select(10, good.week, sow) is copy2
+
+
+def test_implausible_new_data_set_waits_for_a_second_copy():
+    """A decoded record that moves the satellite far from the record in force (here the
+    assistance record) is held until a second identical copy; a real next data set is not."""
+    nav = load_nav(REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz")
+    good = next(r for r in nav.records[10] if r.toe == 367200.0)
+    prev = next(r for r in nav.records[10] if r.toe == good.toe - 3600.0)
+    sow = good.toe + 600.0
+    # a wrong AODE and a wrong omega, as the TCXO seed-3 C30 copy: a new data set by identity
+    wrong = dataclasses.replace(good, AODE=30, omega=good.omega - 2.4e-5)
+    nd = NavDataInForce(nav)
+    assert nd.select_with_source(10, good.week, sow)[1] == RINEX
+    assert not nd.offer_ephemeris(wrong, 48.1)
+    assert nd.select_with_source(10, good.week, sow)[1] == RINEX
+    assert (nd.n_implausible, nd.n_rejected) == (1, 1)
+    assert not nd.offer_ephemeris(wrong, 48.2)          # the same copy again is no vote
+    assert (nd.n_implausible, nd.n_rejected) == (1, 1)
+    assert nd.offer_ephemeris(dataclasses.replace(wrong), 78.1)   # a second identical copy
+    assert nd.select_with_source(10, good.week, sow)[0].AODE == 30
+    # against the wrong record now in force even the real data set needs two copies
+    assert not nd.offer_ephemeris(dataclasses.replace(good), 100.0) and nd.n_implausible == 2
+    # a decoded record and the next data set (toe one hour later, metres apart): at once
+    nd = NavDataInForce(nav)
+    assert nd.offer_ephemeris(dataclasses.replace(prev), 10.0)
+    assert nd.offer_ephemeris(dataclasses.replace(good), 20.0) and nd.n_rejected == 0
+    assert nd.select_with_source(10, good.week, sow) == (good, BROADCAST)
+
+
+@pytest.mark.parametrize("field,delta", [("IDOT", 1e-8), ("af0", 3e-7), ("M0", 1e-5),
+                                         ("toe", 8.0)])
+def test_implausible_field_is_held(field, delta):
+    """One field off as a BCH miscorrection leaves it (a rate term, invisible at toe, shows
+    30 min away); the record in force stays."""
+    nav = load_nav(REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz")
+    good = next(r for r in nav.records[10] if r.toe == 367200.0)
+    nd = NavDataInForce(nav)
+    assert nd.offer_ephemeris(dataclasses.replace(good), 1.0)
+    bad = dataclasses.replace(good, AODE=good.AODE + 1, **{field: getattr(good, field) + delta})
+    assert not nd.offer_ephemeris(bad, 2.0) and nd.n_implausible == 1
+    assert nd.select(10, good.week, good.toe) == good
