@@ -31,6 +31,7 @@ from sdr_di.receiver.ifreader import IfSource
 from sdr_di.receiver.navdata import BROADCAST, RINEX, NavDataInForce
 from sdr_di.receiver.scalar import ScalarReceiver
 from sdr_di.scenario import DEFAULT_SCENARIO, REPO_ROOT, load_scenario, parse_scenario
+from sdr_di.signal.navmsg import EphemerisAssembler, decode_stream, nav_bits
 from sdr_di.sim.generate import generate_files, make_generator
 from sdr_di.timebase import bdt_to_datetime
 
@@ -148,3 +149,31 @@ def test_implausible_field_is_held(field, delta):
     bad = dataclasses.replace(good, AODE=good.AODE + 1, **{field: getattr(good, field) + delta})
     assert not nd.offer_ephemeris(bad, 2.0) and nd.n_implausible == 1
     assert nd.select(10, good.week, good.toe) == good
+
+
+def test_assembler_returns_no_rebuilt_copy_as_a_second_one():
+    """A D1 set rebuilt with some of the subframes of the set returned before is not a second,
+    independent copy for the two-copies rule: it is not returned again unless it differs."""
+    nav = load_nav(REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz")
+    good = next(r for r in nav.records[10] if r.toe == 367200.0)
+    subs = decode_stream(nav_bits(good, good.week, good.toe, 90.0).bits, prn=10)
+    frame = {(d["SOW"] - int(good.toe)) // 30: {} for d in subs}
+    for d in subs:
+        frame[(d["SOW"] - int(good.toe)) // 30][d["FraID"]] = d
+    asm = EphemerisAssembler(10)
+    got = [asm.add(frame[0][k]) for k in (1, 2, 3)]
+    ref = got[2][0]           # good, to the fields' LSBs
+    assert got[:2] == [None, None] and _model_difference_m(ref, good)[0] < 0.05
+    assert asm.add(frame[1][1]) is None          # new subframe 1, the same 2 and 3
+    assert asm.add(frame[2][2]) is None
+    assert asm.add(frame[2][3])[0] == ref        # none of the first copy's subframes: a copy
+    asm = EphemerisAssembler(10)
+    assert [asm.add(frame[0][k]) for k in (1, 2, 3)][2][0] == ref
+    assert [asm.add(frame[1][k]) for k in (2, 3)] == [None, None]   # the same subframe 1
+    assert asm.add(frame[2][1])[0] == ref        # none of the first copy's subframes: a copy
+    # a wrong subframe 1 (AODE) corrected by the next one: the corrected set is returned
+    asm = EphemerisAssembler(10)
+    bad1 = {**frame[0][1], "raw": {**frame[0][1]["raw"], "AODE": 30}}
+    assert [asm.add(d) for d in (bad1, frame[0][2])] == [None, None]
+    assert asm.add(frame[0][3])[0].AODE == 30
+    assert asm.add(frame[1][1])[0] == ref

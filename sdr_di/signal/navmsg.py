@@ -757,6 +757,7 @@ class EphemerisAssembler:
         self.nav_type = _nav_type(self.prn)
         self._parts: dict[int, dict] = {}
         self._done_group: tuple[int, ...] | None = None
+        self._done_sows: set = set()   # SOW of the subframes of the last set returned
         self.ephemeris: Ephemeris | None = None
         self.klobuchar: Klobuchar | None = None
 
@@ -766,7 +767,10 @@ class EphemerisAssembler:
         Returns
         -------
         (Ephemeris, Klobuchar) or None
-            The record, when this subframe completes a consistent data set not returned before.
+            The record, when this subframe completes a consistent data set not returned before;
+            a set equal to the last one and sharing a subframe with it (D1: a new subframe 1
+            with the last subframes 2 and 3, or the last subframe 1 with new ones) is not
+            returned again, so that two returned copies of a record are independent decodes.
         """
         if sf.get("nav_type") != self.nav_type:
             raise NavMessageError(
@@ -800,6 +804,12 @@ class EphemerisAssembler:
             return None
         result = self._build([self._parts[k] for k in needed])
         self._done_group = groups
+        sows = {self._parts[k]["SOW"] for k in needed}
+        if sows & self._done_sows and result == (self.ephemeris, self.klobuchar):
+            # the last set returned, rebuilt with some of its subframes: not a second,
+            # independent copy (NavDataInForce's two-copies rule would count it as one)
+            return None
+        self._done_sows = sows
         self.ephemeris, self.klobuchar = result
         return result
 
