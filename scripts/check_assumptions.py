@@ -5,6 +5,7 @@ Usage::
 
     python scripts/check_assumptions.py [--fs 25e6] [--seeds 4] [--duration 60]
         [--filter ekf] [--out DIR] [--keep] [--skip-heading] [--skip-2x2]
+        [--truths tcxo ocxo] [--heading-truth tcxo|ocxo]
 
 For each seed the default scenario is generated twice, with a truth ``[oscillator]`` of
 preset ``tcxo`` and of ``ocxo`` (``scripts/`` writes the scenario variants; the files depend
@@ -16,7 +17,7 @@ only on the truth), and the deep receiver runs on each:
   and the clock-drift error RMS against the truth file's clock bias differenced over 1 s;
 * **heading**: EKF and UKF with a 20 deg initial heading error injected at the alignment
   (``[initial_errors] att_deg = [0, 0, 20]``, believed: ``[initial_covariance] att_deg =
-  [0.05, 0.05, 20]``) on the tcxo-truth files; attitude RMSE over the run and the heading
+  [0.05, 0.05, 20]``) on the ``--heading-truth`` files (default tcxo); attitude RMSE over the run and the heading
   error 5 s and 15 s after the hand-over.
 
 Prints one line per seed and run, then means and the paired differences over the seeds with
@@ -83,7 +84,9 @@ def _run(paths: dict, out: Path, cfg: DeepConfig) -> dict:
         i = np.searchsorted(res.t, res.handover_s + dt)
         return float(abs(head[i])) if i < len(head) else math.nan
 
-    return {"pos_all": m_all["pos_m_rmse"], "vel_all": m_all["vel_mps_rmse"],
+    return {"n_chan": len(res.prns),
+            "used": float(res.used.mean()) if res.used.size else math.nan,
+            "pos_all": m_all["pos_m_rmse"], "vel_all": m_all["vel_mps_rmse"],
             "att_all": m_all["att_deg_rmse"], "pos_circ": m_c["pos_m_rmse"],
             "vel_circ": m_c["vel_mps_rmse"], "drift_rms": drift_rms,
             "head_5s": head_at(5.0), "head_15s": head_at(15.0), "cpu_s": cpu}
@@ -109,6 +112,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--keep", action="store_true", help="keep the generated files")
     p.add_argument("--skip-heading", action="store_true")
     p.add_argument("--skip-2x2", action="store_true")
+    p.add_argument("--truths", nargs="+", choices=("tcxo", "ocxo"), default=["tcxo", "ocxo"],
+                   help="truth oscillators to generate (default both)")
+    p.add_argument("--heading-truth", choices=("tcxo", "ocxo"), default="tcxo",
+                   help="truth oscillator of the heading runs (default tcxo)")
     args = p.parse_args(argv)
     work = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sdr-di-assume-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -118,8 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict = {}
     try:
         for seed in range(args.seed0, args.seed0 + args.seeds):
-            for truth_osc in ("tcxo", "ocxo"):
-                if args.skip_2x2 and truth_osc == "ocxo":
+            for truth_osc in args.truths:
+                if args.skip_2x2 and truth_osc != args.heading_truth:
                     continue
                 d = work / f"s{seed}_{truth_osc}"
                 t0 = time.process_time()
@@ -136,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
                         a = parse_assumptions({"oscillator": {"preset": assumed}}, assumed)
                         runs.append((f"2x2 truth={truth_osc} assumed={assumed}",
                                      apply_to_deep(DeepConfig(filter=args.filter), a)))
-                if truth_osc == "tcxo" and not args.skip_heading:
+                if truth_osc == args.heading_truth and not args.skip_heading:
                     for f in ("ekf", "ukf"):
                         runs.append((f"heading20 {f}",
                                      apply_to_deep(DeepConfig(filter=f), heading)))
@@ -149,7 +156,8 @@ def main(argv: list[str] | None = None) -> int:
                         r = {}
                     rows.setdefault(label, []).append(r)
                     if r:
-                        print(f"  seed {seed} {label}: pos {r['pos_all']:.3f} m (circling "
+                        print(f"  seed {seed} {label}: {r['n_chan']} channels (used "
+                              f"{r['used']:.2f}), pos {r['pos_all']:.3f} m (circling "
                               f"{r['pos_circ']:.3f}), vel {r['vel_all']:.4f} m/s (circling "
                               f"{r['vel_circ']:.4f}), att {r['att_all']:.4f} deg, drift err "
                               f"{r['drift_rms']:.4f} m/s, heading at +5 s {r['head_5s']:.3f} "
