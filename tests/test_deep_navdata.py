@@ -144,9 +144,10 @@ def test_channel_decoder_rebuilds_the_broadcast_record(nav, prn, toe):
     p = _prompts(nb.bits, bit_ms, start, n_ms - start, rng, phase=0.3 + np.pi)
     dec = ChannelNavDecoder(prn, bit_ms == 20, ms_t0 - 1000)    # loop epoch e = ms - ms0
     out = []
-    for a in range(0, p.size, 20):
+    for a in range(0, p.size, 20):              # the loop's fast test passes every 20 ms
         ep = np.arange(start + a, start + min(a + 20, p.size)) + 1000
-        out += dec.add(p[a:a + 20], ep)
+        dec.add(p[a:a + 20], ep)
+        out += dec.confirm(60 // bit_ms)
     ephs = [e for e, _ in out if e is not None]
     assert ephs and ephs[-1] == want[0]
     assert any(k == want[1] for _, k in out)
@@ -160,7 +161,8 @@ def test_channel_decoder_rebuilds_the_broadcast_record(nav, prn, toe):
     got = []
     for a in range(0, p.size, 20):
         ep = np.arange(start + a, start + min(a + 20, p.size)) + 1000
-        got += late.add(p[a:a + 20], ep)
+        late.add(p[a:a + 20], ep)
+        got += late.confirm(60 // bit_ms)
     assert got == [] and late.n_subframes == 0 and late.n_failed > 3
 
 
@@ -179,6 +181,34 @@ def test_seeded_bits_complete_the_subframe_cut_by_the_hand_over(nav):
     p = _prompts(nb.bits, 20, cut * 20, (300 - cut) * 20 + 40, rng)
     dec.add(p, np.arange(cut * 20, cut * 20 + p.size))
     assert dec.n_subframes == 1 and dec.n_failed == 0
+
+
+def test_decoded_subframe_waits_for_the_signal_test_after_its_last_bit(nav):
+    """A decoded subframe reaches the assembler only when a passed test's window of bit sums
+    starts after its last bit; a failed test before that drops it (the scalar channel's rule,
+    signal.navmsg.HeldSubframes)."""
+    from sdr_di.deep.navdecode import ChannelNavDecoder
+
+    eph = {r.toe: r for r in nav.records[27]}[367200.0]
+    klob = assistance_klobuchar(nav)[0]
+    nb = nav_bits(eph, WEEK, 367200.0 + 600.0, 12.0, klob)    # subframes 1 and 2 of a frame
+    ms_t0 = round(nb.t0 * 1000)
+    p = _prompts(nb.bits, 20, 0, 300 * 20 + 4 * 20 + 1, np.random.default_rng(2))
+
+    def decoder(n_ms):
+        dec = ChannelNavDecoder(27, True, ms_t0)
+        dec.add(p[:n_ms], np.arange(n_ms))
+        return dec
+
+    dec = decoder(300 * 20 + 1)           # subframe 1's last bit just ended
+    assert dec.n_subframes == 1 and dec.confirm(3) == []
+    dec.add(p[300 * 20 + 1:], np.arange(300 * 20 + 1, p.size))   # 4 more bits
+    assert dec.confirm(5) == []           # the window starts before the last bit ended
+    got = dec.confirm(3)                  # starts after it: the coefficients of subframe 1
+    assert len(got) == 1 and got[0][1] is not None and dec.confirm(3) == []
+    dec = decoder(p.size)
+    dec.interrupt()                       # the test failed: the subframe is dropped
+    assert dec.confirm(3) == []
 
 
 # ---- end to end ----------------------------------------------------------------------------------

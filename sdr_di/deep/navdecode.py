@@ -20,11 +20,18 @@ whole 2 ms) and subframe edges (D1: whole 6 s; D2: whole 0.6 s) are known. The d
    receiver's decoders (:func:`~sdr_di.signal.navmsg.decode_subframe` after the preamble
    gave the polarity; the Costas-type ambiguity is resolved per subframe), accepts it only
    when its start time equals the subframe edge's (a BCH miscorrection or a lost channel
-   fails this), and feeds the scalar channel's
+   fails this), and holds it (:class:`~sdr_di.signal.navmsg.HeldSubframes`, the scalar
+   channel's rule) until the loop's fast C/N0 test passes on a window of bit sums that
+   starts after its last bit (:meth:`ChannelNavDecoder.confirm`); a failed test drops it
+   (:meth:`ChannelNavDecoder.interrupt`). Without this, the subframe that completed in the
+   interval whose test then failed had already been taken: its last bits came from noise,
+   which BCH(15,11) "corrects" to some codeword (TCXO 25 MHz seed 3: C30's subframe 1 with
+   AODE 30). A confirmed subframe feeds the scalar channel's
    :class:`~sdr_di.signal.navmsg.EphemerisAssembler` (subframes decoded before the hand-over
    complete sets with those decoded after). The Klobuchar coefficients are taken from a
-   D1 subframe 1 as soon as it is decoded (all eight are in it), without waiting for the
-   subframes 2-3 that complete the ephemeris.
+   D1 subframe 1 as soon as it is confirmed (all eight are in it), without waiting for the
+   subframes 2-3 that complete the ephemeris. A subframe reaches the assembler one test
+   window (60 ms) to one window plus an interval after its end.
 """
 
 from __future__ import annotations
@@ -35,7 +42,12 @@ import numpy as np
 
 from ..constants import SECONDS_PER_WEEK
 from ..errors import NavMessageError
-from ..signal.navmsg import EphemerisAssembler, decode_subframe, klobuchar_of_subframe
+from ..signal.navmsg import (
+    EphemerisAssembler,
+    HeldSubframes,
+    decode_subframe,
+    klobuchar_of_subframe,
+)
 from ..signal.words import PREAMBLE, SUBFRAME_BITS
 
 __all__ = ["ChannelNavDecoder"]
@@ -60,7 +72,8 @@ class ChannelNavDecoder:
     Attributes
     ----------
     n_subframes, n_failed : int
-        Subframes decoded and complete subframes that failed (preamble, BCH, time check).
+        Subframes decoded (held or confirmed) and complete subframes that failed (preamble,
+        BCH, time check).
     """
 
     def __init__(self, prn: int, is_d1: bool, ms0: int,
@@ -76,6 +89,7 @@ class ChannelNavDecoder:
         self._acc_bit: int | None = None   # bit number (ms of week // bit_ms) being summed
         self._bits: list[int] = []
         self._first_bit: int | None = None  # bit number of self._bits[0] (a subframe edge)
+        self._held = HeldSubframes()        # decoded, awaiting the signal test (notes)
         self.n_subframes = 0
         self.n_failed = 0
 
@@ -100,18 +114,13 @@ class ChannelNavDecoder:
         self._bits = [int(v) for v in b[edge - k0:]]
         self._acc_bit = k0 + b.size                # next bit expected
 
-    def add(self, prompts: np.ndarray, epochs: np.ndarray) -> list:
+    def add(self, prompts: np.ndarray, epochs: np.ndarray) -> None:
         """Add consecutive NH-wiped 1 ms prompts with their loop epoch numbers.
 
-        Returns
-        -------
-        list of (Ephemeris or None, Klobuchar or None)
-            Per subframe decoded in this call: the data set it completed (if any) and the
-            ionosphere coefficients it carried or completed (if any).
+        Decoded subframes are held until :meth:`confirm`.
         """
-        out = []
         if len(prompts) == 0:
-            return out
+            return
         bitno = (self.ms0 + np.asarray(epochs, np.int64)) // self.bit_ms
         edges = np.flatnonzero(np.r_[True, bitno[1:] != bitno[:-1]])
         sums = np.add.reduceat(np.asarray(prompts, np.complex128), edges)
@@ -120,39 +129,57 @@ class ChannelNavDecoder:
                 self._acc += s
                 continue
             if self._acc_bit is not None and k == self._acc_bit + 1:
-                out += self._on_bit(self._acc_bit, self._acc)
+                self._on_bit(self._acc_bit, self._acc)
             elif self._acc_bit is not None:
                 self._bits, self._first_bit = [], None      # gap in the epochs: restart
             self._acc_bit, self._acc = k, s
+
+    def confirm(self, n_bits: int) -> list:
+        """The channel's signal test passed on its last ``n_bits`` complete bit sums (the
+        bits before the one in progress): pass the held subframes that ended before them to
+        the assembler (module notes).
+
+        Returns
+        -------
+        list of (Ephemeris or None, Klobuchar or None)
+            Per subframe passed on: the data set it completed (if any) and the ionosphere
+            coefficients it carried or completed (if any).
+        """
+        if not self._held or self._acc_bit is None:
+            return []
+        out = []
+        for d in self._held.confirmed(self._acc_bit - int(n_bits)):
+            out += self._use(d)
         return out
 
     def interrupt(self) -> None:
         """The signal was not there for some of the recent bits (the channel failed its C/N0
-        test): drop the subframe in progress. Without this a subframe whose first words came
+        test): drop the subframe in progress and the held ones. Without this a subframe whose first words came
         before a blockage and the rest from noise was accepted: BCH(15,11) is a perfect code,
         so every noise word "corrects" to a codeword, and the time check only sees word 1
         (a blocked C30 record got an argument of perigee 0.37 rad off, a range step of
         2000 km)."""
         self._bits, self._first_bit = [], None
+        self._held.drop()
 
     # -- internals ------------------------------------------------------------------------
-    def _on_bit(self, k: int, s: complex) -> list:
+    def _on_bit(self, k: int, s: complex) -> None:
         d = 1.0 if (s * self._ref.conjugate()).real >= 0.0 else -1.0
         self._ref = self._lam * self._ref + d * s
         per = self.sub_ms // self.bit_ms
         if k % per == 0:
             self._bits, self._first_bit = [], k
         if self._first_bit is None:
-            return []
+            return
         self._bits.append(0 if d > 0 else 1)
         if len(self._bits) < SUBFRAME_BITS:
-            return []
+            return
         seg = np.asarray(self._bits, np.uint8)
         self._bits, first = [], self._first_bit
         self._first_bit = None
-        return self._decode(seg, first)
+        self._decode(seg, first)
 
-    def _decode(self, seg: np.ndarray, first_bit: int) -> list:
+    def _decode(self, seg: np.ndarray, first_bit: int) -> None:
         head = seg[:_NPRE]
         if np.array_equal(head, PREAMBLE):
             bits = seg
@@ -160,19 +187,22 @@ class ChannelNavDecoder:
             bits = 1 - seg
         else:
             self.n_failed += 1
-            return []
+            return
         try:
             d = decode_subframe(bits, prn=self.prn)
         except NavMessageError:
             self.n_failed += 1
-            return []
+            return
         t_edge = (first_bit * self.bit_ms / 1000.0) % SECONDS_PER_WEEK
         dt = (d["t_start"] - t_edge + SECONDS_PER_WEEK / 2) % SECONDS_PER_WEEK \
             - SECONDS_PER_WEEK / 2
         if abs(dt) > 1e-6:
             self.n_failed += 1
-            return []
+            return
         self.n_subframes += 1
+        self._held.hold(d, first_bit + SUBFRAME_BITS)
+
+    def _use(self, d: dict) -> list:
         try:
             res = self.assembler.add(d)
         except NavMessageError:

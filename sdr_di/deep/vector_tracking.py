@@ -417,6 +417,8 @@ class VectorTracking:
                 c.fast_fail = 2
             if c.fast_fail and c.nav is not None:
                 c.nav.interrupt()  # no subframe from bits of a failing interval
+            elif c.nav is not None and mon.count >= _FAST_MS // c.bit_ms:
+                self.nav_log.confirm(c, _FAST_MS // c.bit_ms, t_s)  # subframes before it
             if c.fast_fail >= 2:
                 # signal gone: lost, back only on a whole window of fresh bit
                 # sums, not on one still full of signal from before a blockage
@@ -555,8 +557,13 @@ class _NavLog:
         self._iono_entry(t_s, iono)
 
     def demodulate(self, c: _Chan, prompts, epochs, t_s: float) -> None:
-        """Feed channel ``c``'s prompts to its decoder; offer what it completes."""
-        for eph, klob in c.nav.add(prompts, epochs):
+        """Feed channel ``c``'s prompts to its decoder (it holds what it decodes)."""
+        c.nav.add(prompts, epochs)
+
+    def confirm(self, c: _Chan, n_bits: int, t_s: float) -> None:
+        """Channel ``c``'s test passed on its last ``n_bits`` bit sums: offer what the
+        subframes its decoder held until then complete (deep.navdecode notes)."""
+        for eph, klob in c.nav.confirm(n_bits):
             if eph is not None:
                 self.navdata.offer_ephemeris(eph, t_s)
             self.navdata.offer_klobuchar(klob, t_s)

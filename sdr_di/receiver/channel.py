@@ -62,7 +62,7 @@ import numpy as np
 from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I, SECONDS_PER_WEEK
 from ..errors import NavMessageError
 from ..signal.codes import NH20, nav_type
-from ..signal.navmsg import EphemerisAssembler, decode_subframe, find_preamble
+from ..signal.navmsg import EphemerisAssembler, HeldSubframes, decode_subframe, find_preamble
 from ..signal.words import PREAMBLE, SUBFRAME_BITS
 from .correlator import check_prn
 from .lock import (
@@ -207,7 +207,7 @@ class Channel:
         self._search_from = 0
         self._frame: dict | None = None  # {'idx', 'pol', 'misses', 'expect'}
         self._candidate: dict | None = None
-        self._unconfirmed: list[dict] = []  # decoded subframes awaiting the lock (notes)
+        self._unconfirmed = HeldSubframes()  # decoded subframes awaiting the lock (notes)
         self._frozen = False
         self.time_valid = False
         self._new_arc()
@@ -555,7 +555,7 @@ class Channel:
         self._search_from = 0
         self._frame = None
         self._candidate = None
-        self._unconfirmed = []
+        self._unconfirmed.drop()
         self.time_valid = False
 
     def _lose(self) -> None:
@@ -832,22 +832,21 @@ class Channel:
 
     def _accept_subframe(self, d: dict) -> None:
         """Hold decoded subframe ``d`` until the lock detector confirms it (module notes)."""
-        self._unconfirmed.append(d)
+        self._unconfirmed.hold(d, d["epoch"] + SUBFRAME_BITS * self.bit_ms)
 
     def _confirm_subframes(self, window_start: int) -> None:
         """Pass on the held subframes that ended before epoch ``window_start``, the start of
         the C/N0 window of a passed code-lock test (module notes)."""
-        sub_ms = SUBFRAME_BITS * self.bit_ms
-        while self._unconfirmed and self._unconfirmed[0]["epoch"] + sub_ms <= window_start:
-            self._use_subframe(self._unconfirmed.pop(0))
+        for d in self._unconfirmed.confirmed(window_start):
+            self._use_subframe(d)
 
     def release_unconfirmed(self) -> None:
         """Pass on the held subframes unconfirmed: at the deep hand-over, where this channel
         stops in lock and the vector loop's decoder, with its own C/N0 test, goes on with the
         same assembler (without this, a subframe 2 ended less than 0.12 s before the
         hand-over was lost and the data set waited a whole frame)."""
-        while self._unconfirmed:
-            self._use_subframe(self._unconfirmed.pop(0))
+        for d in self._unconfirmed.release():
+            self._use_subframe(d)
 
     def _use_subframe(self, d: dict) -> None:
         self.subframes.append(d)

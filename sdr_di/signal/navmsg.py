@@ -65,6 +65,7 @@ from .words import PREAMBLE, SUBFRAME_BITS, build_info, decode_words, encode_wor
 
 __all__ = [
     "EphemerisAssembler",
+    "HeldSubframes",
     "assistance_klobuchar",
     "klobuchar_of_subframe",
     "NavBits",
@@ -735,6 +736,52 @@ def decode_stream(
         out.append(d)
         pos += SUBFRAME_BITS
     return out
+
+
+class HeldSubframes:
+    """Decoded subframes held until the signal is confirmed present after their last bit.
+
+    D1/D2 words are BCH(15,11) coded, a perfect code that "corrects" every noise word to some
+    codeword, so a subframe whose last bits were demodulated after the signal had gone
+    (a blockage, a fade) decodes cleanly with wrong fields. A receiver channel therefore
+    holds each decoded subframe and passes it on (to its
+    :class:`EphemerisAssembler`) only when a signal-presence test whose window starts at or
+    after the subframe's end has passed; a failed or lost channel drops what it holds. The
+    scalar channel counts in code epochs and tests with its code-lock C/N0
+    (:mod:`~sdr_di.receiver.channel`), the vector loop's decoder in data bits with its fast
+    C/N0 test (:mod:`~sdr_di.deep.navdecode`).
+    """
+
+    def __init__(self) -> None:
+        self._held: list[tuple[int, dict]] = []
+
+    def __len__(self) -> int:
+        return len(self._held)
+
+    def hold(self, sf: dict, end: int) -> None:
+        """Hold subframe ``sf``, whose last bit ends at ``end`` (the caller's unit, exclusive:
+        the first epoch or bit after it)."""
+        self._held.append((int(end), sf))
+
+    def confirmed(self, window_start: int) -> list[dict]:
+        """The held subframes that end at or before ``window_start``, the start of the window
+        of a passed test, oldest first; they are no longer held."""
+        n = 0
+        while n < len(self._held) and self._held[n][0] <= window_start:
+            n += 1
+        out = [sf for _, sf in self._held[:n]]
+        del self._held[:n]
+        return out
+
+    def release(self) -> list[dict]:
+        """Every held subframe, unconfirmed (oldest first); none held after."""
+        out = [sf for _, sf in self._held]
+        self._held = []
+        return out
+
+    def drop(self) -> None:
+        """Forget the held subframes (the signal was not confirmed)."""
+        self._held = []
 
 
 class EphemerisAssembler:
