@@ -142,3 +142,35 @@ def test_a_loose_like_source_runs_the_same_loop_and_pulls_the_error_in():
     assert abs(north_m[-1]) < 1.0                   # after 10 s of 0.5 m fixes
     assert np.linalg.norm(cols["v"][-1]) < 0.05
     assert np.all(np.isfinite(cols["nis"]))
+
+
+def test_background_loops_restore_the_switch_interval_after_the_last_one():
+    """Loop threads lower the interpreter's switch interval while they run; with two at a
+    time (a study's threads) it comes back to its value only after the last one ends, and
+    an exception on the loop thread reaches the caller."""
+    import sys
+    import time
+
+    import pytest
+
+    from sdr_di.integration.loop import BackgroundLoop
+
+    class Sleeper:
+        stop_requested = False
+
+        def __init__(self, t, fail=False):
+            self.t, self.fail = t, fail
+
+        def run(self, source):
+            time.sleep(self.t)
+            if self.fail:
+                raise RuntimeError("loop failed")
+
+    s0 = sys.getswitchinterval()
+    a, b = BackgroundLoop(Sleeper(0.05), None), BackgroundLoop(Sleeper(0.2, fail=True), None)
+    assert sys.getswitchinterval() < s0
+    a.join()
+    assert sys.getswitchinterval() < s0
+    with pytest.raises(RuntimeError, match="loop failed"):
+        b.join()
+    assert sys.getswitchinterval() == s0

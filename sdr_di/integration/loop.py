@@ -375,7 +375,8 @@ class BackgroundLoop:
     interval (5 ms by default: up to 5 ms after each of the receiver's ~100 kernel calls per
     second of file, which would put the loop's work back on the receiver's path). The
     switch interval is :attr:`switch_interval_s` while the thread runs, restored by
-    :meth:`join` / :meth:`abort`.
+    :meth:`join` / :meth:`abort` when no other loop thread of the process is running (runs
+    in threads of one process, e.g. a study's workers, share the interpreter's setting).
 
     Parameters
     ----------
@@ -390,16 +391,33 @@ class BackgroundLoop:
 
     #: Interpreter switch interval while the loop thread runs [s].
     switch_interval_s = 2e-4
+    _lock = threading.Lock()
+    _running = 0                 # loop threads of the process
+    _saved_switch = 0.005        # the interval before the first of them
 
     def __init__(self, loop: IntegrationLoop, source: MeasurementSource) -> None:
         self.loop, self.source = loop, source
         self.error: BaseException | None = None
         self.cpu_s = 0.0
-        self._switch = sys.getswitchinterval()
-        sys.setswitchinterval(min(self._switch, self.switch_interval_s))
+        self._restored = False
+        with BackgroundLoop._lock:
+            if BackgroundLoop._running == 0:
+                BackgroundLoop._saved_switch = sys.getswitchinterval()
+                sys.setswitchinterval(min(BackgroundLoop._saved_switch,
+                                          self.switch_interval_s))
+            BackgroundLoop._running += 1
         self._thread = threading.Thread(target=self._run, name="sdr-di integration loop",
                                         daemon=True)
         self._thread.start()
+
+    def _restore_switch(self) -> None:
+        with BackgroundLoop._lock:
+            if self._restored:
+                return
+            self._restored = True
+            BackgroundLoop._running -= 1
+            if BackgroundLoop._running == 0:
+                sys.setswitchinterval(BackgroundLoop._saved_switch)
 
     def _run(self) -> None:
         c0 = time.thread_time()
@@ -413,7 +431,7 @@ class BackgroundLoop:
     def join(self) -> None:
         """Wait for the loop to end; re-raise its exception here."""
         self._thread.join()
-        sys.setswitchinterval(self._switch)
+        self._restore_switch()
         if self.error is not None:
             raise self.error
 
@@ -423,4 +441,4 @@ class BackgroundLoop:
         close its epoch stream first."""
         self.loop.stop_requested = True
         self._thread.join()
-        sys.setswitchinterval(self._switch)
+        self._restore_switch()
