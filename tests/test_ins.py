@@ -148,3 +148,20 @@ def test_cross_rows_is_np_cross_bit_for_bit():
             a = rng.normal(size=sa) * 10.0 ** rng.uniform(-6, 6)
             b = rng.normal(size=sb) * 10.0 ** rng.uniform(-6, 6)
             assert np.array_equal(cross_rows(a, b), np.cross(a, b))
+
+
+def test_skew_of_rows_is_exactly_the_cross_product_matrix():
+    """``skew`` of a vector and of a batch of rows: the components (and their negatives,
+    signed zeros included) in place, zeros on the diagonal, ``skew(a) @ b = a x b``."""
+    rng = np.random.default_rng(4)
+    v = rng.normal(size=(6, 3))
+    v[0, 0] = 0.0
+    S = skew(v)
+    assert S.shape == (6, 3, 3) and S.dtype == np.float64
+    for k in range(6):
+        x, y, z = v[k]
+        want = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+        assert np.array_equal(S[k], want) and np.array_equal(np.signbit(S[k]), np.signbit(want))
+        assert np.array_equal(skew(v[k]), want)
+    b = rng.normal(size=3)
+    np.testing.assert_allclose(skew(v[1]) @ b, np.cross(v[1], b), rtol=1e-15, atol=1e-15)
