@@ -306,18 +306,24 @@ def test_heuristic_with_strong_signal_and_small_files(tmp_path):
     assert check_format_statistics(tmp_path / "tiny.bin", "iq_int16") is None
 
 
+def _read_ahead_and_plain(path, fmt: str, n: int, seed: int):
+    """A file of ``n`` random values, opened twice: with the read-ahead (default) and
+    without (synchronous reads, the reference)."""
+    path.write_bytes(encode(fmt, random_values(np.random.default_rng(seed), fmt, n)))
+    src = IfSource(path, 25e6, 0.0, fmt, check_format=False)
+    ref = IfSource(path, 25e6, 0.0, fmt, check_format=False)
+    ref.read_ahead = False
+    return src, ref
+
+
 @pytest.mark.parametrize("fmt", ["iq_int8", "iq_int16", "iq_int4"])
 def test_read_ahead_serves_the_same_values(tmp_path, fmt):
     """Sequential chunk reads with overlaps (the receivers' pattern), a jump backwards and a
     pickled copy give what synchronous reads give; the read-ahead is actually used."""
     import pickle
 
-    rng = np.random.default_rng(5)
     n = 50_000
-    (tmp_path / "r.bin").write_bytes(encode(fmt, random_values(rng, fmt, n)))
-    src = IfSource(tmp_path / "r.bin", 25e6, 0.0, fmt, check_format=False)
-    ref = IfSource(tmp_path / "r.bin", 25e6, 0.0, fmt, check_format=False)
-    ref.read_ahead = False
+    src, ref = _read_ahead_and_plain(tmp_path / "r.bin", fmt, n, seed=5)
     served = 0
     for s, m in [(0, 4000), (3500, 4000), (7500, 4000), (11000, 4000), (200, 300),
                  (500, 4000), (4400, 6000), (n - 3000, 3000)]:
@@ -341,12 +347,8 @@ def test_read_stored_power_equals_mean_power_of_the_values(tmp_path, fmt, monkey
     from sdr_di.receiver._numba_correlate_bits import mean_power
 
     monkeypatch.setattr(ifreader, "_POWER_BLOCK", 64)
-    rng = np.random.default_rng(7)
     n = 20_000
-    (tmp_path / "p.bin").write_bytes(encode(fmt, random_values(rng, fmt, n)))
-    src = IfSource(tmp_path / "p.bin", 25e6, 0.0, fmt, check_format=False)
-    ref = IfSource(tmp_path / "p.bin", 25e6, 0.0, fmt, check_format=False)
-    ref.read_ahead = False
+    src, ref = _read_ahead_and_plain(tmp_path / "p.bin", fmt, n, seed=7)
     summed_ahead = 0
     for s, m in [(0, 3000), (2601, 3000), (4101, 3001), (6000, 10), (6003, 4000),
                  (300, 50), (n - 700, 700)]:
