@@ -262,6 +262,10 @@ def _add_run(sub) -> None:
     p.add_argument("--cold", action="store_true",
                    help="cold start (every mode): ignore the sidecar's satellite list and "
                    "Dopplers, search --prn (default all 63) over +-5 kHz")
+    p.add_argument("--pll-bw", type=float, default=None, metavar="HZ",
+                   help="noise bandwidth of the tracking PLL once locked (default 15 Hz; at "
+                   "most 25 Hz with the 10 ms D1 coherent time): widen it for a poor "
+                   "oscillator (docs/assumptions.md); any mode (deep's start-up)")
     p.add_argument("--approx-pos", type=_approx_pos, default=None, metavar="LAT,LON,H",
                    help="scalar mode, with --ephemeris and the file's start time: search the "
                    "satellites visible from this approximate position [deg, deg, m] around "
@@ -302,6 +306,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .constants import parse_prn
     from .io.atomic import check_output_dir
     from .receiver.run_scalar import run_scalar
+    from .receiver.scalar import ScalarReceiver
 
     scalar_search = args.mode == "scalar" and args.approx_pos is not None
     deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
@@ -327,8 +332,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     assist = not args.cold
     if scalar_search:
         assist = _visible_assistance(args, source)
+    tracking = _tracking_config(args)
     res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress,
-                     assist=assist)
+                     assist=assist, receiver=None if tracking is None
+                     else ScalarReceiver(config=tracking, log=False))
     rt = res.processed_s / max(res.wall_s, 1e-9)
     print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
           f"{res.n_fixes}/{res.n_epochs} epochs with a fix")
@@ -345,10 +352,24 @@ def _check_run_options(args: argparse.Namespace) -> None:
     import math
 
     for opt, v in (("--rate", args.rate), ("--filter-rate", args.filter_rate),
-                   ("--duration", args.duration), ("--gnss-rate", args.gnss_rate)):
+                   ("--duration", args.duration), ("--gnss-rate", args.gnss_rate),
+                   ("--pll-bw", args.pll_bw)):
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UsageError(f"{opt} must be a finite number > 0, got {v:g}")
+    _tracking_config(args)
     _check_file_options(args)
+
+
+def _tracking_config(args: argparse.Namespace):
+    """The scalar loops' settings of ``run`` (``--pll-bw``), or None for the defaults."""
+    if args.pll_bw is None:
+        return None
+    from .receiver.tracking import TrackingConfig
+
+    try:
+        return TrackingConfig(track_pll_bw_hz=args.pll_bw)
+    except ValueError as exc:   # too wide for the coherent time: an unstable loop
+        raise UsageError(f"--pll-bw {args.pll_bw:g}: {exc}") from None
 
 
 def _check_file_options(args: argparse.Namespace) -> None:
@@ -428,7 +449,7 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
         res = run_deep(source, out, config=cfg, imu_path=args.imu, truth_path=args.truth,
                        nav_path=args.ephemeris, assist=not args.no_assist, prns=prns,
                        progress=not args.no_progress, duration_s=args.duration,
-                       search=not args.cold)
+                       search=not args.cold, tracking=_tracking_config(args))
     except ValueError as exc:  # e.g. a filter rate that does not divide the IMU rate
         raise UsageError(str(exc)) from None
     r = res.result
@@ -498,14 +519,14 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     from .errors import FilterError, ImuDataError, ScenarioError
     from .filters import FILTER_NAMES
     from .ins.imu import ImuErrorModel
+    from .integration.assumptions import apply_to_lc, resolve_assumptions
     from .integration.loose import (
+        lc_summary,
         load_lc_scenario,
         make_inputs,
         min_lc_duration_s,
         run_loose,
     )
-    from .integration.assumptions import apply_to_lc, resolve_assumptions
-    from .integration.loose import lc_summary
     from .integration.noise import NoiseWindow
     from .io.atomic import atomic_open, check_output_dir, ensure_output_dir
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT

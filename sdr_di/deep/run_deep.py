@@ -50,6 +50,8 @@ from ..io.atomic import atomic_open, ensure_output_dir
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
 from ..receiver.run_scalar import search_assistance
+from ..receiver.scalar import ScalarReceiver
+from ..receiver.tracking import TrackingConfig
 from .vector_loop import DeepConfig, DeepReceiver, DeepResult, check_imu_span
 
 __all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
@@ -127,12 +129,16 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
              nav_path: str | Path | None = None, assist: bool = True, prns=None,
              stem: str | None = None, progress: bool = True,
              duration_s: float | None = None,
-             search: bool | dict[int, float | None] = True) -> DeepRunSummary:
+             search: bool | dict[int, float | None] = True,
+             tracking: TrackingConfig | None = None) -> DeepRunSummary:
     """Run the deep receiver over ``source`` and write the solution files (module notes).
 
     ``search`` is the start-up's acquisition assistance, the same rule as scalar mode's
     (:func:`~sdr_di.receiver.run_scalar.search_assistance`: True, the sidecar's list around
-    its Dopplers; False, a cold search of ``prns``, default all 63).
+    its Dopplers; False, a cold search of ``prns``, default all 63). ``tracking``: the
+    start-up scalar receiver's loop settings (default :class:`~sdr_di.receiver.tracking.
+    TrackingConfig`; ``sdr-di run --pll-bw``), which also track loose's and tight's
+    channels to the end.
 
     Raises
     ------
@@ -191,7 +197,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
             bar.set_postfix_str(f"x{rt:.2f} real time, {n_used}/{n_ch} in the vector")
 
     try:
-        rx = DeepReceiver(cfg)
+        rx = DeepReceiver(cfg, scalar=None if tracking is None
+                          else ScalarReceiver(config=tracking, log=False))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", NavDataWarning)
             res = rx.run(source, imu, prns=prns, nav=nav, truth=truth, progress=cb,
