@@ -364,12 +364,17 @@ def _tracking_config(args: argparse.Namespace):
     """The scalar loops' settings of ``run`` (``--pll-bw``), or None for the defaults."""
     if args.pll_bw is None:
         return None
+    import dataclasses
+
     from .receiver.tracking import TrackingConfig
 
-    try:
-        return TrackingConfig(track_pll_bw_hz=args.pll_bw)
-    except ValueError as exc:   # too wide for the coherent time: an unstable loop
-        raise UsageError(f"--pll-bw {args.pll_bw:g}: {exc}") from None
+    d = TrackingConfig()
+    t_max = max(d.coherent_ms_d1, d.coherent_ms_d2) * 1e-3
+    if args.pll_bw * t_max > 0.25:     # the loop's stability limit (TrackingConfig)
+        raise UsageError(f"--pll-bw {args.pll_bw:g} Hz x {t_max * 1e3:g} ms coherent time = "
+                         f"{args.pll_bw * t_max:g} > 0.25 (unstable loop): at most "
+                         f"{0.25 / t_max:g} Hz")
+    return dataclasses.replace(d, track_pll_bw_hz=args.pll_bw)
 
 
 def _check_file_options(args: argparse.Namespace) -> None:

@@ -164,6 +164,10 @@ CASES: list[tuple[str, list[str]]] = [
     ("run-tight-gnss-rate-nan", ["run", "{d}/set/s.bin", "--mode", "tight", "--gnss-rate",
                                  "nan"]),
     ("run-scalar-gnss-rate", ["run", "{d}/set/s.bin", "--gnss-rate", "5"]),
+    ("run-pll-bw-0", ["run", "{d}/set/s.bin", "--pll-bw", "0"]),
+    ("run-pll-bw-unstable", ["run", "{d}/set/s.bin", "--pll-bw", "40"]),
+    ("run-deep-pll-bw-unstable", ["run", "{d}/set/s.bin", "--mode", "deep", "--pll-bw",
+                                  "26"]),
     # -- acquire -----------------------------------------------------------------------------
     ("acquire-no-file", ["acquire"]),
     ("acquire-missing", ["acquire", "{d}/nope.bin"]),

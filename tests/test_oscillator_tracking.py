@@ -42,7 +42,8 @@ def test_a_wider_pll_decodes_what_the_tcxo_breaks_at_15_hz(tcxo_file, tmp_path):
 @pytest.mark.parametrize(("value", "msg"), [
     ("-3", "--pll-bw must be a finite number > 0"),
     ("nan", "--pll-bw must be a finite number > 0"),
-    ("30", "--pll-bw 30: track_pll_bw_hz x coherent time = 0.3 > 0.25"),
+    ("30", ("--pll-bw 30 Hz x 10 ms coherent time = 0.3 > 0.25 (unstable loop): at most "
+            "25 Hz")),
 ])
 def test_bad_pll_bandwidth_is_a_one_line_error_before_any_work(tcxo_file, tmp_path, capsys,
                                                                value, msg):
