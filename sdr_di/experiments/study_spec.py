@@ -137,7 +137,8 @@ class StudySpec:
         cell = self.cells[c]
         canon = {"experiment": self.experiment, "filters": self.filters,
                  "base_seed": self.base_seed, "params": cell.params,
-                 "scenario_files": _scenario_digests([cell])}
+                 # the scenario's content, not where this checkout keeps it
+                 "scenario_files": sorted(map(str, _scenario_digests([cell]).values()))}
         text = json.dumps(canon, sort_keys=True, default=str).encode()
         return hashlib.sha256(text).hexdigest()[:16]
 
