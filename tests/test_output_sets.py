@@ -8,6 +8,7 @@ touches an earlier complete set.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -42,8 +43,11 @@ def complete_set(tmp_path_factory) -> Path:
     return d
 
 
-def _contents(d: Path) -> dict[str, bytes]:
-    return {p.name: p.read_bytes() for p in sorted(d.iterdir()) if p.is_file()}
+def _contents(d: Path) -> dict[str, str]:
+    """SHA-256 of each file by name: equal exactly when the bytes are (a failed comparison
+    then prints 64 characters per file, not a diff of 80 MB of samples)."""
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(d.iterdir()) if p.is_file()}
 
 
 def _copy(src: Path, dst: Path) -> Path:
@@ -179,11 +183,10 @@ def test_output_set_renames_in_order_and_discards_on_error(tmp_path, monkeypatch
             "a.bin.part", "b.csv.part", "c.json.part"]
         files.commit()
     assert order == ["a.bin", "b.csv", "c.json"]
-    with pytest.raises(RuntimeError):
-        with OutputSet() as files:
-            with files.open(tmp_path / "a.bin", "w") as fh:
-                fh.write("new")
-            raise RuntimeError
+    with pytest.raises(RuntimeError), OutputSet() as files:
+        with files.open(tmp_path / "a.bin", "w") as fh:
+            fh.write("new")
+        raise RuntimeError
     assert (tmp_path / "a.bin").read_text() == "a.bin"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bin", "b.csv", "c.json"]
 
