@@ -449,6 +449,8 @@ def test_report_warns_for_each_unreadable_run_record(tmp_path, capsys):
 _INTERRUPT_AT_IMPORT = """
 import os, signal, sys
 from importlib.abc import MetaPathFinder
+# a terminal's Ctrl-C: whatever disposition the test process left to its children
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 class Interrupt(MetaPathFinder):
     def find_spec(self, name, path=None, target=None):

@@ -198,7 +198,9 @@ def _start_generation(out: Path) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "sdr_di.cli", "generate", "--no-progress", "--duration", "4",
          "--fs", "10e6", "--out", str(out), "--name", "s"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        # a terminal's Ctrl-C, whatever disposition the test process left to its children
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _wait_for_part(proc: subprocess.Popen, part: Path, timeout_s: float = 120.0) -> None:
