@@ -369,8 +369,8 @@ def _tracking_config(args: argparse.Namespace):
     from .receiver.tracking import TrackingConfig
 
     d = TrackingConfig()
-    t_max = max(d.coherent_ms_d1, d.coherent_ms_d2) * 1e-3
-    if args.pll_bw * t_max > 0.25:     # the loop's stability limit (TrackingConfig)
+    t_max = d.max_coherent_s
+    if args.pll_bw * t_max > 0.25:     # TrackingConfig's stability limit, in the CLI's terms
         raise UsageError(f"--pll-bw {args.pll_bw:g} Hz x {t_max * 1e3:g} ms coherent time = "
                          f"{args.pll_bw * t_max:g} > 0.25 (unstable loop): at most "
                          f"{0.25 / t_max:g} Hz")

@@ -212,6 +212,12 @@ class TrackingConfig:
     coast_max_s: float = 300.0
     coast_tol_chips: float = 1000.0
 
+    @property
+    def max_coherent_s(self) -> float:
+        """Longest coherent time of the tracking loops [s]; ``track_pll_bw_hz`` times it
+        must stay <= 0.25 (loop stability)."""
+        return max(self.coherent_ms_d1, self.coherent_ms_d2) * 1e-3
+
     def __post_init__(self):
         if self.coherent_ms_d1 not in (1, 2, 4, 5, 10, 20):
             raise ValueError(f"coherent_ms_d1 must divide 20 ms, got {self.coherent_ms_d1}")
@@ -222,7 +228,7 @@ class TrackingConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v}")
-        t_max = max(self.coherent_ms_d1, self.coherent_ms_d2) * 1e-3
+        t_max = self.max_coherent_s
         if self.track_pll_bw_hz * t_max > 0.25:
             raise ValueError(f"track_pll_bw_hz x coherent time = "
                              f"{self.track_pll_bw_hz * t_max:g} > 0.25 (unstable loop)")
