@@ -143,6 +143,20 @@ def test_bds_klobuchar_from_gop_header():
     assert read_klobuchar(ESBC) is None
 
 
+def test_header_without_bds_klobuchar_does_not_import_georinex():
+    """Nothing to cross-check without BDSA/BDSB: loading the shipped ESBC file (every
+    ``sdr-di run``'s assistance) leaves georinex (xarray, pandas) unimported; the GOP file,
+    which has them, is still compared with georinex's header reader."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from sdr_di.orbits.rinex_nav import load_nav; "
+            "load_nav(sys.argv[1]); print('georinex' in sys.modules)")
+    out = [subprocess.run([sys.executable, "-c", code, str(f)], capture_output=True,
+                          text=True, check=True).stdout.split()[-1] for f in (ESBC, GOP)]
+    assert out == ["False", "True"]
+
+
 def test_georinex_nan_pitfall_and_crosscheck():
     """georinex 1.16.2 gives NaN for every BDS value of the station files; we do not."""
     import georinex
