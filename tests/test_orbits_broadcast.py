@@ -152,3 +152,25 @@ def test_sat_states_selects_per_time(esbc):
     np.testing.assert_array_equal(dt[2], sat_pos_vel_clock(b, t[2], week=a.week)[2][0])
     with pytest.raises(NoEphemerisError):
         sat_states(esbc, 20, a.week, np.array([a.toe, a.toe - 86400.0]))
+
+
+def test_stacked_rows_equal_one_record_at_a_time(esbc):
+    """sat_pos_vel_clock_stacked: row i is record i alone, bit for bit (GEO, IGSO, MEO mixed;
+    different eccentricities converge Kepler's equation in different iteration counts)."""
+    from sdr_di.orbits.broadcast import sat_pos_vel_clock_stacked, stack_ephemerides
+
+    ephs = [esbc.records[p][0] for p in (5, 6, 11, 20, 33, 1, 59) if p in esbc.records]
+    assert any(e.is_geo for e in ephs) and not all(e.is_geo for e in ephs)
+    rng = np.random.default_rng(3)
+    t = ephs[0].toe + rng.uniform(-7200.0, 7200.0, (len(ephs), 5))
+    st = stack_ephemerides(ephs)
+    assert stack_ephemerides(list(ephs)) is st          # cached by record identity
+    for week in (None, ephs[0].week):
+        got = sat_pos_vel_clock_stacked(st, t, week=week)
+        for i, eph in enumerate(ephs):
+            one = sat_pos_vel_clock(eph, t[i], week=week)
+            for g, o in zip(got, one):
+                np.testing.assert_array_equal(g[i], o)
+    # one row of times for every record (broadcast)
+    got = sat_pos_vel_clock_stacked(st, t[0])
+    np.testing.assert_array_equal(got[0][3], sat_pos_vel_clock(ephs[3], t[0])[0])

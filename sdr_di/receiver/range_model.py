@@ -26,7 +26,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..constants import C_LIGHT
-from ..orbits.broadcast import sat_pos_vel_clock
+from ..orbits.broadcast import sat_pos_vel_clock_stacked, stack_ephemerides
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from .pvt import PvtConfig, atmosphere_delays, sagnac_rotation
 
@@ -97,15 +97,12 @@ def predict_ranges(ephemerides: Sequence[Ephemeris], week: int, sow_nom, r_rx, c
     else:
         tau = np.array(tau0, float).reshape(n_s, n_t)
     t_r = sow - b / C_LIGHT                                  # BDT of reception
-    r_sat = np.empty((n_s, n_t, 3))
-    v_sat = np.empty((n_s, n_t, 3))
-    dt_sv = np.empty((n_s, n_t))
+    stack = stack_ephemerides(ephemerides)      # every satellite in one numpy pass
+    r_rep = np.repeat(r[None], n_s, 0).reshape(-1, 3)
     for _ in range(passes):
-        for i, eph in enumerate(ephemerides):
-            rs, vs, dts, _ = sat_pos_vel_clock(eph, t_r - tau[i], week=week)
-            r_sat[i], v_sat[i], dt_sv[i] = rs, vs, dts
-        rot, rho, _ = sagnac_rotation(r_sat.reshape(-1, 3), np.repeat(r[None], n_s, 0)
-                                          .reshape(-1, 3))
+        r_sat, v_sat, dt_sv, _ = sat_pos_vel_clock_stacked(stack, t_r[None, :] - tau,
+                                                           week=week)
+        rot, rho, _ = sagnac_rotation(r_sat.reshape(-1, 3), r_rep)
         tau = rho.reshape(n_s, n_t) / C_LIGHT
     r_rot = rot.reshape(n_s, n_t, 3)
     rho = rho.reshape(n_s, n_t)
