@@ -143,6 +143,23 @@ def test_batch_equals_single_and_zero_is_fixed_point(truth):
     assert y[16] == pytest.approx(2.0 * (1 - 1 / 3600.0), rel=1e-6)
 
 
+def test_f_and_F_is_f_and_F_bit_for_bit(truth):
+    """The EKF's one-batch time update (``f_and_F``: 2 n + 1 rows) gives exactly the
+    ``f`` of a one-row batch and the ``F`` of the 2 n-row one, at the zero state the
+    closed loop predicts from and at large errors, with the start and end states apart."""
+    model = InsErrorModel()
+    rng = np.random.default_rng(7)
+    scale = np.r_[[1e-2] * 3, [1] * 3, [1e-6] * 2, 5, [1e-5] * 3, [1e-2] * 3, 10, 1]
+    for i in range(0, 3000, 150):
+        model.set_interval(NavState(truth.llh[i], truth.v_n[i], truth.C_b_n[i]),
+                           NavState(truth.llh[i + 4], truth.v_n[i + 4], truth.C_b_n[i + 4]),
+                           truth.f_b[i + 1], truth.w_ib_b[i + 1])
+        for x in (np.zeros(17), rng.standard_normal(17) * scale):
+            f, F = model.f_and_F(x, 0.02)
+            f1, F1 = model.f(x, 0.02), model.F(x, 0.02)
+            assert f.tobytes() == f1.tobytes() and F.tobytes() == F1.tobytes()
+
+
 def test_process_noise_and_ekf_runs(truth):
     Q = process_noise(1.0, gyro_random_walk_si=np.radians(0.04) / 60,
                       accel_random_walk_si=0.05 / 60, gyro_bias_si=np.radians(8) / 3600,

@@ -37,8 +37,8 @@ class EKF(KalmanFilterBase):
         self.H = np.zeros((0, self.x.size))
 
     def _propagate(self, x, P, dt):
-        F = np.asarray(self.process_model.F(x, dt), dtype=float)
-        x_new = np.asarray(self.process_model.f(x, dt), dtype=float)
+        x_new, F = self.process_model.f_and_F(x, dt)
+        x_new, F = np.asarray(x_new, dtype=float), np.asarray(F, dtype=float)
         self.F = F
         return x_new, F @ P @ F.T
 

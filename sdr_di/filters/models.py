@@ -104,6 +104,11 @@ class ProcessModel:
         """State-transition Jacobian ``df/dx`` at ``x`` (default: central differences)."""
         return numerical_jacobian(lambda v: self.f(v, dt), x)
 
+    def f_and_F(self, x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(f(x, dt), F(x, dt))``, what the EKF's time update needs; subclasses whose
+        ``F`` evaluates ``f_batch`` may return both from one batch."""
+        return self.f(x, dt), self.F(x, dt)
+
 
 class MeasurementModel:
     """Measurement model ``z_k = h(x_k) + v_k``, ``v_k ~ N(0, R_k)``; ``len(z_k)`` may vary.

@@ -314,6 +314,17 @@ class InsErrorModel(ProcessModel):
         Y = self.f_batch(np.vstack([x + E, x - E]), dt)
         return ((Y[:n] - Y[n:]) / (2.0 * JACOBIAN_STEPS[:, None])).T
 
+    def f_and_F(self, x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """``f(x, dt)`` and :meth:`F` from one ``f_batch`` call of ``2 n + 1`` rows (the
+        EKF's time update: half the error-model evaluations of calling both). Every
+        operation of :func:`error_derivative` is row by row, so each row is the value a
+        batch of its own gives, bit for bit (tested)."""
+        x = np.asarray(x, float)
+        n = x.size
+        E = np.diag(JACOBIAN_STEPS)
+        Y = self.f_batch(np.vstack([x + E, x - E, x[None, :]]), dt)
+        return Y[2 * n], ((Y[:n] - Y[n:2 * n]) / (2.0 * JACOBIAN_STEPS[:, None])).T
+
     def F_numerical(self, x: np.ndarray, dt: float, scale: float = 1.0) -> np.ndarray:
         """Reference Jacobian with :func:`numerical_jacobian` (steps scaled by ``scale``)."""
         return numerical_jacobian(lambda v: self.f(v, dt), x, step=JACOBIAN_STEPS * scale)
