@@ -317,3 +317,17 @@ def test_row_split_works_in_a_forked_child():
     _pool(1).submit(lambda: None).result()
     with mp.get_context("fork").Pool(1) as p:
         assert p.apply_async(_split_in_child).get(timeout=30) == [(0, 5), (5, 10)]
+
+
+def test_block_sum_squares_equals_plain_sums():
+    """block_sum_squares (int64 sums): the float64 sums of squares of each block, short last
+    block included, with the extreme 8-bit values."""
+    from sdr_di.receiver._numba_correlate_bits import block_sum_squares
+
+    rng = np.random.default_rng(7)
+    x = rng.integers(-128, 128, 3 * 4096 + 123).astype(np.int8)
+    x[:4096] = -128                       # a full block at the largest square
+    out = np.empty(4)
+    block_sum_squares(x, 4096, out)
+    want = [float(np.sum(x[i:i + 4096].astype(np.float64) ** 2)) for i in range(0, x.size, 4096)]
+    np.testing.assert_array_equal(out, want)

