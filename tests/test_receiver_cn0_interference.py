@@ -162,3 +162,25 @@ def test_cn0_within_1p5_db_of_the_sidecar_effective_cn0(tmp_path):
     print(f"C/N0 {cn0:.2f} dB-Hz, sidecar effective {sat['effective_cn0_dbhz']:.2f}, "
           f"nominal {sat['cn0_dbhz']:.2f}")
     assert cn0 == pytest.approx(sat["effective_cn0_dbhz"], abs=1.5)
+
+
+def test_noise_sums_made_when_asked_equal_sums_after_every_add():
+    """PostCorrelationNoise makes its sums when asked: the same values as asking after every
+    add (ring wrap, clear, blocks and single values)."""
+    rng = np.random.default_rng(11)
+    lazy, eager = PostCorrelationNoise(n_values=300, min_values=50), \
+        PostCorrelationNoise(n_values=300, min_values=50)
+    for k in range(60):
+        m = int(rng.integers(1, 40))
+        e, p, l = (_cgauss(rng, m, 1024.0) for _ in range(3))
+        for pc in (lazy, eager):
+            pc.add(e, p, l, 1024)
+        eager.per_sample()
+        if k == 30:
+            lazy.clear()
+            eager.clear()
+        if k % 7 == 0:
+            assert lazy.noise_power(0.9) == eager.noise_power(0.9)
+    assert lazy.per_sample() == eager.per_sample()
+    held = eager._v[:eager.count]
+    assert eager.per_sample() == float(np.sum(held)) / eager.count

@@ -281,6 +281,7 @@ class PostCorrelationNoise:
         self._i = 0
         self.count = 0
         self._s = self._s2 = 0.0     # sums of the values held and of their squares
+        self._dirty = False          # values added since the sums were made (_sums)
         self.z = float(z)
         self.min_values = int(min_values)
 
@@ -319,21 +320,30 @@ class PostCorrelationNoise:
                 v[i:] = vals[:size - i]
                 v[:j - size] = vals[size - i:]
             self._i, self.count = j % size, min(size, self.count + m)
-        held = v[:self.count]
-        self._s = float(np.sum(held))
-        self._s2 = float(np.dot(held, held))
+        self._dirty = True
+
+    def _sums(self) -> tuple[float, float]:
+        """Sums of the values held and of their squares, made when asked for after values
+        were added (a channel adds every block and asks every lock evaluation)."""
+        if self._dirty:
+            held = self._v[:self.count]
+            self._s = float(np.sum(held))
+            self._s2 = float(np.dot(held, held))
+            self._dirty = False
+        return self._s, self._s2
 
     def clear(self) -> None:
         """Forget every value."""
         self._i = 0
         self.count = 0
         self._s = self._s2 = 0.0
+        self._dirty = False
 
     def per_sample(self) -> float:
         """Mean post-correlation noise power per sample [stored units^2] (NaN when empty)."""
         if self.count == 0:
             return math.nan
-        return self._s / self.count
+        return self._sums()[0] / self.count
 
     def noise_power(self, input_power: float | None) -> float | None:
         """Noise power per sample for the C/N0 (module notes): ``input_power`` (may be None)
@@ -342,10 +352,11 @@ class PostCorrelationNoise:
         k = self.count
         if k < self.min_values:
             return input_power
-        m = self._s / k
+        s, s2 = self._sums()
+        m = s / k
         if not m > 0.0:
             return input_power
         if input_power is None or not input_power > 0.0:
             return m
-        se = math.sqrt(max(self._s2 / k - m * m, 0.0) / k)
+        se = math.sqrt(max(s2 / k - m * m, 0.0) / k)
         return m if abs(m - input_power) > self.z * se else input_power
