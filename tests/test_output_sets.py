@@ -194,9 +194,12 @@ def test_output_set_renames_in_order_and_discards_on_error(tmp_path, monkeypatch
 # -- a real kill / Ctrl-C during a re-generation ------------------------------------------------
 
 def _start_generation(out: Path) -> subprocess.Popen:
-    # long enough (10 MHz, 4 s: 80 MB) to be killed while writing the .bin
+    # long enough (10 MHz, 12 s: 240 MB if it ran to the end) that the signal, sent once the
+    # .bin.part has bytes, always lands while it is being written, even on a fast idle machine
+    # (at 4 s a generation could finish before the signal arrived); killed early, it writes
+    # only a few MB
     return subprocess.Popen(
-        [sys.executable, "-m", "sdr_di.cli", "generate", "--no-progress", "--duration", "4",
+        [sys.executable, "-m", "sdr_di.cli", "generate", "--no-progress", "--duration", "12",
          "--fs", "10e6", "--out", str(out), "--name", "s"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         # a terminal's Ctrl-C, whatever disposition the test process left to its children
