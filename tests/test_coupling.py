@@ -174,7 +174,7 @@ _LLH0 = np.array([math.radians(40.0), math.radians(116.0), 100.0])
 
 def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0, p0=None,
                         bad_epoch_s=None, bad_rate_mps=1.5, bad_channels=(0, 1), cn0=45.0,
-                        background=False, **src_kw):
+                        background=False, iono_change_s=None, **src_kw):
     """A static receiver at :data:`_LLH0` with five satellites, observables exact (the PVT's
     forward model at the truth), 5 Hz, through :class:`TightRangeSource` in the integration
     loop with an EKF. The INS starts ``d_north_m`` north of the truth moving ``v_east_mps``
@@ -184,8 +184,10 @@ def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0
     at ``bad_epoch_s``, their C/N0 set to ``cn0``. ``background``: as loose and tight mode
     run it, the loop on a second thread (``BackgroundLoop``) waits for the epochs that
     another thread records, with a column for an extra channel (PRN 40) that is never
-    seen and dropped at the end (``keep_columns``). Returns the loop's columns and the
-    source."""
+    seen and dropped at the end (``keep_columns``); ``background="process"``: the loop in a
+    child process (``LoopProcess``) fed by the recorder. ``iono_change_s``: the epochs carry
+    a Klobuchar object, another one (equal values) from that time on. Returns the loop's
+    columns and the source."""
     import types
 
     from sdr_di.constants import OMEGA_E
@@ -219,6 +221,10 @@ def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0
     ns = len(dirs)
     sat = SatelliteStates(np.ones(ns, bool), r0 + 2.2e7 * np.array(dirs), np.zeros((ns, 3)),
                           np.zeros(ns), np.zeros(ns), ())
+    from sdr_di.deep.vector_tracking import SampleClock
+    from sdr_di.orbits.ephemeris import Klobuchar
+
+    klob = [Klobuchar(alpha=(0.0,) * 4, beta=(72000.0, 0.0, 0.0, 0.0)) for _ in range(2)]
     epochs = []
     for k in range(0, round(dur * fs), 200):                  # 5 Hz
         P, D, _, _ = modelled_observables(sat, np.arange(ns), r0, np.zeros(3), 0.0, 0.0,
@@ -233,7 +239,8 @@ def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0
                           t_tx_sow=np.full(ns, sow0), pseudorange_m=P,
                           pseudorange_rate_mps=D, doppler_hz=np.zeros(ns),
                           carrier_phase_m=np.zeros(ns), cn0_dbhz=c)
-        epochs.append(GnssEpoch(k, obs, sat, None, None, {}))
+        iono = None if iono_change_s is None else klob[int(k >= iono_change_s * fs)]
+        epochs.append(GnssEpoch(k, obs, sat, iono, None, {}))
     ins = StrapdownINS(llh0 + [d_north_m / 6.37e6, 0.0, 0.0], np.array([v_east_mps, 0.0, 0.0]),
                        att=np.zeros(3))
     ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], 1.0 / rate)
@@ -252,11 +259,13 @@ def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0
     loop = IntegrationLoop(
         imu=imu, t_if=imu.t, i_start=0, k_start=0, n_per=4, fs=fs, stop=10 ** 9, margin=0,
         ins=ins, clock_bias_m=clock_bias_m, clock_drift_mps=0.0, kf=kf, process=process,
-        set_geometry=model.set_geometry, sow_of_sample=lambda k: sow0 + k / fs,
-        output_every=1)
-    if not background:
+        set_geometry=model.set_geometry,     # sow0 + k / fs, picklable for the process
+        sow_of_sample=SampleClock(week, sow0, 0.0, 0.0, fs).sow, output_every=1)
+    if not background or background == "built":
         src = TightRangeSource(epochs, list(range(1, ns + 1)), imu.t, (week, sow0), fs, {},
                                **src_kw)
+        if background == "built":          # not run: (loop, source, epochs)
+            return loop, src, epochs
         loop.run(src)
         return loop.columns(ns), src
     import threading
@@ -276,8 +285,17 @@ def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0
         rec.close()
 
     producer = threading.Thread(target=produce)
-    producer.start()
-    BackgroundLoop(loop, src).join()
+    if background == "process":
+        from sdr_di.integration.loop_process import LoopProcess
+
+        run = LoopProcess(loop, src, src, rec)
+        producer.start()
+        run.join()
+        loop, src = run.loop, run.epoch_source
+        assert run.cpu_s > 0.0
+    else:
+        producer.start()
+        BackgroundLoop(loop, src).join()
     producer.join()
     src.keep_columns(range(1, ns + 1), loop.rows)
     return loop.columns(ns), src
@@ -332,6 +350,48 @@ def test_loop_behind_the_receiver_gives_the_rows_of_a_loop_after_it():
     for k in seq:
         assert seq[k].shape == bg[k].shape, k
         assert np.array_equal(seq[k], bg[k], equal_nan=True), k
+
+
+def test_loop_in_a_child_process_gives_the_rows_of_the_loop_on_a_thread():
+    """Loose and tight mode run the loop in a child process fed epoch by epoch: its rows,
+    gate counts and navigation record are those of the loop run over the finished list,
+    bit for bit; two Klobuchar objects with the same values are two models there as here
+    (the source marks a change by identity, which the feed keeps)."""
+    seq, s_seq = _static_tight_setup(dur=3.0, bad_epoch_s=2.0, iono_change_s=1.0)
+    pr, s_pr = _static_tight_setup(dur=3.0, bad_epoch_s=2.0, iono_change_s=1.0,
+                                   background="process")
+    assert len(s_seq.navigation["ionosphere"]) == 2
+    assert s_pr.navigation == s_seq.navigation
+    assert (s_pr.prns, s_pr.n_gated, s_pr.n_screened) == (s_seq.prns, s_seq.n_gated,
+                                                           s_seq.n_screened)
+    assert seq.keys() == pr.keys()
+    for k in seq:
+        assert seq[k].shape == pr[k].shape, k
+        assert np.array_equal(seq[k], pr[k], equal_nan=True), k
+
+
+def test_loop_process_hands_back_the_loops_exception():
+    """An exception of the loop in its child process is raised by ``join`` in the parent,
+    the same type and text as on a thread (a loop without a process model)."""
+    from sdr_di.integration.gnss_epochs import GnssEpochRecorder
+    from sdr_di.integration.loop import BackgroundLoop
+    from sdr_di.integration.loop_process import LoopProcess
+
+    def broken(run):
+        loop, src, epochs = _static_tight_setup(dur=1.0, background="built")
+        loop.process = None
+        rec = GnssEpochRecorder(None, None)
+        for ep in epochs:
+            rec.append(ep)
+        rec.close()
+        src.attach_epochs(rec.epochs, rec.wait_for)
+        return run(loop, src, rec)
+
+    with pytest.raises(AttributeError) as on_thread:
+        broken(lambda loop, src, rec: BackgroundLoop(loop, src).join())
+    with pytest.raises(AttributeError) as in_child:
+        broken(lambda loop, src, rec: LoopProcess(loop, src, src, rec).join())
+    assert str(in_child.value) == str(on_thread.value)
 
 
 def test_gate_quantile_is_scipys_chi2_ppf():

@@ -116,7 +116,8 @@ from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..integration.assumptions import FixedNoiseSource
 from ..integration.gnss_epochs import GnssEpochRecorder
-from ..integration.loop import BackgroundLoop, IntegrationLoop
+from ..integration.loop import IntegrationLoop
+from ..integration.loop_process import LoopChild, LoopProcess, start_loop_behind
 from ..integration.loose_fixes import LooseFixSource
 from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
 from ..integration.metrics import summarize
@@ -570,6 +571,8 @@ class DeepReceiver:
             return False
 
         t0 = time.perf_counter()
+        if cfg.mode != "deep":     # the loop's process, started while acquisition runs
+            hand["child"] = LoopChild.start()
         try:
             rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=_EPOCH_S,
                    stop_sample=stop, assist=assist)
@@ -578,6 +581,9 @@ class DeepReceiver:
             if "coupled" in hand:
                 hand["coupled"]["thread"].abort()
             raise
+        finally:
+            if hand.get("child") is not None:          # no hand-over: not used
+                hand.pop("child").close()
         recorder.close()
         t_scalar = time.perf_counter() - t0
         if "sample" not in hand:
@@ -675,8 +681,9 @@ class DeepReceiver:
         Same hand-over grid point, INS alignment, clock and filter as :meth:`_vector_loop`;
         the loop's measurement source is :class:`~sdr_di.integration.loose_fixes.
         LooseFixSource` or :class:`~sdr_di.integration.tight_ranges.TightRangeSource` over
-        the epochs the scalar receiver records; the loop runs on a second thread behind the
-        receiver (:class:`~sdr_di.integration.loop.BackgroundLoop`), with a channel column
+        the epochs the scalar receiver records; the loop runs behind the receiver in a
+        child process (:func:`~sdr_di.integration.loop_process.start_loop_behind`; else on
+        a second thread), with a channel column
         for every channel of the receiver until :meth:`_finish_scalar_coupled_loop`.
         """
         cfg = self.config
@@ -709,8 +716,10 @@ class DeepReceiver:
             output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
             profile=prof)
         adapt0 = kf.adaptation_time_s
-        thread = BackgroundLoop(loop, src if loose or cfg.noise_policy == "cn0" else
-                                FixedNoiseSource(src, cfg.sigma_range_m, cfg.sigma_rate_mps))
+        thread = start_loop_behind(loop, src if loose or cfg.noise_policy == "cn0" else
+                                   FixedNoiseSource(src, cfg.sigma_range_m,
+                                                    cfg.sigma_rate_mps), src, recorder,
+                                   child=hand.pop("child", None))
         return {"thread": thread, "loop": loop, "src": src, "clock": clock, "kf": kf,
                 "adapt0": adapt0, "k_grid0": k_grid0, "prof": prof}
 
@@ -721,6 +730,9 @@ class DeepReceiver:
         run = hand["coupled"]
         t0 = time.perf_counter()
         run["thread"].join()
+        if isinstance(run["thread"], LoopProcess):     # its objects as the loop ended
+            th = run["thread"]
+            run.update(loop=th.loop, src=th.epoch_source, kf=th.loop.kf, prof=th.loop.profile)
         loop, src, prof = run["loop"], run["src"], run["prof"]
         prof["scalar"] = t_scalar
         prof["loop_wait"] = time.perf_counter() - t0   # the loop's tail after the receiver

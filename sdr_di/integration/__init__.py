@@ -12,6 +12,7 @@
 ``loose_fixes``   loose mode's source: WLS position/velocity fixes, R from their formal
                   covariances (``sdr-di run --mode loose``; ``lc`` is the simulated one)
 ``tight_ranges``  tight mode's source: pseudoranges and rates into paper 004 eq 6-12
+``loop_process``  loose and tight mode's loop in a child process behind the receiver
 
 The process model is :class:`sdr_di.ins.error_model.InsErrorModel`.
 """

@@ -402,6 +402,8 @@ class FixedNoiseSource:
         self._sig = (float(sigma_range_m), float(sigma_rate_mps))
 
     def __getattr__(self, name: str):
+        if name == "_source":          # not set yet (unpickling): nothing to delegate to
+            raise AttributeError(name)
         return getattr(self._source, name)
 
     def measure(self, loop, iv):

@@ -124,12 +124,29 @@ class GnssEpochRecorder:
         self.epochs: list[GnssEpoch] = []
         self.closed = False
         self._cond = threading.Condition()
+        self._listeners: list[tuple] = []
+
+    def add_listener(self, on_epoch, on_close) -> None:
+        """Call ``on_epoch(ep)`` for every epoch, those recorded so far at once, and
+        ``on_close()`` at :meth:`close` (on the recording thread; e.g. the feed of a loop
+        in a child process, :mod:`~sdr_di.integration.loop_process`)."""
+        with self._cond:
+            for ep in self.epochs:
+                on_epoch(ep)
+            if self.closed:
+                on_close()
+            else:
+                self._listeners.append((on_epoch, on_close))
 
     def close(self) -> None:
         """No more epochs: wakes a consumer waiting in :meth:`wait_for`."""
         with self._cond:
+            if self.closed:
+                return
             self.closed = True
             self._cond.notify_all()
+            for _, on_close in self._listeners:
+                on_close()
 
     def wait_for(self, i: int) -> bool:
         """Block until epoch ``i`` is recorded (True) or the recorder is closed without it
@@ -164,6 +181,8 @@ class GnssEpochRecorder:
         with self._cond:
             self.epochs.append(ep)
             self._cond.notify_all()
+            for on_epoch, _ in self._listeners:
+                on_epoch(ep)
         return ep
 
 
@@ -224,6 +243,20 @@ class ScalarEpochSource:
         self.n_screened = 0              # channel-epochs (tight) / fixes (loose) screened out
         self.n_gated = 0                 # channel-epochs (tight) / fixes (loose) gated out
         self.navigation: dict = {"ephemerides": {}, "ionosphere": []}
+
+    def detach_epochs(self) -> tuple:
+        """Take the epoch list and its wait away (to pickle the source); returns them for
+        :meth:`attach_epochs`."""
+        saved = (self.epochs, self._wait)
+        self.epochs, self._wait = [], None
+        return saved
+
+    def attach_epochs(self, epochs: list, wait=None) -> None:
+        """Read ``epochs`` (``wait(i)``: blocks until epoch ``i`` exists or none will, as
+        :meth:`GnssEpochRecorder.wait_for`; None: the list is complete)."""
+        self.epochs, self._wait = epochs, wait
+        if wait is not None:
+            self.profile.setdefault("epoch_wait", 0.0)
 
     # ------------------------------------------------------------------------------------
     def imu_time(self, week: int, sow: float) -> float:

@@ -1,0 +1,326 @@
+"""The integration loop of loose and tight mode in a child Python process.
+
+Loose and tight run the loop behind the scalar receiver, which does not depend on the
+filter (:mod:`~sdr_di.integration.gnss_epochs`). On a thread of the receiver's process
+(:class:`~sdr_di.integration.loop.BackgroundLoop`) the loop's Python work (INS at 200 Hz,
+filter at 50 Hz) needs the interpreter lock, which the receiver's own Python work holds
+about half of the run: the loop then runs either in the receiver's place or beside the
+correlation kernels on cores they use, and the run is longer by about the loop's CPU time
+(issue 17 target 4, docs/coupling.md *Speed*). In a child process the loop has its own
+interpreter and runs on the core the receiver leaves idle while it is in Python.
+
+:class:`LoopProcess` has :class:`~sdr_di.integration.loop.BackgroundLoop`'s interface
+(``join``, ``abort``, ``cpu_s``). It sends the child the loop and its measurement source
+(pickled; the source's epoch list detached), then every epoch the
+:class:`~sdr_di.integration.gnss_epochs.GnssEpochRecorder` records, as it records it (a
+writer thread, so the receiver never waits on the pipe); ``join`` takes back the loop and
+source as they ended (rows, filter, profile, navigation record). The child computes what
+the thread would have: the same objects, the same epochs in the same order, the same
+code; the Klobuchar object of each epoch keeps its identity across the pipe (the source
+marks an ionosphere change by identity), so the rows are the thread's bit for bit
+(tested).
+
+:func:`start_loop_behind` chooses: the child process unless the loop or its source cannot
+be pickled (a filter holding a closure), or the caller is a daemonic
+``multiprocessing`` worker (which may not have children), or ``SDR_DI_LOOP_THREAD=1``
+is set; the thread otherwise. The child can be started before the loop exists
+(:class:`LoopChild`: ``DeepReceiver.run`` starts it with the receiver, so that its
+interpreter start and imports overlap the acquisition rather than the tracking).
+
+Frames on the pipes: an 8-byte little-endian length, then a pickle. Parent to child: the
+set-up ``(loop, source, epoch_source)``, then ``("epoch", GnssEpoch, iono_key, iono)`` per
+epoch (``iono`` sent only with a new key) and ``("close",)``; child to parent: ``(loop,
+source, epoch_source, cpu_s, error, warnings)`` (the warnings the loop issued, issued again
+in the parent).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import pickle
+import queue
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+import warnings
+
+from ..errors import SdrDiError
+from .loop import BackgroundLoop, IntegrationLoop
+
+__all__ = ["LoopChild", "LoopProcess", "LoopProcessError", "start_loop_behind"]
+
+_LEN = struct.Struct("<Q")
+#: Where the child's warnings, issued again here, are counted (once per place by default).
+_WARNING_REGISTRY: dict = {}
+
+
+class LoopProcessError(SdrDiError):
+    """The loop's child process ended without handing back its result."""
+
+
+def _write_frame(fh, data: bytes) -> None:
+    fh.write(_LEN.pack(len(data)))
+    fh.write(data)
+    fh.flush()
+
+
+def _read_frame(fh) -> bytes | None:
+    head = fh.read(_LEN.size)
+    if len(head) < _LEN.size:
+        return None
+    n = _LEN.unpack(head)[0]
+    data = fh.read(n)
+    if len(data) < n:
+        return None
+    return data
+
+
+class LoopChild:
+    """A started child process, its imports done or under way, waiting for a loop.
+
+    Started at the beginning of a loose/tight run (:meth:`start`), its interpreter start
+    and imports (about 0.8 s of CPU) overlap the receiver's acquisition, on the core the
+    FFT search leaves idle, instead of the receiver's tracking at the hand-over.
+    :meth:`close` ends one that gets no loop (no hand-over, or the thread runs it).
+    """
+
+    def __init__(self) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "sdr_di.integration.loop_process"],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+
+    @classmethod
+    def start(cls) -> LoopChild | None:
+        """A child, or None where the thread will run the loop (module notes)."""
+        import multiprocessing
+
+        if (os.environ.get("SDR_DI_LOOP_THREAD", "") not in ("", "0")
+                or multiprocessing.current_process().daemon):
+            return None
+        return cls()
+
+    def close(self) -> None:
+        """End the child, which has run nothing (killed: it may still be importing)."""
+        self.proc.kill()
+        self.proc.wait()
+        for fh in (self.proc.stdin, self.proc.stdout):
+            try:
+                fh.close()
+            except OSError:
+                pass
+
+
+class LoopProcess:
+    """:meth:`IntegrationLoop.run` in a child process fed by a recorder (module notes).
+
+    Parameters
+    ----------
+    loop : IntegrationLoop
+    source : MeasurementSource
+        What the loop runs with (``epoch_source`` or a wrapper of it).
+    epoch_source : ScalarEpochSource
+        The source reading the recorder's epochs.
+    recorder : GnssEpochRecorder
+        Its epochs so far are sent at once, later ones as they are recorded.
+    payload : bytes, optional
+        ``pickle.dumps((loop, source, epoch_source))`` with the epochs detached, when the
+        caller has made it already.
+    child : LoopChild, optional
+        A child started earlier (default: one started now).
+
+    Attributes
+    ----------
+    loop, source, epoch_source
+        After :meth:`join`: the child's objects as the loop ended.
+    cpu_s : float
+        CPU time of the loop in the child [s] (its thread's, as ``BackgroundLoop``'s).
+    """
+
+    def __init__(self, loop: IntegrationLoop, source, epoch_source, recorder, *,
+                 payload: bytes | None = None, child: LoopChild | None = None) -> None:
+        self.loop, self.source, self.epoch_source = loop, source, epoch_source
+        self.cpu_s = 0.0
+        if payload is None:
+            payload = _payload(loop, source, epoch_source)
+        self._proc = (child or LoopChild()).proc
+        self._q: queue.SimpleQueue = queue.SimpleQueue()
+        self._q.put(payload)
+        self._iono_keys: dict[int, tuple[int, object]] = {}
+        self._writer = threading.Thread(target=self._write, name="sdr-di loop feed",
+                                        daemon=True)
+        self._writer.start()
+        self._done = False
+        recorder.add_listener(self._on_epoch, self._on_close)
+
+    # ---- parent side ---------------------------------------------------------------------
+    def _on_epoch(self, ep) -> None:
+        """Recorder listener: one epoch, its Klobuchar object by key (module notes)."""
+        iono = ep.iono
+        key = id(iono)
+        known = self._iono_keys.get(key)
+        new = known is None or known[1] is not iono
+        if new:
+            self._iono_keys[key] = (key, iono)      # keeps it alive: the key stays unique
+        self._q.put(pickle.dumps(("epoch", dataclasses.replace(ep, iono=None), key,
+                                  iono if new else None), protocol=pickle.HIGHEST_PROTOCOL))
+
+    def _on_close(self) -> None:
+        self._q.put(pickle.dumps(("close",)))
+        self._q.put(None)
+
+    def _write(self) -> None:
+        fh = self._proc.stdin
+        try:
+            while (data := self._q.get()) is not None:
+                _write_frame(fh, data)
+            fh.close()
+        except (BrokenPipeError, OSError, ValueError):
+            pass            # the child ended early (error or abort): join reports it
+
+    def join(self) -> None:
+        """Wait for the loop to end; take back its objects; re-raise its exception here."""
+        data = _read_frame(self._proc.stdout)
+        self._proc.stdout.close()
+        rc = self._proc.wait()
+        self._writer.join()
+        self._done = True
+        if data is None:
+            raise LoopProcessError(f"integration loop process ended (exit status {rc}) "
+                                   "without a result")
+        loop, source, epoch_source, cpu_s, error, notes = pickle.loads(data)
+        self.loop, self.source, self.epoch_source, self.cpu_s = (loop, source, epoch_source,
+                                                                 cpu_s)
+        for message, category, filename, lineno in notes:    # as the thread would have
+            warnings.warn_explicit(message, category, filename, lineno,
+                                   registry=_WARNING_REGISTRY)
+        if error is not None:
+            raise error
+
+    def abort(self) -> None:
+        """End the child now (the caller failed)."""
+        if self._done:
+            return
+        self._done = True
+        self._proc.kill()
+        self._proc.wait()
+        self._q.put(None)
+        self._writer.join()
+        for fh in (self._proc.stdout, self._proc.stdin):
+            try:
+                fh.close()
+            except OSError:
+                pass
+
+
+def _payload(loop, source, epoch_source) -> bytes:
+    """The set-up frame: the objects with the epoch list detached (restored after)."""
+    saved = epoch_source.detach_epochs()
+    try:
+        return pickle.dumps((loop, source, epoch_source), protocol=pickle.HIGHEST_PROTOCOL)
+    finally:
+        epoch_source.attach_epochs(*saved)
+
+
+def start_loop_behind(loop: IntegrationLoop, source, epoch_source, recorder,
+                      child: LoopChild | None = None):
+    """The loop behind the receiver: a :class:`LoopProcess` (in ``child``, a
+    :class:`LoopChild` started earlier, else in a new one), else a
+    :class:`~sdr_di.integration.loop.BackgroundLoop` (module notes)."""
+    payload = None
+    if child is None:
+        child = LoopChild.start()
+    if child is not None:
+        try:
+            payload = _payload(loop, source, epoch_source)
+            pickle.loads(payload)          # what the child will do: fails here, not there
+        except Exception:  # noqa: BLE001 - an unpicklable model: the thread runs it
+            payload = None
+            child.close()
+    if payload is None:
+        return BackgroundLoop(loop, source)
+    return LoopProcess(loop, source, epoch_source, recorder, payload=payload, child=child)
+
+
+# ---- child side --------------------------------------------------------------------------
+class _EpochStream:
+    """The child's view of the recorder: ``epochs`` and ``wait_for`` over the pipe."""
+
+    def __init__(self, fh) -> None:
+        self.fh = fh
+        self.epochs: list = []
+        self.closed = False
+        self._iono: dict[int, object] = {}
+
+    def wait_for(self, i: int) -> bool:
+        while i >= len(self.epochs) and not self.closed:
+            data = _read_frame(self.fh)
+            msg = pickle.loads(data) if data is not None else ("close",)
+            if msg[0] == "close":
+                self.closed = True
+                break
+            _, ep, key, iono = msg
+            if iono is not None:
+                self._iono[key] = iono
+            self.epochs.append(dataclasses.replace(ep, iono=self._iono.get(key)))
+        return i < len(self.epochs)
+
+
+#: Modules a loop's set-up frame needs, imported before it arrives (:class:`LoopChild`).
+_PRELOAD = ("sdr_di.integration.loose_fixes", "sdr_di.integration.tight_ranges",
+            "sdr_di.integration.assumptions", "sdr_di.deep.vector_tracking")
+
+
+def _child_main() -> int:
+    """Run the loop sent on stdin; write the result frame on stdout."""
+    import importlib
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)     # the parent ends the child
+    inp = sys.stdin.buffer
+    out = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
+    sys.stdout = sys.stderr                          # nothing else on the result pipe
+    for name in _PRELOAD:
+        importlib.import_module(name)
+    data = _read_frame(inp)
+    if data is None:
+        return 1
+    loop, source, epoch_source = pickle.loads(data)
+    stream = _EpochStream(inp)
+    epoch_source.attach_epochs(stream.epochs, stream.wait_for)
+    error = None
+    c0 = time.thread_time()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")              # the parent's filters decide
+        try:
+            loop.run(source)
+        except BaseException as e:  # noqa: BLE001 - handed to the parent
+            error = e
+    cpu_s = time.thread_time() - c0
+    epoch_source.detach_epochs()
+    # the whole child's CPU: interpreter start, imports, feed, loop (profile notes)
+    loop.profile["loop_process_cpu"] = time.process_time()
+    notes = [(w.message, w.category, w.filename, w.lineno) for w in caught]
+    try:
+        res = pickle.dumps((loop, source, epoch_source, cpu_s, error, notes),
+                           protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:  # noqa: BLE001 - an unpicklable exception or warning: the text
+        res = pickle.dumps((loop, source, epoch_source, cpu_s,
+                            LoopProcessError(f"integration loop: {error!r}") if error
+                            else None,
+                            [(str(m), UserWarning, f, n) for m, _, f, n in notes]))
+    _write_frame(out, res)
+    out.close()
+    return 0
+
+
+if __name__ == "__main__":
+    # run the module's own copy (not this ``__main__`` one), so that what the child pickles
+    # (LoopProcessError) has the name the parent unpickles
+    from sdr_di.integration.loop_process import _child_main as _main
+
+    _rc = _main()
+    sys.stderr.flush()
+    os._exit(_rc)            # the result is written: no interpreter teardown on the tail
