@@ -28,7 +28,6 @@ Change of the measurement count N
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import minimize
 
 from ...errors import FilterError
 from .base import AdaptiveRule
@@ -144,6 +143,10 @@ class MLMeasurementNoiseCKF(AdaptiveRule):
             P = self._P[:c]
             lb = self.r_floor_rel
             u0 = np.maximum(u0, lb)
+            # imported here: scipy.optimize costs ~0.15 s of CPU at import, in every process
+            # that imports the filters (every sdr-di run but scalar's), used only here
+            from scipy.optimize import minimize
+
             res = minimize(ml_r_objective, u0, args=(scale, Y, P), jac=True, method="SLSQP",
                            bounds=[(lb, None)] * m,
                            options={"maxiter": self.maxiter, "ftol": self.ftol})
