@@ -87,11 +87,22 @@ from sdr_di.receiver.run_scalar import open_source, run_scalar
 from sdr_di.receiver.scalar import ScalarReceiver
 from sdr_di.receiver.threads import split_stats
 path, out, search = sys.argv[1], sys.argv[2], sys.argv[3]
+import threading
+def sched():   # main thread (on-CPU s, waiting-for-a-core s): Linux schedstat, else None
+    try:
+        a = open(f"/proc/self/task/{threading.get_native_id()}/schedstat").read().split()
+        return int(a[0]) / 1e9, int(a[1]) / 1e9
+    except OSError:
+        return None
 rx = ScalarReceiver(log=False)
+s0, t0 = sched(), time.perf_counter()
 res = run_scalar(open_source(path), out, progress=False, receiver=rx,
                  assist=search == "assisted")
+s1, wall = sched(), time.perf_counter() - t0
 prof = {k: v for k, v in res.profile.items() if isinstance(v, (int, float))}
 print("RESULT", json.dumps({"profile": prof, "processed_s": res.processed_s,
+      "main_sched": None if s0 is None or s1 is None else
+      {"wall": wall, "cpu": s1[0] - s0[0], "runnable": s1[1] - s0[1]},
       "run_wall_s": res.wall_s, "cpu_main": time.thread_time(), "split": split_stats(),
       "maxrss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
 """
@@ -316,6 +327,12 @@ def bench_run(args: argparse.Namespace) -> None:
                       f"{p['realtime_factor']:8.2f} "
                       + " ".join(f"{v:6.1f}%" for v in shares)
                       + f" {100.0 - sum(shares):5.1f}% {r['maxrss'] / 2**20:12.1f}")
+                ms = r.get("main_sched")
+                if ms is not None:   # where the main thread's time went (bench_deep notes)
+                    print(f"{'':>8} main thread over run_scalar: {ms['wall']:.2f} s wall = "
+                          f"{ms['cpu']:.2f} s on a core + {ms['runnable']:.2f} s waiting for "
+                          f"a core (load) + {ms['wall'] - ms['cpu'] - ms['runnable']:.2f} s "
+                          "sleeping (kernel worker, GIL, reads)")
                 if search == "assisted" and (f not in best or wall < best[f]["wall"]):
                     best[f] = {"wall": wall, "cpu": r["cpu_s"], "d": d, "shares": shares,
                                "idle": r["cpu_main"] + r["split"]["wait_cpu_s"]}

@@ -23,6 +23,9 @@ the integration filter, CSV/JSON output) in a fresh process and prints:
   loop's real-time factor over the seconds it processed;
 * the share of the loop's time in correlation, pre-filters, integration filter, INS (and
   feedback), NCO commands and sample reading;
+* where the main thread's wall time went (Linux ``/proc`` schedstat): on a core, waiting for
+  a core (the load of other processes), sleeping (the GIL handed to the kernel worker, its
+  longer parts, reads); and the CPU time of the other threads (kernel worker, IF read-ahead);
 * the peak RSS of the process, and the load average (the machine is shared: repeat and report
   best and typical).
 
@@ -44,21 +47,40 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 _CHILD = """
-import json, resource, sys, time
+import json, resource, sys, threading, time
 from pathlib import Path
 from sdr_di.deep.run_deep import run_deep
 from sdr_di.deep.vector_loop import DeepConfig
 from sdr_di.receiver.run_scalar import open_source
+
+def sched(tid=None):
+    # (on-CPU s, runnable-but-waiting-for-a-core s) of a thread; Linux schedstat, else None
+    try:
+        a = open(f"/proc/self/task/{tid or threading.get_native_id()}/schedstat").read().split()
+        return int(a[0]) / 1e9, int(a[1]) / 1e9
+    except OSError:
+        return None
+
 path, out, filt, rate = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
 meta = json.loads(Path(path).with_suffix('.json').read_text())
 prns = [s['prn'] for s in meta['satellites']]
+s0 = sched()
 t0 = time.perf_counter()
 res = run_deep(open_source(path), out, config=DeepConfig(filter=filt, filter_rate_hz=rate),
                prns=prns, progress=False)
 wall, cpu_main = time.perf_counter() - t0, time.thread_time()   # main thread, from start
+s1 = sched()
+main_sched = None if s0 is None or s1 is None else {
+    'cpu': s1[0] - s0[0], 'runnable': s1[1] - s0[1], 'wall': wall}
+threads = {}                     # CPU [s] of the threads alive at the end, by name
+for t in threading.enumerate():
+    st = None if t.native_id is None else sched(t.native_id)
+    if st is not None and t is not threading.main_thread():
+        name = t.name.rsplit('_', 1)[0]
+        threads[name] = threads.get(name, 0.0) + st[0]
 from sdr_di.receiver.threads import split_stats
 print('RESULT', json.dumps({'wall': wall, 'cpu_main': cpu_main, 'split': split_stats(),
-      'profile': res.result.profile,
+      'profile': res.result.profile, 'main_sched': main_sched, 'threads': threads,
       'maxrss_kb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
       'metrics': {k: v for k, v in res.metrics.items() if not k.endswith('axes')}}))
 """
@@ -121,6 +143,18 @@ def run(args: argparse.Namespace) -> list[dict]:
             m = d["metrics"]
             print(f"    errors: pos {m['pos_m_rmse']:.3f} m, vel {m['vel_mps_rmse']:.4f} m/s, "
                   f"att {m['att_deg_rmse']:.4f} deg RMSE over {m['n']} rows")
+            ms = d.get("main_sched")
+            if ms is not None:
+                # where the main thread's wall time went (Linux schedstat): on a quiet
+                # machine 'waiting for a core' is ~0 and 'sleeping' is the chain's waits
+                sleep = ms["wall"] - ms["cpu"] - ms["runnable"]
+                print(f"    main thread over run_deep: {ms['wall']:.2f} s wall = {ms['cpu']:.2f} s "
+                      f"on a core + {ms['runnable']:.2f} s waiting for a core (load) + "
+                      f"{sleep:.2f} s sleeping (GIL hand-overs, kernel worker, reads); other "
+                      "threads' CPU: " + ", ".join(f"{k} {v:.2f} s" for k, v in sorted(
+                          d.get("threads", {}).items()) if v >= 0.05)
+                      + f", the rest (IF read-ahead, ended threads) "
+                      f"{d['cpu_s'] - d['cpu_main'] - sum(d.get('threads', {}).values()):.2f} s")
             rows.append(d)
         b = min(rows, key=lambda r: r["process_wall"])
         p = b["profile"]
