@@ -23,6 +23,7 @@ Time: ``t_sow`` is BDT seconds of week. Without ``week``, t_k = t - t_oe is wrap
 from __future__ import annotations
 
 import dataclasses
+import threading
 
 import numpy as np
 
@@ -124,6 +125,8 @@ class EphemerisStack:
 #: holds its records, so their ids stay theirs while the entry lives).
 _STACKS: dict[tuple[int, ...], EphemerisStack] = {}
 _STACKS_MAX = 64
+#: Guards the cache's eviction and insertion (loose/tight run their loop on a second thread).
+_STACKS_LOCK = threading.Lock()
 
 
 def stack_ephemerides(ephemerides) -> EphemerisStack:
@@ -153,9 +156,10 @@ def stack_ephemerides(ephemerides) -> EphemerisStack:
         toc_week=np.array([_toc_week(e) for e in ephs], np.int64).reshape(-1, 1),
         geo=np.array([e.is_geo for e in ephs], bool),
         **{k: cols[i] for i, k in enumerate(names)})
-    if len(_STACKS) >= _STACKS_MAX:
-        _STACKS.pop(next(iter(_STACKS)))
-    _STACKS[key] = st
+    with _STACKS_LOCK:
+        if len(_STACKS) >= _STACKS_MAX:
+            _STACKS.pop(next(iter(_STACKS)))
+        _STACKS[key] = st
     return st
 
 
