@@ -394,6 +394,18 @@ def test_loop_process_hands_back_the_loops_exception():
     assert str(in_child.value) == str(on_thread.value)
 
 
+def test_fixed_noise_source_pickles_for_the_loop_process():
+    """The ``[measurement_noise] policy = "fixed"`` wrapper goes to the loop's child process
+    with its source (its attribute delegation must not recurse while unpickling)."""
+    import pickle
+
+    from sdr_di.integration.assumptions import FixedNoiseSource
+
+    loop, src, _ = _static_tight_setup(dur=1.0, background="built")
+    _, w = pickle.loads(pickle.dumps((loop, FixedNoiseSource(src, 2.0, 0.1))))
+    assert w._sig == (2.0, 0.1) and w.prns == src.prns and w.n_channels == src.n_channels
+
+
 def test_run_modules_leave_the_slow_imports_out():
     """``sdr-di run --mode loose|tight|deep`` and the loop's child process import neither
     ``scipy.stats`` (the gate's quantile) nor ``scipy.optimize`` (ML-R's SQP, imported
