@@ -89,9 +89,13 @@ class LoopChild:
     """
 
     def __init__(self) -> None:
+        # the child imports this very sdr_di, wherever the parent found it
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "sdr_di.integration.loop_process"],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
 
     @classmethod
     def start(cls) -> LoopChild | None:
@@ -101,7 +105,10 @@ class LoopChild:
         if (os.environ.get("SDR_DI_LOOP_THREAD", "") not in ("", "0")
                 or multiprocessing.current_process().daemon):
             return None
-        return cls()
+        try:
+            return cls()
+        except OSError:            # no process to be had: the thread runs the loop
+            return None
 
     def close(self) -> None:
         """End the child, which has run nothing (killed: it may still be importing)."""
