@@ -394,6 +394,35 @@ def test_loop_process_hands_back_the_loops_exception():
     assert str(in_child.value) == str(on_thread.value)
 
 
+def test_a_dead_loop_process_is_replaced_by_the_loop_here():
+    """A child that dies without a result (here: exits at once) is reported by a warning
+    and the loop runs in the parent over the recorded epochs: the rows of a sequential
+    run."""
+    import subprocess
+    import sys
+    import types
+
+    from sdr_di.integration.gnss_epochs import GnssEpochRecorder
+    from sdr_di.integration.loop_process import LoopProcess
+
+    seq, _ = _static_tight_setup(dur=2.0)
+    loop, src, epochs = _static_tight_setup(dur=2.0, background="built")
+    rec = GnssEpochRecorder(None, None)
+    src.attach_epochs(rec.epochs, rec.wait_for)
+    dead = types.SimpleNamespace(proc=subprocess.Popen(
+        [sys.executable, "-c", "import sys; sys.exit(3)"], stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE))
+    run = LoopProcess(loop, src, src, rec, child=dead)
+    for ep in epochs:
+        rec.append(ep)
+    rec.close()
+    with pytest.warns(RuntimeWarning, match="exit status 3"):
+        run.join()
+    cols = run.loop.columns(src.n_channels)
+    for k in seq:
+        assert np.array_equal(seq[k], cols[k], equal_nan=True), k
+
+
 def test_fixed_noise_source_pickles_for_the_loop_process():
     """The ``[measurement_noise] policy = "fixed"`` wrapper goes to the loop's child process
     with its source (its attribute delegation must not recurse while unpickling)."""

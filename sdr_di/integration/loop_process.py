@@ -14,9 +14,11 @@ interpreter and runs on the core the receiver leaves idle while it is in Python.
 (pickled; the source's epoch list detached), then every epoch the
 :class:`~sdr_di.integration.gnss_epochs.GnssEpochRecorder` records, as it records it (a
 writer thread, so the receiver never waits on the pipe); ``join`` takes back the loop and
-source as they ended (rows, filter, profile, navigation record). The child computes what
-the thread would have: the same objects, the same epochs in the same order, the same
-code; the Klobuchar object of each epoch keeps its identity across the pipe (the source
+source as they ended (rows, filter, profile, navigation record); a child that died
+without a result (killed, out of memory) is reported by a ``RuntimeWarning`` and replaced
+by running the loop, which the parent still holds unrun, over the recorded epochs. The
+child computes what the thread would have: the same objects, the same epochs in the same
+order, the same code; the Klobuchar object of each epoch keeps its identity across the pipe (the source
 marks an ionosphere change by identity), so the rows are the thread's bit for bit
 (tested).
 
@@ -59,7 +61,8 @@ _WARNING_REGISTRY: dict = {}
 
 
 class LoopProcessError(SdrDiError):
-    """The loop's child process ended without handing back its result."""
+    """The loop failed in its child process with an exception that does not pickle (its
+    text)."""
 
 
 def _write_frame(fh, data: bytes) -> None:
@@ -189,15 +192,23 @@ class LoopProcess:
             pass            # the child ended early (error or abort): join reports it
 
     def join(self) -> None:
-        """Wait for the loop to end; take back its objects; re-raise its exception here."""
+        """Wait for the loop to end; take back its objects; re-raise its exception here.
+        Call it after the recorder is closed (a child that died is replaced by running the
+        loop here over the recorded epochs)."""
         data = _read_frame(self._proc.stdout)
         self._proc.stdout.close()
         rc = self._proc.wait()
         self._writer.join()
         self._done = True
-        if data is None:
-            raise LoopProcessError(f"integration loop process ended (exit status {rc}) "
-                                   "without a result")
+        if data is None:     # the child died (killed, out of memory, could not start):
+            # the loop, never run here, runs now over the recorded epochs, the same rows
+            warnings.warn(f"integration loop process ended (exit status {rc}) without a "
+                          "result; running the loop in this process", RuntimeWarning,
+                          stacklevel=2)
+            c0 = time.thread_time()
+            self.loop.run(self.source)
+            self.cpu_s = time.thread_time() - c0
+            return
         loop, source, epoch_source, cpu_s, error, notes = pickle.loads(data)
         self.loop, self.source, self.epoch_source, self.cpu_s = (loop, source, epoch_source,
                                                                  cpu_s)
