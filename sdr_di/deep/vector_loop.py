@@ -532,6 +532,10 @@ class DeepReceiver:
             return False
 
         def on_epoch(sample, obs, ephs):
+            if cfg.mode != "deep" and "child" not in hand:
+                # loose/tight: the loop's process, started once acquisition is done, so that
+                # its start-up uses the core tracking leaves idle (integration.loop_process)
+                hand["child"] = LoopChild.start()
             if "sample" in hand:
                 return after_handover(sample, obs, ephs)
             if not obs:            # nothing tracked at this epoch: no fix, keep going
@@ -571,8 +575,6 @@ class DeepReceiver:
             return False
 
         t0 = time.perf_counter()
-        if cfg.mode != "deep":     # the loop's process, started while acquisition runs
-            hand["child"] = LoopChild.start()
         try:
             rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=_EPOCH_S,
                    stop_sample=stop, assist=assist)
@@ -583,7 +585,7 @@ class DeepReceiver:
             raise
         finally:
             if hand.get("child") is not None:          # no hand-over: not used
-                hand.pop("child").close()
+                hand["child"].close()
         recorder.close()
         t_scalar = time.perf_counter() - t0
         if "sample" not in hand:
@@ -719,7 +721,8 @@ class DeepReceiver:
         thread = start_loop_behind(loop, src if loose or cfg.noise_policy == "cn0" else
                                    FixedNoiseSource(src, cfg.sigma_range_m,
                                                     cfg.sigma_rate_mps), src, recorder,
-                                   child=hand.pop("child", None))
+                                   child=hand.get("child"))
+        hand["child"] = None                              # taken (or not needed)
         return {"thread": thread, "loop": loop, "src": src, "clock": clock, "kf": kf,
                 "adapt0": adapt0, "k_grid0": k_grid0, "prof": prof}
 

@@ -26,8 +26,10 @@ marks an ionosphere change by identity), so the rows are the thread's bit for bi
 be pickled (a filter holding a closure), or the caller is a daemonic
 ``multiprocessing`` worker (which may not have children), or ``SDR_DI_LOOP_THREAD=1``
 is set; the thread otherwise. The child can be started before the loop exists
-(:class:`LoopChild`: ``DeepReceiver.run`` starts it with the receiver, so that its
-interpreter start and imports overlap the acquisition rather than the tracking).
+(:class:`LoopChild`: ``DeepReceiver.run`` starts it at the receiver's first output epoch,
+after the acquisition, whose FFT search uses every core, so that its interpreter start
+and imports run in the seconds before the hand-over on the core tracking leaves idle,
+not beside the loop's first epochs).
 
 Frames on the pipes: an 8-byte little-endian length, then a pickle. Parent to child: the
 set-up ``(loop, source, epoch_source)``, then ``("epoch", GnssEpoch, iono_key, iono)`` per
@@ -85,9 +87,9 @@ def _read_frame(fh) -> bytes | None:
 class LoopChild:
     """A started child process, its imports done or under way, waiting for a loop.
 
-    Started at the beginning of a loose/tight run (:meth:`start`), its interpreter start
-    and imports (about 0.8 s of CPU) overlap the receiver's acquisition, on the core the
-    FFT search leaves idle, instead of the receiver's tracking at the hand-over.
+    Started early in a loose/tight run (:meth:`start`: at the receiver's first output
+    epoch), its interpreter start and imports (0.6-0.7 s of CPU) run before the hand-over,
+    while the receiver tracks, rather than at it.
     :meth:`close` ends one that gets no loop (no hand-over, or the thread runs it).
     """
 
