@@ -46,6 +46,10 @@ shares (scalar receiver, loop process)::
 
     python scripts/bench.py run --mode all --durations 60 --bits 4 --repeat 2
 
+Loose and tight run their integration loop in a child process
+(``sdr_di.integration.loop_process``); ``SDR_DI_LOOP_THREAD=1`` in the environment runs it
+on a thread of the receiver's process instead, as before session 7 (A/B on the same file).
+
 ``acquire``: acquisition time per PRN at 25 MHz, normal (40 x 1 ms) and long (400 x 1 ms)
 searches, over +-5 kHz and +-1 kHz around a predicted Doppler.
 """
