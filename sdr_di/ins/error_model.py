@@ -170,13 +170,18 @@ def rotvec_to_dcm(phi: np.ndarray) -> np.ndarray:
     """``exp([phi x])`` for rotation vectors ``phi`` (..., 3) (Rodrigues)."""
     phi = np.asarray(phi, float)
     th2 = np.sum(phi * phi, axis=-1)[..., None, None]
+    K = skew(phi)
+    return _rotvec_to_dcm_of(th2, K, K @ K)
+
+
+def _rotvec_to_dcm_of(th2: np.ndarray, K: np.ndarray, KK: np.ndarray) -> np.ndarray:
+    """:func:`rotvec_to_dcm` from ``|phi|^2`` (..., 1, 1), ``[phi x]`` and ``[phi x]^2``."""
     th = np.sqrt(th2)
     small = th2 < 1e-12
     safe = np.where(small, 1.0, th)
     a = np.where(small, 1.0 - th2 / 6.0, np.sin(safe) / safe)
     b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(safe)) / np.where(small, 1.0, th2))
-    K = skew(phi)
-    return np.eye(3) + a * K + b * (K @ K)
+    return np.eye(3) + a * K + b * KK
 
 
 def dcm_to_rotvec(C: np.ndarray) -> np.ndarray:
@@ -195,23 +200,32 @@ def dcm_to_rotvec(C: np.ndarray) -> np.ndarray:
 def _inv_right_jacobian(phi: np.ndarray) -> np.ndarray:
     """``C_w^-1 = J_r(phi)^-1`` (..., 3, 3)."""
     th2 = np.sum(phi * phi, axis=-1)[..., None, None]
+    K = skew(phi)
+    return _inv_right_jacobian_of(th2, K, K @ K)
+
+
+def _inv_right_jacobian_of(th2: np.ndarray, K: np.ndarray, KK: np.ndarray) -> np.ndarray:
+    """:func:`_inv_right_jacobian` from ``|phi|^2`` (..., 1, 1), ``[phi x]`` and
+    ``[phi x]^2`` (shared with :func:`rotvec_to_dcm` in :func:`error_derivative`)."""
     th = np.sqrt(th2)
     small = th2 < 1e-8
     ths = np.where(small, 1.0, th)
     c = np.where(small, 1.0 / 12.0 + th2 / 720.0,
                  1.0 / np.where(small, 1.0, th2) - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
-    K = skew(phi)
-    return np.eye(3) + 0.5 * K + c * (K @ K)
+    return np.eye(3) + 0.5 * K + c * KK
 
 
 def _rates(lat, h, v):
     """w_ie^n, w_en^n (..., 3) and radii, vectorized."""
     R_M, R_N = radii_of_curvature(lat)
     sl, cl = np.sin(lat), np.cos(lat)
-    z = np.zeros_like(lat)
-    w_ie = np.stack([z, OMEGA_E * cl, OMEGA_E * sl], axis=-1)
-    w_en = np.stack([-v[..., 1] / (R_M + h), v[..., 0] / (R_N + h),
-                     v[..., 0] * sl / cl / (R_N + h)], axis=-1)
+    w_ie = np.zeros(np.shape(lat) + (3,))            # filled in place: cheaper than stacking
+    w_ie[..., 1] = OMEGA_E * cl
+    w_ie[..., 2] = OMEGA_E * sl
+    w_en = np.empty_like(w_ie)
+    w_en[..., 0] = -v[..., 1] / (R_M + h)
+    w_en[..., 1] = v[..., 0] / (R_N + h)
+    w_en[..., 2] = v[..., 0] * sl / cl / (R_N + h)
     return w_ie, w_en, R_M, R_N
 
 
@@ -238,13 +252,18 @@ def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.n
     wie_t, wen_t, RM_t, RN_t = _rates(lat_t, h_t, v_t)
     d_wie = wie_c - wie_t
     d_wen = wen_c - wen_t
-    A = rotvec_to_dcm(-phi)                                  # C_n^n' (p, 3, 3)
+    # C_n^n' = exp(-[phi x]) (p, 3, 3): rotvec_to_dcm(-phi) written with the skew matrix
+    # and |phi|^2 that C_w^-1 also needs (negation is exact: the same values)
+    th2 = np.sum(phi * phi, axis=-1)[..., None, None]
+    K = skew(phi)
+    KK = K @ K
+    A = _rotvec_to_dcm_of(th2, -K, KK)
     At = np.swapaxes(A, -1, -2)
     I = np.eye(3)
     # attitude (eq 2, line 1)
     u = (np.einsum("pij,j->pi", I - A, win_c) + np.einsum("pij,pj->pi", A, d_wie + d_wen)
          - eps @ Cb.T)
-    phi_dot = np.einsum("pij,pj->pi", _inv_right_jacobian(phi), u)
+    phi_dot = np.einsum("pij,pj->pi", _inv_right_jacobian_of(th2, K, KK), u)
     # velocity (eq 2, line 2)
     Cf = Cb @ f_b
     dv_dot = (np.einsum("pij,j->pi", I - At, Cf) + np.einsum("pij,pj->pi", At, nab @ Cb.T)
