@@ -62,7 +62,7 @@ import numpy as np
 from ..constants import A_CGCS, E2_CGCS, F_CGCS, OMEGA_E
 from ..frames import C_b_n_to_euler, euler_to_C_b_n
 from .gravity import GAMMA_E, K_SOMIGLIANA, M_CGCS
-from .rotation import cross, dcm_from_quat, quat_from_dcm, quat_from_rotvec, quat_mult
+from .rotation import dcm_from_quat, quat_from_dcm, quat_from_rotvec, quat_mult
 
 
 def _radii(lat: float) -> tuple[float, float]:
@@ -80,6 +80,20 @@ def _gravity(lat: float, h: float) -> float:
     return g0 * (1.0 - 2.0 / A_CGCS * (1.0 + F_CGCS + M_CGCS - 2.0 * F_CGCS * s2) * h
                  + 3.0 * h * h / A_CGCS**2)
 
+
+
+def _rate_components(lat: float, h: float, v) -> tuple[tuple, tuple]:
+    """Earth rate w_ie^n and transport rate w_en^n [rad/s] (ENU float triples) at (lat [rad],
+    h [m]) with ENU velocity ``v`` [m/s]."""
+    R_M, R_N = _radii(lat)
+    sl, cl = math.sin(lat), math.cos(lat)
+    return ((0.0, OMEGA_E * cl, OMEGA_E * sl),
+            (-v[1] / (R_M + h), v[0] / (R_N + h), v[0] * sl / cl / (R_N + h)))
+
+
+def _cross(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> tuple:
+    """``a x b`` of float components (the products and differences of :func:`.rotation.cross`)."""
+    return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
 
 class StrapdownINS:
     """Strapdown inertial navigator (ENU, Right-Front-Up body, CGCS2000).
@@ -161,46 +175,64 @@ class StrapdownINS:
         dt : float
             Interval length [s], > 0.
         """
+        # Components as Python floats (the same IEEE operations as on numpy scalars, at a
+        # fraction of the cost per operation); the matrix-vector and dot products stay numpy
+        # calls so their (BLAS) summation is unchanged.
         dth = (np.asarray(w_ib_b, float) - self.gyro_bias) * dt
         dv = (np.asarray(f_b, float) - self.accel_bias) * dt
         dth_p = dth if self._dth_prev is None else self._dth_prev
         dv_p = dv if self._dv_prev is None else self._dv_prev
+        a0, a1, a2_ = dth.tolist()
+        u0, u1, u2 = dv.tolist()
+        p0, p1, p2 = dth_p.tolist()
+        s0, s1, s2 = dv_p.tolist()
 
         v0 = self.v_n
-        lat0, lon0, h0 = self.llh
+        ve, vn, vu = v0.tolist()
+        lat0, lon0, h0 = self.llh.tolist()
         # 1. mid-interval quantities by extrapolation from the previous step
         if self._v_prev is not None and self._dt_prev > 0:
             c = 0.5 * dt / self._dt_prev
-            v_mid = v0 + c * (v0 - self._v_prev)
-            lat_mid = lat0 + c * (lat0 - self._llh_prev[0])
-            h_mid = h0 + c * (h0 - self._llh_prev[2])
+            pe, pn, pu = self._v_prev.tolist()
+            v_mid = (ve + c * (ve - pe), vn + c * (vn - pn), vu + c * (vu - pu))
+            lat_mid = lat0 + c * (lat0 - float(self._llh_prev[0]))
+            h_mid = h0 + c * (h0 - float(self._llh_prev[2]))
         else:
-            v_mid, lat_mid, h_mid = v0, lat0, h0
-        w_ie, w_en = self._rates(lat_mid, h_mid, v_mid)
-        w_in = w_ie + w_en
+            v_mid, lat_mid, h_mid = (ve, vn, vu), lat0, h0
+        w_ie, w_en = _rate_components(lat_mid, h_mid, v_mid)
+        zeta = ((w_ie[0] + w_en[0]) * dt, (w_ie[1] + w_en[1]) * dt, (w_ie[2] + w_en[2]) * dt)
         g = _gravity(lat_mid, h_mid)
 
         # 2. velocity
         C = dcm_from_quat(self.q_b_n)
-        a_x_v = cross(dth, dv)
+        a_x_v = _cross(a0, a1, a2_, u0, u1, u2)
         a2 = float(dth @ dth)
         if a2 < 1e-6:  # series of Savage's exact coefficients (error < 1e-14)
             c1, c2 = 0.5 - a2 / 24.0 + a2 * a2 / 720.0, 1.0 / 6.0 - a2 / 120.0 + a2 * a2 / 5040.0
         else:
             a = math.sqrt(a2)
             c1, c2 = (1.0 - math.cos(a)) / a2, (1.0 - math.sin(a) / a) / a2
-        dv_b = (dv + c1 * a_x_v + c2 * cross(dth, a_x_v)
-                + (cross(dth_p, dv) + cross(dv_p, dth)) / 12.0)
-        zeta = w_in * dt
-        Cdv = C @ dv
-        dv_n = C @ dv_b
-        dv_n = (dv_n - 0.5 * cross(zeta, dv_n)
-                + cross(zeta, cross(zeta, Cdv)) / 6.0 - cross(zeta, C @ a_x_v) / 12.0)
-        cor = cross(2.0 * w_ie + w_en, v_mid)
-        v1 = v0 + dv_n + dt * np.array([-cor[0], -cor[1], -g - cor[2]])
+        r = _cross(a0, a1, a2_, *a_x_v)
+        m = _cross(p0, p1, p2, u0, u1, u2)
+        n = _cross(s0, s1, s2, a0, a1, a2_)
+        dv_b = np.array([u0 + c1 * a_x_v[0] + c2 * r[0] + (m[0] + n[0]) / 12.0,
+                         u1 + c1 * a_x_v[1] + c2 * r[1] + (m[1] + n[1]) / 12.0,
+                         u2 + c1 * a_x_v[2] + c2 * r[2] + (m[2] + n[2]) / 12.0])
+        Cdv = (C @ dv).tolist()
+        dvn = (C @ dv_b).tolist()
+        Caxv = (C @ np.array(a_x_v)).tolist()
+        z0, z1, z2 = zeta
+        k = _cross(z0, z1, z2, *dvn)
+        zz = _cross(z0, z1, z2, *_cross(z0, z1, z2, *Cdv))
+        za = _cross(z0, z1, z2, *Caxv)
+        dvn = [dvn[i] - 0.5 * k[i] + zz[i] / 6.0 - za[i] / 12.0 for i in range(3)]
+        cor = _cross(2.0 * w_ie[0] + w_en[0], 2.0 * w_ie[1] + w_en[1],
+                     2.0 * w_ie[2] + w_en[2], *v_mid)
+        v1 = (ve + dvn[0] + dt * -cor[0], vn + dvn[1] + dt * -cor[1],
+              vu + dvn[2] + dt * (-g - cor[2]))
 
         # 3. position (trapezoid, mid-point radii)
-        v_avg = 0.5 * (v0 + v1)
+        v_avg = (0.5 * (ve + v1[0]), 0.5 * (vn + v1[1]), 0.5 * (vu + v1[2]))
         h1 = h0 + v_avg[2] * dt
         h_m = 0.5 * (h0 + h1)
         R_M, _ = _radii(lat0)
@@ -212,26 +244,19 @@ class StrapdownINS:
         lon1 = lon0 + v_avg[0] / ((R_N + h_m) * math.cos(lat_m)) * dt
 
         # 4. attitude
-        w_ie_m, w_en_m = self._rates(lat_m, h_m, v_avg)
-        zeta = (w_ie_m + w_en_m) * dt
-        phi = dth + cross(dth_p, dth) / 12.0
+        w_ie_m, w_en_m = _rate_components(lat_m, h_m, v_avg)
+        zeta = np.array([(w_ie_m[0] + w_en_m[0]) * dt, (w_ie_m[1] + w_en_m[1]) * dt,
+                         (w_ie_m[2] + w_en_m[2]) * dt])
+        cpd = _cross(p0, p1, p2, a0, a1, a2_)
+        phi = np.array([a0 + cpd[0] / 12.0, a1 + cpd[1] / 12.0, a2_ + cpd[2] / 12.0])
         q = quat_mult(quat_from_rotvec(-zeta), quat_mult(self.q_b_n, quat_from_rotvec(phi)))
         self.q_b_n = q / math.sqrt(float(q @ q))
 
         self._v_prev, self._llh_prev, self._dt_prev = v0, self.llh, dt
         self._dth_prev, self._dv_prev = dth, dv
-        self.v_n = v1
+        self.v_n = np.array(v1)
         self.llh = np.array([lat1, lon1, h1])
         self.t += dt
-
-    @staticmethod
-    def _rates(lat: float, h: float, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Earth rate and transport rate in ENU [rad/s] at (lat, h) with velocity v."""
-        R_M, R_N = _radii(lat)
-        sl, cl = math.sin(lat), math.cos(lat)
-        w_ie = np.array([0.0, OMEGA_E * cl, OMEGA_E * sl])
-        w_en = np.array([-v[1] / (R_M + h), v[0] / (R_N + h), v[0] * sl / cl / (R_N + h)])
-        return w_ie, w_en
 
     # --- closed-loop feedback ------------------------------------------------------------
     def correct(self, d_att, d_v_n, d_llh, d_gyro_bias=None, d_accel_bias=None) -> None:

@@ -14,10 +14,16 @@ import math
 import numpy as np
 
 
+def _floats(v) -> list:
+    """Components of a small vector as Python floats: the same IEEE operations as on numpy
+    scalars, several times cheaper each (the INS runs these at the IMU rate)."""
+    return v.tolist() if isinstance(v, np.ndarray) else v
+
+
 def quat_mult(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Hamilton product ``p * q`` of scalar-first quaternions (4,)."""
-    p0, p1, p2, p3 = p
-    q0, q1, q2, q3 = q
+    p0, p1, p2, p3 = _floats(p)
+    q0, q1, q2, q3 = _floats(q)
     return np.array([
         p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3,
         p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
@@ -28,7 +34,7 @@ def quat_mult(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 def quat_from_rotvec(phi: np.ndarray) -> np.ndarray:
     """Quaternion (4,) of the rotation vector ``phi`` [rad] (3,); series below 1e-4 rad."""
-    x, y, z = phi
+    x, y, z = _floats(phi)
     a2 = x * x + y * y + z * z
     if a2 < 1e-8:
         c = 1.0 - a2 / 8.0 + a2 * a2 / 384.0
@@ -42,7 +48,7 @@ def quat_from_rotvec(phi: np.ndarray) -> np.ndarray:
 
 def dcm_from_quat(q: np.ndarray) -> np.ndarray:
     """Rotation matrix (3, 3) of a unit quaternion (4,)."""
-    q0, q1, q2, q3 = q
+    q0, q1, q2, q3 = _floats(q)
     return np.array([
         [q0 * q0 + q1 * q1 - q2 * q2 - q3 * q3, 2 * (q1 * q2 - q0 * q3), 2 * (q1 * q3 + q0 * q2)],
         [2 * (q1 * q2 + q0 * q3), q0 * q0 - q1 * q1 + q2 * q2 - q3 * q3, 2 * (q2 * q3 - q0 * q1)],
