@@ -254,7 +254,7 @@ class KalmanFilterBase:
         Qk = self.Q if Q is None else _as_square("Q", Q, self.x.size, f"{self.name} predict")
         x, P_spread = self._propagate(self.x, self.P, dt)
         P = symmetrize(P_spread + Qk)
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+        if not (np.isfinite(x).all() and np.isfinite(P).all()):
             raise FilterError(f"{self.name} predict at epoch {self.epoch}: the process model "
                               "produced NaN or infinite values")
         self.x, self.P, self.Q_used = x, P, Qk
@@ -295,7 +295,7 @@ class KalmanFilterBase:
             z = z.reshape(1)
         if z.ndim != 1:
             raise FilterError(f"{who}: z must be a 1-D vector, got shape {z.shape}")
-        if not np.all(np.isfinite(z)):
+        if not np.isfinite(z).all():
             raise FilterError(f"{who}: z contains NaN or infinite values")
         m = z.size
         if m == 0:
@@ -343,7 +343,7 @@ class KalmanFilterBase:
             R = np.diag(R)
         elif R.shape != (m, m):
             raise FilterError(f"{who}: z has {m} elements but R has shape {R.shape}")
-        if not np.all(np.isfinite(R)):
+        if not np.isfinite(R).all():
             raise FilterError(f"{who}: R contains NaN or infinite values")
         if np.any(np.diagonal(R) <= 0.0):
             raise FilterError(f"{who}: R has a non-positive variance on its diagonal")
@@ -354,7 +354,7 @@ class KalmanFilterBase:
 
         Returns ``(L, A_used)``; ``A_used`` differs from ``A`` only after a clip repair.
         """
-        L = cholesky_lower(A) if np.all(np.isfinite(A)) else None
+        L = cholesky_lower(A) if np.isfinite(A).all() else None
         if L is not None:
             return L, A
         wmin = min_eigenvalue(A)

@@ -55,8 +55,10 @@ def weighted_moments(Y: np.ndarray, wm: np.ndarray, wc: np.ndarray
     D = Y - ref
     delta = wm @ D
     c = wc @ D
-    cov = (D.T * wc) @ D - np.outer(delta, c) - np.outer(c, delta) \
-        + float(np.sum(wc)) * np.outer(delta, delta)
+    # outer products by broadcasting (np.outer's own products, without its call overhead)
+    dcol = delta[:, None]
+    cov = (D.T * wc) @ D - dcol * c - c[:, None] * delta \
+        + float(np.sum(wc)) * (dcol * delta)
     return ref + delta, 0.5 * (cov + cov.T), D, delta
 
 
@@ -117,7 +119,7 @@ class SigmaPointFilter(KalmanFilterBase):
         wm, wc = self._wm, self._wc
         z_pred, Pzz, DZ, dz = weighted_moments(Z, wm, wc)
         # cross covariance: X deviations are exact (dX, zero weighted mean by symmetry)
-        Pxz = (dX.T * wc) @ DZ - np.outer(wc @ dX, dz)
+        Pxz = (dX.T * wc) @ DZ - (wc @ dX)[:, None] * dz
         return MeasurementPrediction(z_pred, Pzz, Pxz, model)
 
 

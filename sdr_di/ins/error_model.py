@@ -95,6 +95,9 @@ __all__ = [
 N_STATES = 17
 C_LIGHT = 299792458.0
 
+_I3 = np.eye(3)
+_I3.setflags(write=False)
+
 #: Central-difference steps per state for the numerical Jacobian (state units).
 JACOBIAN_STEPS = np.array([1e-6] * 3 + [1e-4] * 3 + [1e-9, 1e-9, 1e-3] + [1e-7] * 3
                           + [1e-5] * 3 + [1e-2, 1e-3])
@@ -181,7 +184,7 @@ def _rotvec_to_dcm_of(th2: np.ndarray, K: np.ndarray, KK: np.ndarray) -> np.ndar
     safe = np.where(small, 1.0, th)
     a = np.where(small, 1.0 - th2 / 6.0, np.sin(safe) / safe)
     b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(safe)) / np.where(small, 1.0, th2))
-    return np.eye(3) + a * K + b * KK
+    return _I3 + a * K + b * KK
 
 
 def dcm_to_rotvec(C: np.ndarray) -> np.ndarray:
@@ -212,7 +215,7 @@ def _inv_right_jacobian_of(th2: np.ndarray, K: np.ndarray, KK: np.ndarray) -> np
     ths = np.where(small, 1.0, th)
     c = np.where(small, 1.0 / 12.0 + th2 / 720.0,
                  1.0 / np.where(small, 1.0, th2) - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
-    return np.eye(3) + 0.5 * K + c * KK
+    return _I3 + 0.5 * K + c * KK
 
 
 def _rates(lat, h, v):
@@ -259,7 +262,7 @@ def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.n
     KK = K @ K
     A = _rotvec_to_dcm_of(th2, -K, KK)
     At = np.swapaxes(A, -1, -2)
-    I = np.eye(3)
+    I = _I3
     # attitude (eq 2, line 1)
     u = (np.einsum("pij,j->pi", I - A, win_c) + np.einsum("pij,pj->pi", A, d_wie + d_wen)
          - eps @ Cb.T)
