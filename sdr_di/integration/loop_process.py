@@ -51,6 +51,7 @@ import sys
 import threading
 import time
 import warnings
+from collections.abc import Callable
 
 from ..errors import SdrDiError
 from .loop import BackgroundLoop, IntegrationLoop
@@ -117,13 +118,7 @@ class LoopChild:
 
     def close(self) -> None:
         """End the child, which has run nothing (killed: it may still be importing)."""
-        self.proc.kill()
-        self.proc.wait()
-        for fh in (self.proc.stdin, self.proc.stdout):
-            try:
-                fh.close()
-            except OSError:
-                pass
+        _end(self.proc)
 
 
 class LoopProcess:
@@ -225,15 +220,26 @@ class LoopProcess:
         if self._done:
             return
         self._done = True
-        self._proc.kill()
-        self._proc.wait()
-        self._q.put(None)
-        self._writer.join()
-        for fh in (self._proc.stdout, self._proc.stdin):
-            try:
-                fh.close()
-            except OSError:
-                pass
+
+        def stop_writer() -> None:     # before the pipes close: it may be writing to stdin
+            self._q.put(None)
+            self._writer.join()
+
+        _end(self._proc, before_close=stop_writer)
+
+
+def _end(proc: subprocess.Popen, before_close: Callable[[], None] | None = None) -> None:
+    """Kill the child ``proc``, wait for it, run ``before_close`` (if any), then close its
+    pipes (a pipe already broken is ignored)."""
+    proc.kill()
+    proc.wait()
+    if before_close is not None:
+        before_close()
+    for fh in (proc.stdin, proc.stdout):
+        try:
+            fh.close()
+        except OSError:
+            pass
 
 
 def _payload(loop, source, epoch_source) -> bytes:
