@@ -295,6 +295,10 @@ def _add_run(sub) -> None:
     g.add_argument("--gnss-rate", type=float, default=None, metavar="HZ",
                    help="loose and tight: GNSS measurement rate [Hz], 10 divided by a whole "
                    "number (default 5)")
+    g.add_argument("--iono-wait", type=float, default=None, metavar="S",
+                   help="seconds after the first fix the hand-over waits for ionosphere "
+                   "coefficients (assistance file or decoded subframe 1) before it goes "
+                   "without them, with a warning (default 30; 0: do not wait)")
     g.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
                    help="what the integration filter believes: IMU spec, oscillator, R, P0, "
                    "initial errors (docs/assumptions.md)")
@@ -311,7 +315,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     scalar_search = args.mode == "scalar" and args.approx_pos is not None
     deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
                                                        "filter_rate", "align", "duration",
-                                                       "assume")
+                                                       "assume", "iono_wait")
                  if getattr(args, n) is not None
                  and not (n == "ephemeris" and scalar_search)] \
         + (["--no-assist"] if args.no_assist else [])
@@ -356,6 +360,9 @@ def _check_run_options(args: argparse.Namespace) -> None:
                    ("--pll-bw", args.pll_bw)):
         if v is not None and not (math.isfinite(v) and v > 0):
             raise UsageError(f"{opt} must be a finite number > 0, got {v:g}")
+    if args.iono_wait is not None and not (math.isfinite(args.iono_wait)
+                                           and args.iono_wait >= 0):
+        raise UsageError(f"--iono-wait must be a finite number >= 0, got {args.iono_wait:g}")
     _tracking_config(args)
     _check_file_options(args)
 
@@ -439,6 +446,8 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
         kw["filter_rate_hz"] = args.filter_rate
     if args.align is not None:
         kw["align"] = args.align
+    if args.iono_wait is not None:
+        kw["iono_wait_s"] = args.iono_wait
     try:
         cfg = DeepConfig(**kw)
     except ValueError as exc:

@@ -168,6 +168,9 @@ CASES: list[tuple[str, list[str]]] = [
     ("run-pll-bw-unstable", ["run", "{d}/set/s.bin", "--pll-bw", "40"]),
     ("run-deep-pll-bw-unstable", ["run", "{d}/set/s.bin", "--mode", "deep", "--pll-bw",
                                   "26"]),
+    ("run-deep-iono-wait-negative", ["run", "{d}/set/s.bin", "--mode", "deep", "--iono-wait",
+                                     "-1"]),
+    ("run-scalar-iono-wait", ["run", "{d}/set/s.bin", "--iono-wait", "0"]),
     # -- acquire -----------------------------------------------------------------------------
     ("acquire-no-file", ["acquire"]),
     ("acquire-missing", ["acquire", "{d}/nope.bin"]),

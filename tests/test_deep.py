@@ -434,3 +434,27 @@ def test_gnss_alignment_recovers_a_banked_turn():
         C_est = gnss_alignment(v_n, C.T @ f_n, C.T @ w_n, g)
         err = np.degrees(np.linalg.norm(dcm_to_rotvec(C_est @ C.T)))
         assert err < 1.0, (pitch, roll, yaw, err)
+
+
+@pytest.mark.parametrize("mode", ["deep", "loose", "tight"])
+def test_iono_wait_option_reaches_the_handover_rule(gen26, tmp_path, monkeypatch, mode):
+    """``run --iono-wait S`` sets ``DeepConfig.iono_wait_s`` of every integrated mode (the
+    default config keeps 30 s); the run itself is stopped at ``run_deep``'s door."""
+    import sdr_di.deep.run_deep as rd
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_run_deep(source, out_dir, *, config, **kw):
+        seen.append(config)
+        raise Stop
+
+    monkeypatch.setattr(rd, "run_deep", fake_run_deep)
+    for extra, want in ((["--iono-wait", "0"], 0.0), (["--iono-wait", "12.5"], 12.5),
+                        ([], 30.0)):
+        with pytest.raises(Stop):
+            main(["run", str(gen26 / "default.bin"), "--mode", mode, "--no-progress",
+                  "--out", str(tmp_path / "o"), *extra])
+        assert seen[-1].iono_wait_s == want and seen[-1].mode == mode
