@@ -151,6 +151,30 @@ def test_implausible_field_is_held(field, delta):
     assert nd.select(10, good.week, good.toe) == good
 
 
+@pytest.mark.parametrize("field,delta", [("week", 1), ("toe", 4 * 3600.0)])
+@pytest.mark.parametrize("assistance", [False, True])
+def test_forward_corrupted_week_or_toe_does_not_displace_the_decoded_record(field, delta,
+                                                                           assistance):
+    """A decoded copy whose week or toe is corrupted forwards has no record in force near its
+    toe to be compared with; it would displace the good decoded record (and be in force at
+    no time the receiver sees). It is held for a second copy; the good record stays."""
+    nav = load_nav(REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz")
+    good = next(r for r in nav.records[10] if r.toe == 367200.0)
+    sow = good.toe + 600.0
+    nd = NavDataInForce(nav if assistance else None)
+    assert nd.offer_ephemeris(dataclasses.replace(good), 1.0)
+    bad = dataclasses.replace(good, **{field: getattr(good, field) + delta})
+    assert not nd.offer_ephemeris(bad, 31.0)
+    assert nd.select_with_source(10, good.week, sow) == (good, BROADCAST)
+    assert (nd.n_implausible, nd.n_rejected) == (1, 1)
+    # a second, separately decoded identical copy decides (a real record after a long gap)
+    assert nd.offer_ephemeris(dataclasses.replace(bad), 61.0)
+    assert nd.decoded[10] == bad
+    # without a decoded record the first copy is still taken as it is (nothing to check)
+    nd = NavDataInForce()
+    assert nd.offer_ephemeris(dataclasses.replace(bad), 1.0)
+
+
 def test_assembler_returns_no_rebuilt_copy_as_a_second_one():
     """A D1 set rebuilt with some of the subframes of the set returned before is not a second,
     independent copy for the two-copies rule: it is not returned again unless it differs."""

@@ -45,7 +45,10 @@ Validity checks on a decoded record (the same for every mode)
   identical copy arrives (the two-copies rule above; a real change that large, after a
   manoeuvre, waits one more frame); each held copy counts in ``n_implausible`` and
   ``n_rejected``. Without a record in force at those times the record is taken as it is
-  (nothing to check against);
+  (nothing to check against), unless a decoded record of the satellite is held: its toe is
+  then out of reach of the new one's (a week or toe field corrupted forwards; an older toe
+  is refused outright), and the new record would displace a good one with a record that is
+  in force at no time the receiver sees, so it is held for a second copy as well;
 * **toe age** at use: a decoded record is in force while ``|t - toe|`` is within
   ``max_age_s`` (:data:`~sdr_di.orbits.rinex_nav.DEFAULT_MAX_AGE_S`, GEO
   :data:`~sdr_di.orbits.rinex_nav.DEFAULT_MAX_AGE_GEO_S`), as for the assistance records.
@@ -229,8 +232,11 @@ class NavDataInForce:
         """True when the satellite position or clock of ``eph`` differs from the record in
         force (decoded or assistance) by more than :data:`PLAUSIBLE_POSITION_M` /
         :data:`PLAUSIBLE_CLOCK_M` at one of the times :data:`PLAUSIBLE_CHECK_DT_S` from its
-        toe (module notes). No record in force at any of them: False (nothing to check
-        against)."""
+        toe (module notes). No record in force at any of them: True while a decoded record
+        of the satellite is held (its toe is then far from the new one's: a corrupted week
+        or toe, which would displace it; a second copy decides), else False (nothing to
+        check against)."""
+        compared = False
         for dt in PLAUSIBLE_CHECK_DT_S:
             t = _toe_abs(eph) + dt
             week, sow = divmod(t, SECONDS_PER_WEEK)
@@ -238,12 +244,13 @@ class NavDataInForce:
                 ref = self.select(eph.prn, int(week), sow)
             except (NoEphemerisError, UnknownPrnError):
                 continue
+            compared = True
             r0, _, c0, _ = sat_pos_vel_clock(ref, sow, int(week))
             r1, _, c1, _ = sat_pos_vel_clock(eph, sow, int(week))
             if not (float(np.linalg.norm(r1 - r0)) <= PLAUSIBLE_POSITION_M
                     and abs(float(c1[0] - c0[0])) * C_LIGHT <= PLAUSIBLE_CLOCK_M):
                 return True
-        return False
+        return not compared and int(eph.prn) in self._decoded
 
     def offer_klobuchar(self, klob: Klobuchar | None, t_s: float = math.nan) -> bool:
         """Offer decoded ionosphere coefficients; True when the set in force changed."""
