@@ -59,6 +59,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -279,7 +280,9 @@ def _run_gnss_sdr(path: Path, work: Path) -> dict | None:
                 if ln.startswith("Initializing GNSS-SDR")), "?")
     return {"wall_s": wall, "version": ver, "rc": res.returncode,
             "cpu_s": (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime),
-            "tracked": res.stdout.count("Tracking of Beidou B3I signal started"),
+            # satellites that started tracking (a re-acquired channel starts again)
+            "tracked": len(set(re.findall(r"Tracking of Beidou B3I signal started on channel "
+                                          r"\d+ for satellite Beidou PRN (\d+)", res.stdout))),
             "n_sat": len(prns)}
 
 
