@@ -156,7 +156,7 @@ class LoopProcess:
         self._proc = (child or LoopChild()).proc
         self._q: queue.SimpleQueue = queue.SimpleQueue()
         self._q.put(payload)
-        self._iono_keys: dict[int, tuple[int, object]] = {}
+        self._iono_keys: dict[int, object] = {}
         self._writer = threading.Thread(target=self._write, name="sdr-di loop feed",
                                         daemon=True)
         self._writer.start()
@@ -168,10 +168,9 @@ class LoopProcess:
         """Recorder listener: one epoch, its Klobuchar object by key (module notes)."""
         iono = ep.iono
         key = id(iono)
-        known = self._iono_keys.get(key)
-        new = known is None or known[1] is not iono
+        new = key not in self._iono_keys
         if new:
-            self._iono_keys[key] = (key, iono)      # keeps it alive: the key stays unique
+            self._iono_keys[key] = iono     # held alive, so no other object gets its id
         self._q.put(pickle.dumps(("epoch", dataclasses.replace(ep, iono=None), key,
                                   iono if new else None), protocol=pickle.HIGHEST_PROTOCOL))
 
