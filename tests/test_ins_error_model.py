@@ -6,6 +6,7 @@ import pytest
 from sdr_di.filters import make_filter
 from sdr_di.ins import StrapdownINS
 from sdr_di.ins.error_model import (
+    JACOBIAN_STEPS,
     ClockModel,
     InsErrorModel,
     NavState,
@@ -156,8 +157,13 @@ def test_f_and_F_is_f_and_F_bit_for_bit(truth):
                            truth.f_b[i + 1], truth.w_ib_b[i + 1])
         for x in (np.zeros(17), rng.standard_normal(17) * scale):
             f, F = model.f_and_F(x, 0.02)
-            f1, F1 = model.f(x, 0.02), model.F(x, 0.02)
+            # F of the 2 n-row batch alone (as F was computed before it called f_and_F)
+            E = np.diag(JACOBIAN_STEPS)
+            Y = model.f_batch(np.vstack([x + E, x - E]), 0.02)
+            F1 = ((Y[:17] - Y[17:]) / (2.0 * JACOBIAN_STEPS[:, None])).T
+            f1 = model.f(x, 0.02)
             assert f.tobytes() == f1.tobytes() and F.tobytes() == F1.tobytes()
+            assert model.F(x, 0.02).tobytes() == F.tobytes()
 
 
 def test_process_noise_and_ekf_runs(truth):
