@@ -17,12 +17,12 @@ For row ``r`` and sample ``k = 0 .. n_r - 1`` of its interval (sample ``start_r 
 The interval is processed in blocks of ``B`` samples (``B = rot_re.shape[1]``, 256), each in
 two passes:
 
-1. **Rotation** into two float64 buffers (real, imaginary): the samples times the rotation
-   table entries ``exp(-j 2 pi m dphi)``, ``m < B`` (one row per carrier step, computed by
-   the caller). No table look-ups; this pass vectorizes. The block phasor
-   ``exp(-j 2 pi (phi0 + k0 dphi))`` (``cos``/``sin`` of the exact phase at the block's first
-   sample ``k0``) multiplies the block's six E/P/L sums after pass 2: the same products
-   associated differently (~1e-16 relative), float64 accuracy (~1e-15) of the carrier.
+1. **Rotation** into two float32 buffers (real, imaginary): the samples times the float32
+   rotation table entries ``exp(-j 2 pi m dphi)``, ``m < B`` (one row per carrier step,
+   computed in float64 and rounded by the caller). No table look-ups; this pass vectorizes.
+   The block phasor ``exp(-j 2 pi (phi0 + k0 dphi))`` (float64 ``cos``/``sin`` of the exact
+   phase at the block's first sample ``k0``) multiplies the block's six E/P/L sums after
+   pass 2, in float64, so the carrier phase never accumulates an error from block to block.
 2. **E/P/L sums** over the block. No phase is accumulated from sample to sample: the code
    phase is recomputed as ``theta0 + k * dchip`` (float64), minus an integer multiple ``w L``
    of the code length fixed per block segment. The block is split where the code wraps (at
@@ -35,9 +35,9 @@ two passes:
 
 * **Input**: the samples as stored, 1-D ``int8``/``int16``/``float32``/``float64`` with
   ``n_comp = 2`` (interleaved I, Q) or ``n_comp = 1`` (real), read through per-block slices
-  (contiguous loads the wipe-off loop vectorizes; integers and float32 convert exactly to
-  float64). ``complex64`` / ``complex128`` data are passed as their ``float32`` / ``float64``
-  view with ``n_comp = 2`` (no copy).
+  (contiguous loads the wipe-off loop vectorizes; ``int8``/``int16`` and float32 convert
+  exactly to float32, float64 samples are rounded to float32). ``complex64`` / ``complex128``
+  data are passed as their ``float32`` / ``float64`` view with ``n_comp = 2`` (no copy).
 * **Replicas as bit windows** (:func:`pack_bit_windows`, through
   :func:`~sdr_di.receiver.correlator.bit_windows`): ``bits[c, j]`` holds, in bit ``b``,
   whether entry ``j + b`` of the channel's padded table (``codes[c, M + i] = code[i mod L]``)
@@ -52,17 +52,26 @@ two passes:
 * **Shared tables**: each row names its replica row (``tab_idx``) and rotation-table row
   (``rot_idx``), so the epochs of one channel share one of each (no repeated copies).
 
-The E/P/L products and sums are float64 throughout. The kernel is compiled with the
-``reassoc`` and ``contract`` fast-math flags only (no ``nnan``/``ninf``/``arcp``), which lets
-LLVM vectorize the loops and fuse multiply-adds (reordered float64 additions within a block:
-relative effect ~1e-15, far below the 1e-9 the tests check). The work is split into
-``n_rows * n_sub`` tasks (row x contiguous range of whole blocks) run with ``prange``; each
-task writes its partial sums, which are added in a fixed order, so results depend on the
-thread count only through the float64 association of whole-block sums (~1e-16 relative), not
-on scheduling.
+**Precision.** The code phase and the chip indices are float64 arithmetic (chip boundaries
+to ~1e-12 chip, as above); the wipe-off products, the replica signs and the sums over a run
+(at most ``B`` samples) are float32, and the run sums are added in float64 (block sums, block
+phasor, interval sums). A float32 product or run sum has a relative rounding of at most
+``2^-24`` (6e-8) per operation, so a row's sums carry a rounding error of about 2e-7 of their
+noise level (``sqrt(n)`` times the sample's standard deviation; measured on random data,
+``tests/test_receiver_correlator.py``), millions of times below the thermal noise that every
+tracking loop, C/N0 estimator and discriminator already sees. float32 doubles the vector lanes
+of the wipe-off and the sums: 1.27 against 1.70 ns per sample and channel on one thread of
+an Intel Xeon (AVX-512; session 8, same run shape as below), where the kernel was float64
+throughout before. The kernel is compiled with the ``reassoc`` and ``contract`` fast-math
+flags only (no ``nnan``/``ninf``/``arcp``), which lets LLVM vectorize the loops and fuse
+multiply-adds. The work is split into ``n_rows * n_sub`` tasks (row x contiguous range of
+whole blocks) run with ``prange``; each task writes its partial sums, which are added in a
+fixed order, so results depend on the thread count only through the float64 association of
+whole-block sums (~1e-16 relative), not on scheduling.
 
-Speed (development machine, AMD EPYC with AVX-512; 7 channels at 25 MHz, one thread, thread
-CPU time on the shared machine): 1.35-1.5 ns per sample and channel, about 2x faster than the
+Speed of the float64 kernel (development machine, AMD EPYC with AVX-512; 7 channels at
+25 MHz, one thread, thread CPU time on the shared machine): 1.35-1.5 ns per sample and
+channel, about 2x faster than the
 earlier kernel that indexed a float32 replica table per sample and wiped ``complex64`` samples
 (~3.1 ns; removed). Measured alternatives that were not faster: a half-chip bit table (one
 index per sample instead of three), single-word windows (runs of ~60 chips, no word select),
@@ -84,13 +93,15 @@ _SPAN = 124.0
 def _run_sums(lo, hi, br, bi, k, th0, dc, off, ae, ap, al):
     """E/P/L sums of one run: wiped samples ``br + j bi`` at interval samples ``k, k + 1, ..``
     (code phase ``th0 + k dc - off``), replica bits in the words ``lo``, ``hi``; indices
-    relative to the run's lowest table index (offsets ``ae``, ``ap``, ``al``)."""
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    s4 = 0.0
-    s5 = 0.0
-    s6 = 0.0
+    relative to the run's lowest table index (offsets ``ae``, ``ap``, ``al``). The indices
+    are float64 arithmetic; the replica signs, products and sums are float32."""
+    one = np.float32(1.0)
+    s1 = np.float32(0.0)
+    s2 = np.float32(0.0)
+    s3 = np.float32(0.0)
+    s4 = np.float32(0.0)
+    s5 = np.float32(0.0)
+    s6 = np.float32(0.0)
     for q in range(br.size):
         th = (th0 + (k + q) * dc) - off
         ie = np.int64(th + ae)
@@ -99,9 +110,9 @@ def _run_sums(lo, hi, br, bi, k, th0, dc, off, ae, ap, al):
         we = lo if ie < 64 else hi
         wp = lo if ip < 64 else hi
         wl = lo if il < 64 else hi
-        ce = -1.0 if (we >> (ie & 63)) & 1 else 1.0
-        cp = -1.0 if (wp >> (ip & 63)) & 1 else 1.0
-        cl = -1.0 if (wl >> (il & 63)) & 1 else 1.0
+        ce = -one if (we >> (ie & 63)) & 1 else one
+        cp = -one if (wp >> (ip & 63)) & 1 else one
+        cl = -one if (wl >> (il & 63)) & 1 else one
         wr = br[q]
         wi = bi[q]
         s1 += ce * wr
@@ -128,8 +139,8 @@ def correlate_epl_bits(
     dchip,  # float64 (n_rows,): code phase step [chips/sample], > 0, B * dchip < L
     phi0,  # float64 (n_rows,): carrier phase at the first sample [cycles], in [0, 1)
     dphi,  # float64 (n_rows,): carrier phase step [cycles/sample]
-    rot_re,  # float64 (n_rot, B): cos(2 pi m dphi)
-    rot_im,  # float64 (n_rot, B): -sin(2 pi m dphi)
+    rot_re,  # float32 (n_rot, B): cos(2 pi m dphi)
+    rot_im,  # float32 (n_rot, B): -sin(2 pi m dphi)
     rot_idx,  # int64 (n_rows,): row of rot_re/rot_im of each row (one with its dphi)
     spacing,  # float64: early/late offset d [chips], 0 <= d < M - 1
     n_sub,  # int: tasks per row
@@ -160,8 +171,8 @@ def correlate_epl_bits(
         rr = rot_re[rot_idx[c]]
         ri = rot_im[rot_idx[c]]
         run = max(int((_SPAN - 2.0 * spacing) / dc), 1)
-        buf_r = np.empty(blk)
-        buf_i = np.empty(blk)
+        buf_r = np.empty(blk, np.float32)
+        buf_i = np.empty(blk, np.float32)
         acc = np.zeros(6)
         for b in range(b0, b1):
             k0 = b * blk
@@ -176,14 +187,14 @@ def correlate_epl_bits(
             if n_comp == 2:
                 a = xs[2 * xo:2 * (xo + m_end)]
                 for m in range(m_end):
-                    xr = float(a[2 * m])
-                    xi = float(a[2 * m + 1])
+                    xr = np.float32(a[2 * m])
+                    xi = np.float32(a[2 * m + 1])
                     buf_r[m] = xr * rr[m] - xi * ri[m]
                     buf_i[m] = xr * ri[m] + xi * rr[m]
             else:
                 a = xs[xo:xo + m_end]
                 for m in range(m_end):
-                    xr = float(a[m])
+                    xr = np.float32(a[m])
                     buf_r[m] = xr * rr[m]
                     buf_i[m] = xr * ri[m]
             # code phase at the block start in [w L, (w + 1) L); split at (w + 1) L

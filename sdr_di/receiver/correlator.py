@@ -21,7 +21,9 @@ Conventions
   reduces internally.
 
 Accuracy: float64 code phase recomputed from the interval start at every sample (no rounding
-accumulates; code-phase error ~1e-12 chip), float64 carrier phasors (~1e-15), float64 sums.
+accumulates; code-phase error ~1e-12 chip), float64 carrier phase per 256-sample block,
+float32 wipe-off products and sums within a block added in float64 (a rounding error of about
+2e-7 of the sums' noise level; kernel module notes).
 
 Kernel: :func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_bits` (replicas as bit
 windows, :func:`bit_windows`), the same kernel the scalar receiver, acquisition and the deep
@@ -175,12 +177,13 @@ def kernel_tasks(n_rows: int, n_max: int, threads: int | None = None) -> int:
 def carrier_rotation(dphi) -> tuple[np.ndarray, np.ndarray]:
     """Carrier rotation tables of the kernels: ``cos(2 pi m dphi)`` and ``-sin(2 pi m dphi)``
     for ``m = 0 .. CARRIER_BLOCK - 1``, one row per carrier step ``dphi`` [cycles/sample]
-    (float64 (n, CARRIER_BLOCK) each; the phase is reduced to one cycle before the trig)."""
+    (float32 (n, CARRIER_BLOCK) each, the kernels' product precision: computed in float64,
+    the phase reduced to one cycle before the trig, then rounded)."""
     a = np.multiply.outer(np.asarray(dphi, dtype=np.float64),
                           np.arange(CARRIER_BLOCK, dtype=np.float64))
     a -= np.floor(a)
     a *= 2.0 * math.pi
-    return np.cos(a), -np.sin(a)
+    return np.cos(a).astype(np.float32), (-np.sin(a)).astype(np.float32)
 
 
 def reduce_code_phase(theta, code_len: int) -> np.ndarray:

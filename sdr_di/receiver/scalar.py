@@ -116,10 +116,9 @@ class _Bank:
         # kernel thread count chosen by measured cost [s per sample-row]
         self.threads = KernelThreads(threads)
         self.tab = np.zeros((0, 1), np.uint64)
-        self.rot_re = np.ones((n_slots, CARRIER_BLOCK))
-        self.rot_im = np.zeros((n_slots, CARRIER_BLOCK))
+        self.rot_re = np.ones((n_slots, CARRIER_BLOCK), np.float32)
+        self.rot_im = np.zeros((n_slots, CARRIER_BLOCK), np.float32)
         self.rot_dphi = [math.nan] * n_slots
-        self._m = np.arange(CARRIER_BLOCK, dtype=np.float64)
 
     def set_prns(self, prns: list[int]) -> None:
         """Replica bit windows (:func:`~sdr_di.receiver.correlator.bit_windows`) of the slots'
