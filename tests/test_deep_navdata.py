@@ -211,6 +211,82 @@ def test_decoded_subframe_waits_for_the_signal_test_after_its_last_bit(nav):
     assert dec.confirm(3) == []
 
 
+def test_held_subframes_are_taken_with_their_ends():
+    """HeldSubframes.take hands every held (end, subframe) pair over, oldest first, and holds
+    nothing after (the deep hand-over moves them to the loop's decoder)."""
+    from sdr_di.signal.navmsg import HeldSubframes
+
+    held = HeldSubframes()
+    a, b = {"FraID": 2}, {"FraID": 3}
+    held.hold(a, 120)
+    held.hold(b, 6120)
+    assert held.take() == [(120, a), (6120, b)]
+    assert len(held) == 0 and held.confirmed(10 ** 6) == []
+
+
+_SC_OFF = 500       # scalar epoch = ms of the frame + _SC_OFF
+_LOOP_OFF = 1000    # loop epoch = ms of the frame + _LOOP_OFF
+_H = 18010          # hand-over: 10 ms after subframe 3 ended (ms of the frame)
+
+
+def _handed_over_subframe_3(nav):
+    """A scalar channel of C27 that confirmed subframes 1-2 of a frame and still held
+    subframe 3 (ended 10 ms before the hand-over), the loop decoder
+    :func:`~sdr_di.deep.vector_loop._handover_decoder` made of it, the loop's prompts after
+    the hand-over (the signal there, 35 dB-Hz) and the record of the frame."""
+    from sdr_di.deep.vector_loop import _handover_decoder
+    from sdr_di.receiver.channel import Channel
+
+    eph = {r.toe: r for r in nav.records[27]}[367200.0]
+    nb = nav_bits(eph, WEEK, 367200.0 + 600.0, 24.0, assistance_klobuchar(nav)[0])
+    sfs = {d["FraID"]: d for d in decode_stream(nb.bits, prn=27)}
+    want = EphemerisAssembler(27)
+    assert want.add(sfs[1]) is None and want.add(sfs[2]) is None
+    want = want.add(sfs[3])
+    assert want is not None
+    sc = Channel(27, 2.5e6, 0.0, log=False)
+    for k in (1, 2):                       # confirmed before the hand-over
+        assert sc.assembler.add(sfs[k]) is None
+    sc._accept_subframe(dict(sfs[3], epoch=sfs[3]["offset"] * 20 + _SC_OFF))
+    sc.epoch = _H + _SC_OFF                # next epoch: the hand-over's
+    sc.bit_runs = [[_SC_OFF, bytearray(nb.bits[:_H // 20].tolist())]]
+    ms0 = round(nb.t0 * 1000) - _LOOP_OFF
+    dec = _handover_decoder(sc, _H + _LOOP_OFF, ms0)
+    p = _prompts(nb.bits, 20, _H, 5 * 20, np.random.default_rng(3))
+    return sc, dec, p, want
+
+
+def test_subframe_held_at_the_hand_over_is_confirmed_by_the_loop_test(nav):
+    """A subframe the scalar channel still held at the hand-over waits in the loop's decoder
+    for a passed test whose window starts after its last bit, and the data set it completes
+    comes out of confirm (what the vector loop offers to its navigation data). Before, the
+    hand-over passed it to the assembler unconfirmed and the set landed in the scalar
+    channel's ``ephemeris``, which nothing reads after the hand-over."""
+    sc, dec, p, want = _handed_over_subframe_3(nav)
+    assert sc.assembler.ephemeris is None and sc.ephemeris is None
+    ep = np.arange(_H, _H + p.size) + _LOOP_OFF
+    n = 45                                 # bits 900-901 complete: the window starts before
+    dec.add(p[:n], ep[:n])                 # subframe 3's end (bit 900)
+    assert dec.confirm(3) == []
+    dec.add(p[n:n + 20], ep[n:n + 20])     # bits 900-902 complete: it starts at the end
+    got = dec.confirm(3)
+    assert got == [want] and dec.confirm(3) == []
+    assert dec.n_subframes == 0            # the loop decoded none itself
+
+
+def test_subframe_held_at_the_hand_over_is_dropped_by_a_failed_loop_test(nav):
+    """The loop's test fails before it confirmed the handed-over subframe (a blockage at
+    the hand-over): the subframe is dropped and never reaches the assembler, even when the
+    signal returns."""
+    sc, dec, p, _ = _handed_over_subframe_3(nav)
+    ep = np.arange(_H, _H + p.size) + _LOOP_OFF
+    dec.add(p[:30], ep[:30])
+    dec.interrupt()                        # the fast C/N0 test failed
+    dec.add(p[30:], ep[30:])
+    assert dec.confirm(3) == []
+    assert sc.assembler.ephemeris is None and 3 not in sc.assembler._parts
+
+
 # ---- end to end ----------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def late_start_file(tmp_path_factory):

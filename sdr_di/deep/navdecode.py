@@ -26,12 +26,17 @@ whole 2 ms) and subframe edges (D1: whole 6 s; D2: whole 0.6 s) are known. The d
    (:meth:`ChannelNavDecoder.interrupt`). Without this, the subframe that completed in the
    interval whose test then failed had already been taken: its last bits came from noise,
    which BCH(15,11) "corrects" to some codeword (TCXO 25 MHz seed 3: C30's subframe 1 with
-   AODE 30). A confirmed subframe feeds the scalar channel's
+   AODE 30). The subframes the scalar channel decoded but had not yet confirmed at the
+   hand-over (one that ended less than its 0.10-0.12 s confirmation delay before it) are
+   held here too (:meth:`ChannelNavDecoder.hold`, their ends moved to the loop's bit
+   numbers) and wait for the same test: passing them on unconfirmed would take one whose
+   last bits came after a blockage began. A confirmed subframe feeds the scalar channel's
    :class:`~sdr_di.signal.navmsg.EphemerisAssembler` (subframes decoded before the hand-over
-   complete sets with those decoded after). The Klobuchar coefficients are taken from a
-   D1 subframe 1 as soon as it is confirmed (all eight are in it), without waiting for the
-   subframes 2-3 that complete the ephemeris. A subframe reaches the assembler one test
-   window (60 ms) to one window plus an interval after its end.
+   complete sets with those decoded after), and what it completes goes to the loop's
+   navigation data (:meth:`ChannelNavDecoder.confirm`). The Klobuchar coefficients are
+   taken from a D1 subframe 1 as soon as it is confirmed (all eight are in it), without
+   waiting for the subframes 2-3 that complete the ephemeris. A subframe reaches the
+   assembler one test window (60 ms) to one window plus an interval after its end.
 """
 
 from __future__ import annotations
@@ -72,7 +77,8 @@ class ChannelNavDecoder:
     Attributes
     ----------
     n_subframes, n_failed : int
-        Subframes decoded (held or confirmed) and complete subframes that failed (preamble,
+        Subframes this decoder decoded (held or confirmed; not those handed to
+        :meth:`hold` by the scalar channel) and complete subframes that failed (preamble,
         BCH, time check).
     """
 
@@ -133,6 +139,18 @@ class ChannelNavDecoder:
             elif self._acc_bit is not None:
                 self._bits, self._first_bit = [], None      # gap in the epochs: restart
             self._acc_bit, self._acc = k, s
+
+    def hold(self, sf: dict, end_bit: int) -> None:
+        """Hold decoded subframe ``sf`` until :meth:`confirm` (or drop it at
+        :meth:`interrupt`).
+
+        ``end_bit``: bit number (satellite-clock ms of the week // ``bit_ms``) after the
+        subframe's last bit. The decoder holds its own subframes; the vector loop hands it
+        those the scalar channel still held at the hand-over
+        (:meth:`~sdr_di.receiver.channel.Channel.take_unconfirmed`), which end before any bit
+        the loop adds, in the order of their ends.
+        """
+        self._held.hold(sf, end_bit)
 
     def confirm(self, n_bits: int) -> list:
         """The channel's signal test passed on its last ``n_bits`` complete bit sums (the
@@ -200,7 +218,7 @@ class ChannelNavDecoder:
             self.n_failed += 1
             return
         self.n_subframes += 1
-        self._held.hold(d, first_bit + SUBFRAME_BITS)
+        self.hold(d, first_bit + SUBFRAME_BITS)
 
     def _use(self, d: dict) -> list:
         try:

@@ -884,14 +884,21 @@ def _offer_subframe_klobuchar(rx: ScalarReceiver, navdata: NavDataInForce, t_s: 
 
 
 def _handover_decoder(sc, epoch: int, ms0: int) -> ChannelNavDecoder:
-    """Navigation decoder of a handed-over channel: the scalar channel ``sc``'s assembler
-    and the bits of its subframe in progress (its epoch counter moved to the loop's
-    numbering, in which ``sc``'s next epoch is ``epoch``); its subframes still held for
-    the lock confirmation go to the assembler now (``Channel.release_unconfirmed``)."""
-    sc.release_unconfirmed()
+    """Navigation decoder of a handed-over channel.
+
+    It takes the scalar channel ``sc``'s assembler, the bits of its subframe in progress and
+    the subframes it still held for the lock confirmation, which wait for the loop's own
+    test (:mod:`~sdr_di.deep.navdecode` notes). ``sc``'s epoch counter moves to the loop's
+    numbering, in which ``sc``'s next epoch is ``epoch``; ``ms0`` is the satellite-clock
+    millisecond of the week of loop epoch 0 (a held subframe's end, an epoch edge after its
+    last bit, becomes the bit number ``ceil((ms0 + loop epoch) / bit_ms)``).
+    """
     dec = ChannelNavDecoder(sc.prn, sc.is_d1, ms0, sc.assembler)
+    shift = epoch - int(sc.epoch)            # loop epoch = scalar epoch + shift
+    for end, sf in sc.take_unconfirmed():
+        dec.hold(sf, -(-(ms0 + end + shift) // dec.bit_ms))
     runs = sc.demodulated_bits()
     if runs:
         e0, bits = runs[-1]
-        dec.seed(e0 + epoch - int(sc.epoch), bits)
+        dec.seed(e0 + shift, bits)
     return dec

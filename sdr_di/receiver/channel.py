@@ -47,7 +47,9 @@ evaluation whose C/N0 window starts after its last bit and passes the code-lock 
 probability of about 1e-6, the mean of 100 exponential powers reaching 1.63 times the noise). Had the signal gone before that bit, every such evaluation fails until the
 loss is declared, which drops the subframe; a weak signal whose estimate dips below the
 threshold once only delays it. The ephemeris comes ``cn0_window_ms`` to
-``cn0_window_ms + lock_eval_ms`` (0.10-0.12 s) after the subframe's end.
+``cn0_window_ms + lock_eval_ms`` (0.10-0.12 s) after the subframe's end. At the deep
+hand-over the subframes still held move to the vector loop's decoder, which confirms them
+with its own test (:meth:`Channel.take_unconfirmed`).
 
 Conventions and the transmit-time definition are in :mod:`~sdr_di.receiver.tracking`.
 """
@@ -840,13 +842,23 @@ class Channel:
         for d in self._unconfirmed.confirmed(window_start):
             self._use_subframe(d)
 
-    def release_unconfirmed(self) -> None:
-        """Pass on the held subframes unconfirmed: at the deep hand-over, where this channel
-        stops in lock and the vector loop's decoder, with its own C/N0 test, goes on with the
-        same assembler (without this, a subframe 2 ended less than 0.12 s before the
-        hand-over was lost and the data set waited a whole frame)."""
-        for d in self._unconfirmed.release():
-            self._use_subframe(d)
+    def take_unconfirmed(self) -> list[tuple[int, dict]]:
+        """The decoded subframes still awaiting the lock confirmation, handed over.
+
+        At the deep hand-over this channel stops in lock; the vector loop's decoder, with its
+        own C/N0 test and the same assembler, holds these until that test confirms them
+        (:func:`~sdr_di.deep.vector_loop._handover_decoder`). Passing them on unconfirmed
+        would take a subframe whose last bits came after a blockage began; dropping them
+        would lose a subframe that ended less than 0.12 s before the hand-over (its data
+        set would wait a whole frame).
+
+        Returns
+        -------
+        list of (int, dict)
+            ``(end, subframe)`` oldest first: ``end`` is the code epoch (this channel's
+            counter) after the subframe's last bit. None are held here after.
+        """
+        return self._unconfirmed.take()
 
     def _use_subframe(self, d: dict) -> None:
         self.subframes.append(d)

@@ -749,7 +749,9 @@ class HeldSubframes:
     after the subframe's end has passed; a failed or lost channel drops what it holds. The
     scalar channel counts in code epochs and tests with its code-lock C/N0
     (:mod:`~sdr_di.receiver.channel`), the vector loop's decoder in data bits with its fast
-    C/N0 test (:mod:`~sdr_di.deep.navdecode`).
+    C/N0 test (:mod:`~sdr_di.deep.navdecode`). At the deep hand-over what the scalar channel
+    still holds moves to the loop's decoder (:meth:`take`, ends converted to its bits) and
+    waits for the loop's test: no subframe skips the test.
     """
 
     def __init__(self) -> None:
@@ -760,7 +762,8 @@ class HeldSubframes:
 
     def hold(self, sf: dict, end: int) -> None:
         """Hold subframe ``sf``, whose last bit ends at ``end`` (the caller's unit, exclusive:
-        the first epoch or bit after it)."""
+        the first epoch or bit after it). Subframes are held in the order of their ends
+        (:meth:`confirmed` passes on the oldest first)."""
         self._held.append((int(end), sf))
 
     def confirmed(self, window_start: int) -> list[dict]:
@@ -773,9 +776,12 @@ class HeldSubframes:
         del self._held[:n]
         return out
 
-    def release(self) -> list[dict]:
-        """Every held subframe, unconfirmed (oldest first); none held after."""
-        out = [sf for _, sf in self._held]
+    def take(self) -> list[tuple[int, dict]]:
+        """Every held subframe with its end, ``(end, sf)`` oldest first, for another holder
+        to go on holding until its own test (the deep hand-over: the scalar channel's
+        subframes move to the vector loop's decoder, :mod:`~sdr_di.deep.vector_loop`);
+        none held here after."""
+        out = self._held
         self._held = []
         return out
 
