@@ -303,6 +303,28 @@ def test_row_split_on_two_threads_is_identical_to_one_call():
     np.testing.assert_array_equal(two, one)
 
 
+def test_row_split_runs_before_after_the_callers_part():
+    """run_rows' `before` runs on the caller after its own part of the rows, while the worker
+    is in its kernel (receiver.threads: run first, it held the GIL the worker needed to
+    start); the caller's part ends at the first cut, the worker takes the rest."""
+    import threading
+
+    import numba
+
+    from sdr_di.receiver.threads import KernelThreads
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two numba threads")
+    me = threading.get_ident()
+    events = []
+    kt = KernelThreads(2)
+    kt.run_rows(lambda a, b: events.append(("part", a, b, threading.get_ident() == me)),
+                np.ones(10), before=lambda: events.append(("before", threading.get_ident() == me)))
+    mine = [e for e in events if e[-1]]
+    assert [e[0] for e in mine] == ["part", "before"]
+    assert mine[0][1] == 0 and ("part", mine[0][2], 10, False) in events
+
+
 def _split_in_child():
     from sdr_di.receiver.threads import KernelThreads
 

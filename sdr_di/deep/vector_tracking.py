@@ -301,8 +301,8 @@ class VectorTracking:
         epoch's noise correlator (its first ``NOISE_SAMPLES`` samples, far from the
         prompt's code phase: :mod:`~sdr_di.receiver.lock` notes), whose sums go to the
         channels' :class:`~sdr_di.receiver.lock.PostCorrelationNoise`. ``before``: work
-        for this thread while the kernel's worker starts (:meth:`~sdr_di.receiver.threads.
-        KernelThreads.run_rows`; its time is not counted here)."""
+        for this thread while the kernel's worker ends its part (:meth:`~sdr_di.receiver.
+        threads.KernelThreads.run_rows`; its time is not counted here)."""
         td = time.perf_counter()
         t_before = [0.0]
 

@@ -39,7 +39,8 @@ __all__ = ["KernelThreads", "balanced_cuts", "split_stats"]
 #: (benchmarks: ``scripts/bench_deep.py --kernel-threads``).
 ENV_THREADS = "SDR_DI_KERNEL_THREADS"
 #: Interpreter switch interval while the caller runs ``before`` in :meth:`KernelThreads.
-#: run_rows` [s] (default 5 ms: a worker would wait that long for the GIL to start).
+#: run_rows` [s] (default 5 ms: a worker that ends its part would wait that long for the
+#: GIL to return).
 _SWITCH_S = 1e-4
 _POOL: ThreadPoolExecutor | None = None
 _POOL_PID = 0
@@ -161,9 +162,13 @@ class KernelThreads:
         returns the thread count used.
 
         ``before``: work for the calling thread that does not need the rows' results (the
-        deep loop's filter predict); it runs while the workers start on their parts, and
-        the calling thread's part is shortened by its measured duration, so that all
-        parts end together.
+        deep loop's filter predict); it runs after the calling thread's part, while the
+        workers are still in their kernels, and that part is shortened by its measured
+        duration, so that all parts end together. Run first, it held the GIL while the
+        workers needed it for the Python steps before their kernels, and each of its GIL
+        releases (a BLAS product) handed the GIL to a worker until that worker's kernel
+        started: the deep run's caller waited 2.1 s of its 17 s for the GIL in ``before``
+        (40 s file, loaded 2-core machine), 0.03-0.4 s with ``before`` after its part.
         """
         ns = np.asarray(nsamp)
         n = ns.size
@@ -194,9 +199,16 @@ class KernelThreads:
                     if cuts[j + 1] > cuts[j]]
             main_cpu = 0.0
             try:
+                if cuts[1] > 0:
+                    dt = timed(0, cuts[1])
+                    main_cpu += dt
+                    per = dt / float(cum[cuts[1] - 1])
+                    self._sample_s = per if self._sample_s == 0.0 else \
+                        0.8 * self._sample_s + 0.2 * per
                 if before is not None:
-                    # `before` holds the GIL: a short switch interval lets the workers take
-                    # it for the few Python steps before their kernels release it
+                    # after the caller's part: the workers are inside their (nogil) kernels
+                    # by then, so `before` has the GIL to itself (notes above); a short
+                    # switch interval lets a worker that ends first return at once
                     switch = sys.getswitchinterval()
                     sys.setswitchinterval(min(switch, _SWITCH_S))
                     tb = time.thread_time()
@@ -208,12 +220,6 @@ class KernelThreads:
                     main_cpu += dt
                     self._before_s = dt if self._before_s == 0.0 else \
                         0.8 * self._before_s + 0.2 * dt
-                if cuts[1] > 0:
-                    dt = timed(0, cuts[1])
-                    main_cpu += dt
-                    per = dt / float(cum[cuts[1] - 1])
-                    self._sample_s = per if self._sample_s == 0.0 else \
-                        0.8 * self._sample_s + 0.2 * per
             finally:
                 worker_cpu = [f.result() for f in futs]
             _STATS["calls"] += 1
