@@ -24,7 +24,15 @@ def llh_to_ecef(lat, lon, h) -> np.ndarray:
     x = (N + h) * cl * np.cos(lon)
     y = (N + h) * cl * np.sin(lon)
     z = (N * (1.0 - E2_CGCS) + h) * sl
-    return np.stack([x, y, z], axis=-1)
+    return _stack3(x, y, z)
+
+
+def _stack3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``np.stack([a, b, c], axis=-1)`` of three same-shape arrays, filled in place (the
+    per-epoch conversions call it on 0-d arrays, where np.stack costs ~3x as much)."""
+    out = np.empty(a.shape + (3,))
+    out[..., 0], out[..., 1], out[..., 2] = a, b, c
+    return out
 
 
 def ecef_to_llh(r_e) -> np.ndarray:
@@ -46,7 +54,7 @@ def ecef_to_llh(r_e) -> np.ndarray:
     sl = np.sin(lat)
     N = A_CGCS / np.sqrt(1.0 - E2_CGCS * sl * sl)
     h = np.where(np.abs(np.cos(lat)) > 1e-9, p / np.cos(lat) - N, np.abs(z) - A_CGCS * np.sqrt(1 - E2_CGCS))
-    return np.stack([lat, lon, h], axis=-1)
+    return _stack3(lat, lon, h)
 
 
 def C_e_n(lat, lon) -> np.ndarray:
@@ -54,15 +62,13 @@ def C_e_n(lat, lon) -> np.ndarray:
     lat = np.asarray(lat, float)
     lon = np.asarray(lon, float)
     sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    z = np.zeros_like(sl)
-    return np.stack(
-        [
-            np.stack([-so, co, z], axis=-1),
-            np.stack([-sl * co, -sl * so, cl], axis=-1),
-            np.stack([cl * co, cl * so, sl], axis=-1),
-        ],
-        axis=-2,
-    )
+    C = np.empty(np.broadcast_shapes(sl.shape, so.shape) + (3, 3))
+    # filled in place (as skew): the deep loop calls this per interval, and four np.stack
+    # calls cost ~6x the element writes
+    C[..., 0, 0], C[..., 0, 1], C[..., 0, 2] = -so, co, 0.0
+    C[..., 1, 0], C[..., 1, 1], C[..., 1, 2] = -sl * co, -sl * so, cl
+    C[..., 2, 0], C[..., 2, 1], C[..., 2, 2] = cl * co, cl * so, sl
+    return C
 
 
 def radii_of_curvature(lat) -> tuple[np.ndarray, np.ndarray]:
@@ -114,10 +120,14 @@ def earth_rate_n(lat) -> np.ndarray:
     return np.stack([np.zeros_like(lat), OMEGA_E * np.cos(lat), OMEGA_E * np.sin(lat)], axis=-1)
 
 
-def elevation_azimuth(r_rx_e, r_sat_e) -> tuple[np.ndarray, np.ndarray]:
-    """Elevation and azimuth [rad] of satellites seen from a receiver, both ECEF [m]."""
+def elevation_azimuth(r_rx_e, r_sat_e, llh=None) -> tuple[np.ndarray, np.ndarray]:
+    """Elevation and azimuth [rad] of satellites seen from a receiver, both ECEF [m].
+
+    ``llh``: the receiver's ``ecef_to_llh(r_rx_e)`` if the caller has it (not recomputed).
+    """
     r_rx = np.asarray(r_rx_e, float)
-    llh = ecef_to_llh(r_rx)
+    if llh is None:
+        llh = ecef_to_llh(r_rx)
     d = np.asarray(r_sat_e, float) - r_rx
     enu = np.einsum("...ij,...j->...i", C_e_n(llh[..., 0], llh[..., 1]), d)
     el = np.arctan2(enu[..., 2], np.hypot(enu[..., 0], enu[..., 1]))

@@ -66,6 +66,31 @@ def test_range_rate_model_is_first_order_of_exact_ranges(n_sat):
     assert np.all(H[n_sat:, 16] == 1) and np.all(H[n_sat:, 15] == 0)
 
 
+def test_range_rate_geometry_is_that_of_its_position_every_time():
+    """set_geometry keeps the last position's C1, C2 (the deep loop sets two models at one
+    position per interval): H is, bit for bit, the one made from dr_e_dllh and C_e_n at
+    the position of each call, also when positions alternate between two models."""
+    from sdr_di.integration.measurements import dr_e_dllh
+
+    rng = np.random.default_rng(5)
+    a, b = RangeRateMeasurementModel(), RangeRateMeasurementModel()
+    llhs = [np.array([math.radians(40), math.radians(116), 100.0]),
+            np.array([math.radians(40) + 1e-9, math.radians(116), 100.0]),
+            np.array([math.radians(40), math.radians(116), 100.5])]
+    for k in (0, 0, 1, 1, 0, 2, 2, 1):
+        llh = llhs[k]
+        U = rng.standard_normal((6, 3))
+        U /= np.linalg.norm(U, axis=1)[:, None]
+        for model in (a, b):
+            model.set_geometry(llh, U)
+            H = np.zeros((12, 17))
+            H[:6, 6:9] = -U @ dr_e_dllh(llh)
+            H[:6, 15] = 1.0
+            H[6:, 3:6] = -U @ C_e_n(llh[0], llh[1]).T
+            H[6:, 16] = 1.0
+            assert model.matrix.tobytes() == H.tobytes()
+
+
 def test_loose_model_matches_differences():
     llh_true = np.array([math.radians(34.2), math.radians(109.0), 500.0])
     v_true = np.array([1.0, 10.0, 0.0])

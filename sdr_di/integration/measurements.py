@@ -43,11 +43,38 @@ __all__ = [
 def dr_e_dllh(llh) -> np.ndarray:
     """``C1 = d r_e / d(lat, lon, h)`` (3, 3) at ``llh`` (rad, rad, m)."""
     lat, lon, h = (float(v) for v in llh)
+    return _dr_e_dllh_of(lat, h, C_e_n(lat, lon).T)
+
+
+def _dr_e_dllh_of(lat: float, h: float, C_n_e: np.ndarray) -> np.ndarray:
+    """:func:`dr_e_dllh` from ``C_n_e`` (3, 3) at the same position."""
     R_M, R_N = (float(r) for r in radii_of_curvature(lat))
     cl = math.cos(lat)
-    C_n_e = C_e_n(lat, lon).T          # columns: E, N, U unit vectors in ECEF
+    # columns of C_n_e: E, N, U unit vectors in ECEF
     return np.column_stack([C_n_e[:, 1] * (R_M + h), C_n_e[:, 0] * (R_N + h) * cl,
                             C_n_e[:, 2]])
+
+
+#: ``(lat, lon, h), C1, C2`` of the last position :func:`_position_matrices` computed.
+_LAST_POSITION: tuple = ((), None, None)
+
+
+def _position_matrices(llh) -> tuple[np.ndarray, np.ndarray]:
+    """``C1`` (:func:`dr_e_dllh`) and ``C2 = C_n_e`` at ``llh`` (rad, rad, m), read-only.
+
+    The last position's are kept: the deep loop sets the geometry twice per interval at
+    the same INS position (the filter's channels, then every channel for the feedback)."""
+    global _LAST_POSITION
+    key = (float(llh[0]), float(llh[1]), float(llh[2]))
+    last = _LAST_POSITION
+    if last[0] == key:
+        return last[1], last[2]
+    C2 = C_e_n(key[0], key[1]).T
+    C1 = _dr_e_dllh_of(key[0], key[2], C2)
+    C1.flags.writeable = False
+    C2.flags.writeable = False
+    _LAST_POSITION = (key, C1, C2)
+    return C1, C2
 
 
 def predicted_observables(llh, v_n, sat_pos_e, sat_vel_e, clock_bias_m: float = 0.0,
@@ -112,8 +139,7 @@ class RangeRateMeasurementModel(LinearMeasurementModel):
         U = np.atleast_2d(np.asarray(U, float))
         self.U = U
         N = U.shape[0]
-        C1 = dr_e_dllh(llh)
-        C2 = C_e_n(llh[0], llh[1]).T
+        C1, C2 = _position_matrices(llh)
         H = np.zeros((2 * N, 17))
         H[:N, 6:9] = -U @ C1          # H_rho1 (eq 11)
         H[:N, 15] = 1.0               # H_rho2 = [1 0]

@@ -405,8 +405,8 @@ def atmosphere_delays(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
 
     One receiver position ``r_rx`` (3,) [m], satellites ``r_sat_rot`` (n, 3), BDT ``t_sow``.
     """
-    el, az = elevation_azimuth(r_rx, r_sat_rot)
     llh = ecef_to_llh(r_rx)
+    el, az = elevation_azimuth(r_rx, r_sat_rot, llh=llh)
     el_pos = np.maximum(el, _EL_FLOOR)
     if cfg.troposphere:
         tropo = saastamoinen_delay(llh[0], llh[2], el_pos)
