@@ -17,6 +17,7 @@ from sdr_di.signal.bch import (
     bch_decode_ints,
     bch_encode,
     bch_encode_ints,
+    bch_syndrome,
 )
 from sdr_di.signal.codes import NH20
 from sdr_di.signal.navmsg import (
@@ -87,6 +88,14 @@ def test_bch_all_words_systematic_and_divisible():
     assert np.array_equal(back, bits) and not n.any()
     one, n1 = bch_decode(cwb[5])
     assert np.array_equal(one, bits[5]) and n1 == 0
+
+
+def test_bch_syndrome_of_every_word_is_its_remainder():
+    """The syndrome table (built by GF(2) linearity) holds the remainder mod g(X) of every
+    15-bit word, as the plain long division gives it."""
+    words = np.arange(1 << 15)
+    bits = ((words[:, None] >> np.arange(14, -1, -1)) & 1).astype(np.uint8)
+    assert bch_syndrome(bits).tolist() == [_poly_mod(int(w)) for w in words]
 
 
 def test_bch_every_single_error_corrected():
