@@ -343,25 +343,31 @@ class Channel:
         ep = self.epoch
         rows = []
         ends = []
+        block = []
         hist = self._hist
+        ceil, floor = math.ceil, math.floor
         for _ in range(m):
-            n = math.ceil((_LF - th) / dchip)
-            n = max(n, 1)
-            rows.append((start, n, th, dchip, ph, dphi))
+            n = ceil((_LF - th) / dchip)
+            if n < 1:
+                n = 1
+            row = (start, n, th, dchip, ph, dphi)
+            rows.append(row)
+            # each epoch's noise row right after it: the kernel's threads take contiguous
+            # halves of the rows, which then hold equal work
+            block.append(row)
+            block.append((start, n if n < NOISE_SAMPLES else NOISE_SAMPLES,
+                          noise_code_phase(th, ep), dchip, ph, dphi))
             hist[ep % _HIST] = (start, th, rate, dph, fd, ep, f_est)
             th = th + n * dchip - _LF
-            th = max(th, 0.0)
+            if th < 0.0:
+                th = 0.0
             ph += n * dphi
-            ph -= math.floor(ph)
+            ph -= floor(ph)
             dph += n * ddop
             start += n
             ep += 1
             ends.append((start, th, ph, dph))
-        # each epoch's noise row right after it: the kernel's threads take contiguous halves
-        # of the rows, which then hold equal work
-        self.block = [x for i, r in enumerate(rows) for x in (
-            r, (r[0], min(r[1], NOISE_SAMPLES), noise_code_phase(r[2], self.epoch + i),
-                r[3], r[4], r[5]))]
+        self.block = block
         self._epoch_rows = rows
         self.n_block_epochs = m
         self._block_ends = ends
