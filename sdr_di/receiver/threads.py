@@ -167,8 +167,9 @@ class KernelThreads:
         duration, so that all parts end together. Run first, it held the GIL while the
         workers needed it for the Python steps before their kernels, and each of its GIL
         releases (a BLAS product) handed the GIL to a worker until that worker's kernel
-        started: the deep run's caller waited 2.1 s of its 17 s for the GIL in ``before``
-        (40 s file, loaded 2-core machine), 0.03-0.4 s with ``before`` after its part.
+        started: in a 40 s deep run on the shared 2-core machine the caller's ``before``
+        took 0.1-2.2 s more wall than CPU (more under more load), 0.03-0.6 s with
+        ``before`` after its part.
         """
         ns = np.asarray(nsamp)
         n = ns.size
