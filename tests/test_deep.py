@@ -332,6 +332,27 @@ def test_deep_ekf_position_is_unbiased(gen26, capsys):
     assert m["vel_mps_rmse"] < 0.02, m
 
 
+@pytest.mark.slow
+def test_deep_run_is_the_same_on_one_thread_and_split(gen26, tmp_path, monkeypatch, capsys):
+    """The kernel calls split between the caller and the worker thread, with the filter's
+    predict and the channels of the caller's part worked on while the worker correlates
+    the rest (receiver.threads, deep.vector_tracking notes), give the solution file of the
+    run on one thread, byte for byte."""
+    from sdr_di.receiver.threads import ENV_THREADS, KernelThreads
+
+    if KernelThreads().max_threads < 2:
+        pytest.skip("needs two numba threads")
+    csv = {}
+    for threads in ("1", "2"):
+        monkeypatch.setenv(ENV_THREADS, threads)
+        out = tmp_path / f"t{threads}"
+        rc = main(["run", str(gen26 / "default.bin"), "--mode", "deep", "--no-progress",
+                   "--out", str(out)])
+        assert rc == 0, capsys.readouterr().out
+        csv[threads] = (out / "default_deep.csv").read_bytes()
+    assert csv["1"] == csv["2"]
+
+
 def _imu_variant(src: Path, dst: Path, *, sow_shift: float = 0.0, keep_s: float | None = None):
     lines = src.read_text().splitlines(keepends=True)
     out = []

@@ -292,8 +292,8 @@ def test_row_split_on_two_threads_is_identical_to_one_call():
 
         kt = KernelThreads(threads)
         calls = []
-        used = [kt.run_rows(rows_ab, n, before=b) for b in (None, lambda: calls.append(1))]
-        assert calls == [1]          # `before` runs once, on the caller
+        used = [kt.run_rows(rows_ab, n, before=b) for b in (None, calls.append)]
+        assert len(calls) == 1       # `before` runs once, on the caller
         return out, used
 
     one, used1 = run(1)
@@ -306,7 +306,7 @@ def test_row_split_on_two_threads_is_identical_to_one_call():
 def test_row_split_runs_before_after_the_callers_part():
     """run_rows' `before` runs on the caller after its own part of the rows, while the worker
     is in its kernel (receiver.threads: run first, it held the GIL the worker needed to
-    start); the caller's part ends at the first cut, the worker takes the rest."""
+    start), and is given the end of that part; the worker takes the rest."""
     import threading
 
     import numba
@@ -319,10 +319,13 @@ def test_row_split_runs_before_after_the_callers_part():
     events = []
     kt = KernelThreads(2)
     kt.run_rows(lambda a, b: events.append(("part", a, b, threading.get_ident() == me)),
-                np.ones(10), before=lambda: events.append(("before", threading.get_ident() == me)))
+                np.ones(10),
+                before=lambda done: events.append(("before", done, threading.get_ident() == me)))
     mine = [e for e in events if e[-1]]
     assert [e[0] for e in mine] == ["part", "before"]
-    assert mine[0][1] == 0 and ("part", mine[0][2], 10, False) in events
+    # `before` is told the rows of the caller's part, all final by then
+    assert mine[0][1] == 0 and mine[1][1] == mine[0][2]
+    assert ("part", mine[0][2], 10, False) in events
 
 
 def _split_in_child():

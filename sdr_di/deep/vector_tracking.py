@@ -137,9 +137,11 @@ class VectorTracking:
         command_ncos       predicted ranges at k1 from the propagated INS and clock, code and
                            carrier NCO commands, correlator rows of every channel's epochs
         load_samples       the IF samples the rows need (False: the file ends)
-        correlate          E/P/L of every epoch of every channel (one numba kernel call), NH
-                           wiped off
-        prefilter          per channel: C/N0 tests and navigation decoding
+        correlate          E/P/L of every epoch of every channel (one numba kernel call);
+                           meanwhile, on this thread, the filter's predict and the
+                           channels the kernel's leading part has correlated
+        prefilter          per channel (:class:`_ChannelPass`, in channel order): noise
+                           sums, NH wipe-off, C/N0 tests and navigation decoding
                            (:meth:`_test_channel`), pre-filter, measurement-vector gate
                            (:meth:`_usable`) -> z, R (eq 7-9, 34)
 
@@ -230,10 +232,17 @@ class VectorTracking:
         rows = self.command_ncos(iv)
         if not self.load_samples(rows):
             return None
-        # the filter's predict does not need this interval's correlations: it runs on this
-        # thread while the kernel's worker thread correlates (receiver.threads notes)
-        E, P, L = self.correlate(rows, before=lambda: loop.predict_filter(iv))
-        return self.prefilter(iv, rows, E, P, L)
+        pf = _ChannelPass(self, iv, rows)
+
+        def before(epochs_done: int, epl: np.ndarray) -> None:
+            # the filter's predict does not need this interval's correlations, and a channel
+            # needs only its own: both run on this thread while the kernel's worker thread
+            # correlates the rest (receiver.threads notes)
+            loop.predict_filter(iv)
+            pf.run(epochs_done, epl)
+        epl = self.correlate(rows, before=before)
+        pf.run(rows.starts.size, epl)
+        return pf.measurements()
 
     def command_ncos(self, iv: Interval) -> _EpochRows:
         """Code and carrier NCO commands over ``[k0, k1)`` and the correlator rows.
@@ -294,21 +303,23 @@ class VectorTracking:
         self.profile["read"] += time.perf_counter() - tc
         return True
 
-    def correlate(self, rows: _EpochRows, before=None):
+    def correlate(self, rows: _EpochRows, before=None) -> np.ndarray:
         """Early, prompt, late of every epoch of every channel: one call of the receiver's
-        kernel on the stored samples (bit-window replicas, one rotation row per epoch), NH
-        code wiped off. Returns ``(E, P, L)`` complex (n_rows,). The same call runs each
-        epoch's noise correlator (its first ``NOISE_SAMPLES`` samples, far from the
-        prompt's code phase: :mod:`~sdr_di.receiver.lock` notes), whose sums go to the
-        channels' :class:`~sdr_di.receiver.lock.PostCorrelationNoise`. ``before``: work
-        for this thread while the kernel's worker ends its part (:meth:`~sdr_di.receiver.
-        threads.KernelThreads.run_rows`; its time is not counted here)."""
+        kernel on the stored samples (bit-window replicas, one rotation row per epoch).
+        The same call runs each epoch's noise correlator (its first ``NOISE_SAMPLES``
+        samples, far from the prompt's code phase: :mod:`~sdr_di.receiver.lock` notes).
+        Returns ``epl`` complex (2 n_epochs, 3): E, P, L of epoch ``e`` in row ``2 e``, of
+        its noise correlator in row ``2 e + 1`` (NH code not wiped off: :class:`_ChannelPass`
+        does). ``before(epochs_done, epl)``: work for this thread while the kernel's worker
+        ends its part, when the rows of the first ``epochs_done`` epochs are final
+        (:meth:`~sdr_di.receiver.threads.KernelThreads.run_rows`; its time is not counted
+        here)."""
         td = time.perf_counter()
         t_before = [0.0]
 
-        def timed_before():
+        def timed_before(rows_done: int) -> None:
             tb = time.perf_counter()
-            before()
+            before(rows_done // 2, epl)
             t_before[0] += time.perf_counter() - tb
         n_rows = rows.starts.size
         th = reduce_code_phase(rows.theta, CODE_LENGTH_B3I)
@@ -325,6 +336,7 @@ class VectorTracking:
 
         nsamp = pair(rows.nsamp, n_noise)
         out = np.empty((2 * n_rows, 3, 2))
+        epl = out.view(np.complex128)[..., 0]    # (re, im) pairs: complex E, P, L rows
         x, n_comp, bits, spacing = self.x_buf, self.n_comp, self.bits, self.pre.spacing
         tab, start = pair(np.repeat(self.chan_idx, rows.reps)), pair(rows.starts - self.buf0)
         theta, dchip = pair(th, th_noise), pair(np.repeat(rows.dchip, rows.reps))
@@ -343,59 +355,32 @@ class VectorTracking:
                                out[a:b])
 
         self.kthreads.run_rows(rows_ab, nsamp, None if before is None else timed_before)
-        epl = out.view(np.complex128)[..., 0]
-        nz = epl[1::2]
-        a = 0
-        nz_e, nz_p, nz_l, nn = (nz[:, 0].tolist(), nz[:, 1].tolist(), nz[:, 2].tolist(),
-                                n_noise.tolist())    # Python numbers: cheaper per value
-        for c, cnt in zip(self.chans, rows.reps):
-            if cnt:
-                c.noise.add(nz_e[a:a + cnt], nz_p[a:a + cnt], nz_l[a:a + cnt], nn[a:a + cnt])
-            a += cnt
-        epl = epl[0::2]
-        E = epl[:, 0] * rows.nh
-        P = epl[:, 1] * rows.nh
-        L = epl[:, 2] * rows.nh
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
-        return E, P, L
+        return epl
 
-    def prefilter(self, iv: Interval, rows: _EpochRows, E, P, L) -> Measurements:
-        """Per channel: C/N0 tests and navigation decoding, pre-filter over its epochs
-        (coherent blocks, module notes), and the measurement-vector gate; ``z`` =
-        ``[c/f_code dtau_i, lambda df_i]`` and ``R`` from the pre-filter variances of the
-        channels in the vector (paper 004 eq 7-9, 34)."""
-        te = time.perf_counter()
-        cfg, pre, fs = self.cfg, self.pre, self.fs
-        ns, ep_all = rows.nsamp, rows.epoch
-        z_rho, z_rate, r_rho, r_rate, use = [], [], [], [], []
-        a = 0
-        for c, cnt in zip(self.chans, rows.reps):
-            i = c.idx
-            sl = slice(a, a + cnt)
-            a += cnt
-            if cnt:
-                pp = P[sl]
-                self._test_channel(c, pp, ns[sl], ep_all[sl], iv.k1 / fs)
-                cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
-                pre.process(i, E[sl], pp, L[sl], ns[sl] / fs, cn0_lin,
-                            block_start=ep_all[sl] % min(c.bit_ms, cfg.coherent_ms) == 0)
-            good = self._usable(c, cnt)
-            c.used = good
-            use.append(good)
-            if good:
-                dtau, df, vt, vf = pre.outputs(i)
-                z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
-                z_rate.append(LAMBDA_B3I * df)
-                r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * vt)
-                r_rate.append(LAMBDA_B3I ** 2 * vf)
-        use = np.asarray(use, bool)
-        z = R = None
-        if use.any():
-            z = np.array(z_rho + z_rate)                # (lists: cheaper than np.r_)
-            R = np.diag(np.array(r_rho + r_rate))
-        m = Measurements(z=z, R=R, geometry=(iv.nav1.llh, self._pred.U[use, 0]), used=use)
-        self.profile["prefilter"] += time.perf_counter() - te
-        return m
+    def prefilter(self, iv: Interval, c: _Chan, epl: np.ndarray, a: int, cnt: int,
+                  rows: _EpochRows) -> bool:
+        """Channel ``c``'s epochs ``[a, a + cnt)`` of the interval (rows of
+        :meth:`correlate`): noise-correlator sums to its
+        :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, NH wipe-off, C/N0 tests and
+        navigation decoding, pre-filter over its epochs (coherent blocks, module notes);
+        returns the measurement-vector gate (:meth:`_usable`)."""
+        cfg, fs = self.cfg, self.fs
+        if cnt:
+            b = a + cnt
+            nz = epl[2 * a + 1:2 * b:2]
+            c.noise.add(nz[:, 0].tolist(), nz[:, 1].tolist(), nz[:, 2].tolist(),
+                        np.minimum(rows.nsamp[a:b], NOISE_SAMPLES).tolist())  # Python numbers
+            ep = epl[2 * a:2 * b:2]
+            nh, ns, epochs = rows.nh[a:b], rows.nsamp[a:b], rows.epoch[a:b]
+            P = ep[:, 1] * nh
+            self._test_channel(c, P, ns, epochs, iv.k1 / fs)
+            cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
+            self.pre.process(c.idx, ep[:, 0] * nh, P, ep[:, 2] * nh, ns / fs, cn0_lin,
+                             block_start=epochs % min(c.bit_ms, cfg.coherent_ms) == 0)
+        good = self._usable(c, cnt)
+        c.used = good
+        return good
 
     def _test_channel(self, c: _Chan, prompts, nsamp, epochs, t_s: float) -> None:
         """Channel management on this interval's prompts (module notes): bit sums for the
@@ -491,6 +476,55 @@ class VectorTracking:
         out = {"cn0": [c.cn0_dbhz for c in self.chans], "nav": self.nav_log.flag}
         self.nav_log.flag = 0
         return out
+
+
+class _ChannelPass:
+    """The per-channel work of one interval after the correlation
+    (:meth:`VectorTracking.prefilter`), channel after channel in their order, and the
+    measurements it gives: ``z = [c/f_code dtau_i, lambda df_i]`` and ``R`` from the
+    pre-filter variances of the channels in the vector (paper 004 eq 7-9, 34).
+
+    :meth:`run` takes the channels whose epochs are all correlated: first those of the
+    kernel call's leading part, while its worker correlates the rest, then the others."""
+
+    def __init__(self, vt: VectorTracking, iv: Interval, rows: _EpochRows) -> None:
+        self.vt, self.iv, self.rows = vt, iv, rows
+        self.next = 0                     # next channel
+        self.a = 0                        # its first epoch
+        self.z_rho: list = []
+        self.z_rate: list = []
+        self.r_rho: list = []
+        self.r_rate: list = []
+        self.use: list = []
+
+    def run(self, epochs_done: int, epl: np.ndarray) -> None:
+        """The channels not yet taken whose epochs are all among the first
+        ``epochs_done`` rows of ``epl``."""
+        te = time.perf_counter()
+        vt, reps = self.vt, self.rows.reps
+        while self.next < vt.n_channels and self.a + reps[self.next] <= epochs_done:
+            c, cnt = vt.chans[self.next], reps[self.next]
+            good = vt.prefilter(self.iv, c, epl, self.a, cnt, self.rows)
+            self.use.append(good)
+            if good:
+                dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)
+                self.z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
+                self.z_rate.append(LAMBDA_B3I * df)
+                self.r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * v_tau)
+                self.r_rate.append(LAMBDA_B3I ** 2 * v_f)
+            self.next += 1
+            self.a += cnt
+        vt.profile["prefilter"] += time.perf_counter() - te
+
+    def measurements(self) -> Measurements:
+        """``z``, ``R`` and the geometry of the channels in the vector (all channels run)."""
+        use = np.asarray(self.use, bool)
+        z = R = None
+        if use.any():
+            z = np.array(self.z_rho + self.z_rate)      # (lists: cheaper than np.r_)
+            R = np.diag(np.array(self.r_rho + self.r_rate))
+        return Measurements(z=z, R=R, geometry=(self.iv.nav1.llh, self.vt._pred.U[use, 0]),
+                            used=use)
 
 
 @dataclasses.dataclass

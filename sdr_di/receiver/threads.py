@@ -155,16 +155,18 @@ class KernelThreads:
         self.cost[threads] = cost if old == 0.0 else 0.7 * old + 0.3 * cost
 
     def run_rows(self, call: Callable[[int, int], None], nsamp,
-                 before: Callable[[], None] | None = None) -> int:
+                 before: Callable[[int], None] | None = None) -> int:
         """Run ``call(a, b)`` (a ``nogil`` kernel on rows ``[a, b)``, writing its own rows'
         outputs) over all rows: on the calling thread alone, or split into contiguous parts
         between it and the worker threads (module notes). Records the cost per sample;
         returns the thread count used.
 
-        ``before``: work for the calling thread that does not need the rows' results (the
-        deep loop's filter predict); it runs after the calling thread's part, while the
-        workers are still in their kernels, and that part is shortened by its measured
-        duration, so that all parts end together. Run first, it held the GIL while the
+        ``before(rows_done)``: work for the calling thread that needs no results but those
+        of the first ``rows_done`` rows, which are final when it runs (the deep loop's
+        filter predict, and the channels whose epochs all lie there); it runs after the
+        calling thread's part (rows ``[0, rows_done)``), while the workers are still in
+        their kernels, and that part is shortened by its measured duration, so that all
+        parts end together (one thread: after all rows). Run first, it held the GIL while the
         workers needed it for the Python steps before their kernels, and each of its GIL
         releases (a BLAS product) handed the GIL to a worker until that worker's kernel
         started: in a 40 s deep run on the shared 2-core machine the caller's ``before``
@@ -176,9 +178,9 @@ class KernelThreads:
         threads = self.pick()
         t0 = time.perf_counter()
         if threads == 1 or n < 2:
-            if before is not None:
-                before()
             call(0, n)
+            if before is not None:
+                before(n)
         else:
             tot = max(float(ns.sum()), 1.0)
             # the caller's part: with `before` (T_b) and the kernel (K) shared so that all
@@ -214,7 +216,7 @@ class KernelThreads:
                     sys.setswitchinterval(min(switch, _SWITCH_S))
                     tb = time.thread_time()
                     try:
-                        before()
+                        before(cuts[1])
                     finally:
                         sys.setswitchinterval(switch)
                     dt = time.thread_time() - tb
