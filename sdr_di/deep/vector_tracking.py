@@ -358,26 +358,20 @@ class VectorTracking:
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
         return epl
 
-    def prefilter(self, iv: Interval, c: _Chan, epl: np.ndarray, a: int, cnt: int,
-                  rows: _EpochRows) -> bool:
-        """Channel ``c``'s epochs ``[a, a + cnt)`` of the interval (rows of
-        :meth:`correlate`): noise-correlator sums to its
-        :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, NH wipe-off, C/N0 tests and
-        navigation decoding, pre-filter over its epochs (coherent blocks, module notes);
-        returns the measurement-vector gate (:meth:`_usable`)."""
-        cfg, fs = self.cfg, self.fs
+    def prefilter(self, iv: Interval, c: _Chan, E, P, L, nsamp, epochs, noise) -> bool:
+        """Channel ``c``'s epochs of the interval (NH wiped off; their sample counts and
+        epoch numbers): its noise-correlator sums ``noise`` (E, P, L, samples: lists) to its
+        :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, C/N0 tests and navigation
+        decoding, pre-filter over its epochs (coherent blocks, module notes); returns the
+        measurement-vector gate (:meth:`_usable`)."""
+        cnt = nsamp.size
         if cnt:
-            b = a + cnt
-            nz = epl[2 * a + 1:2 * b:2]
-            c.noise.add(nz[:, 0].tolist(), nz[:, 1].tolist(), nz[:, 2].tolist(),
-                        np.minimum(rows.nsamp[a:b], NOISE_SAMPLES).tolist())  # Python numbers
-            ep = epl[2 * a:2 * b:2]
-            nh, ns, epochs = rows.nh[a:b], rows.nsamp[a:b], rows.epoch[a:b]
-            P = ep[:, 1] * nh
-            self._test_channel(c, P, ns, epochs, iv.k1 / fs)
+            fs = self.fs
+            c.noise.add(*noise)
+            self._test_channel(c, P, nsamp, epochs, iv.k1 / fs)
             cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
-            self.pre.process(c.idx, ep[:, 0] * nh, P, ep[:, 2] * nh, ns / fs, cn0_lin,
-                             block_start=epochs % min(c.bit_ms, cfg.coherent_ms) == 0)
+            self.pre.process(c.idx, E, P, L, nsamp / fs, cn0_lin,
+                             block_start=epochs % min(c.bit_ms, self.cfg.coherent_ms) == 0)
         good = self._usable(c, cnt)
         c.used = good
         return good
@@ -499,21 +493,38 @@ class _ChannelPass:
 
     def run(self, epochs_done: int, epl: np.ndarray) -> None:
         """The channels not yet taken whose epochs are all among the first
-        ``epochs_done`` rows of ``epl``."""
+        ``epochs_done`` of ``epl`` (:meth:`VectorTracking.correlate`)."""
         te = time.perf_counter()
-        vt, reps = self.vt, self.rows.reps
-        while self.next < vt.n_channels and self.a + reps[self.next] <= epochs_done:
-            c, cnt = vt.chans[self.next], reps[self.next]
-            good = vt.prefilter(self.iv, c, epl, self.a, cnt, self.rows)
-            self.use.append(good)
-            if good:
-                dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)
-                self.z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
-                self.z_rate.append(LAMBDA_B3I * df)
-                self.r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * v_tau)
-                self.r_rate.append(LAMBDA_B3I ** 2 * v_f)
-            self.next += 1
-            self.a += cnt
+        vt, rows, reps = self.vt, self.rows, self.rows.reps
+        j, a0, a1 = self.next, self.a, self.a
+        while j < vt.n_channels and a1 + reps[j] <= epochs_done:
+            a1 += reps[j]
+            j += 1
+        if j > self.next:
+            # the outputs of these channels' epochs at once, each channel then a slice: NH
+            # wiped off, noise sums as Python numbers (cheaper per value)
+            ep, nz = epl[2 * a0:2 * a1:2], epl[2 * a0 + 1:2 * a1:2]
+            nh = rows.nh[a0:a1]
+            E, P, L = ep[:, 0] * nh, ep[:, 1] * nh, ep[:, 2] * nh
+            noise = (nz[:, 0].tolist(), nz[:, 1].tolist(), nz[:, 2].tolist(),
+                     np.minimum(rows.nsamp[a0:a1], NOISE_SAMPLES).tolist())
+            s = 0
+            for k in range(self.next, j):
+                c, cnt = vt.chans[k], reps[k]
+                sl = slice(s, s + cnt)
+                good = vt.prefilter(self.iv, c, E[sl], P[sl], L[sl],
+                                    rows.nsamp[a0 + s:a0 + s + cnt],
+                                    rows.epoch[a0 + s:a0 + s + cnt],
+                                    tuple(v[sl] for v in noise))
+                self.use.append(good)
+                if good:
+                    dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)
+                    self.z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
+                    self.z_rate.append(LAMBDA_B3I * df)
+                    self.r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * v_tau)
+                    self.r_rate.append(LAMBDA_B3I ** 2 * v_f)
+                s += cnt
+            self.next, self.a = j, a1
         vt.profile["prefilter"] += time.perf_counter() - te
 
     def measurements(self) -> Measurements:
