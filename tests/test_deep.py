@@ -334,10 +334,11 @@ def test_deep_ekf_position_is_unbiased(gen26, capsys):
 
 @pytest.mark.slow
 def test_deep_run_is_the_same_on_one_thread_and_split(gen26, tmp_path, monkeypatch, capsys):
-    """The kernel calls split between the caller and the worker thread, with the filter's
-    predict and the channels of the caller's part worked on while the worker correlates
-    the rest (receiver.threads, deep.vector_tracking notes), give the solution file of the
-    run on one thread, byte for byte."""
+    """The kernel calls split between the caller and the worker thread, with the channels
+    of the caller's part (scalar start-up: their loops; vector loop: their pre-filters,
+    with the filter's predict) worked on while the worker correlates the rest
+    (receiver.threads notes), give the solution file of the run on one thread, byte for
+    byte."""
     from sdr_di.receiver.threads import ENV_THREADS, KernelThreads
 
     if KernelThreads().max_threads < 2:

@@ -139,10 +139,13 @@ class _Bank:
             self.rot_dphi[s] = d
 
     def correlate(self, x: np.ndarray, n_comp: int, buf0: int, slots: tuple[int, ...],
-                  chans: list) -> list:
+                  chans: list, ready: Callable[[int, list], None]) -> None:
         """Correlate every row of the channels' blocks on the stored samples ``x``
         (:meth:`~sdr_di.receiver.ifreader.IfSource.read_stored`, first sample ``buf0``);
-        returns per-channel lists of ``(E, P, L)`` complex triples."""
+        ``ready(j, outs)`` gets channel ``j``'s list of ``(E, P, L)`` complex triples as
+        soon as its rows are final, the channels in order: those of the kernel call's
+        leading part while its worker correlates the rest (:meth:`~sdr_di.receiver.threads.
+        KernelThreads.run_rows`), then the others."""
         params: list[tuple] = []
         reps = []
         for c in chans:
@@ -163,15 +166,25 @@ class _Bank:
                                par[5, a:b], self.rot_re, self.rot_im, row_slot[a:b],
                                self.spacing, 1, out[a:b])
 
-        self.threads.run_rows(rows_ab, nsamp)
-        # (re, im) pairs are contiguous: a complex128 view gives Python complex E, P, L
-        o = out.view(np.complex128).reshape(n_rows, 3).tolist()
-        res = []
-        j = 0
-        for r in reps:
-            res.append(o[j:j + r])
-            j += r
-        return res
+        ends = np.cumsum(reps).tolist()
+        taken = [0]                       # channels given to `ready`
+
+        def take(rows_done: int) -> None:
+            j0 = j1 = taken[0]
+            while j1 < len(chans) and ends[j1] <= rows_done:
+                j1 += 1
+            if j1 == j0:
+                return
+            a0 = ends[j0 - 1] if j0 else 0
+            # (re, im) pairs are contiguous: a complex128 view gives Python complex E, P, L
+            o = out[a0:ends[j1 - 1]].view(np.complex128).reshape(-1, 3).tolist()
+            for j in range(j0, j1):
+                a = (ends[j - 1] if j else 0) - a0
+                ready(j, o[a:a + reps[j]])
+            taken[0] = j1
+
+        self.threads.run_rows(rows_ab, nsamp, take)
+        take(n_rows)
 
 
 class ScalarReceiver:
@@ -529,13 +542,18 @@ class ScalarReceiver:
                 continue
             t0 = time.perf_counter()
             slots = tuple(slot_of[id(c)] for c in batch)
-            res = bank.correlate(x, n_comp, buf0, slots, batch)
-            t1 = time.perf_counter()
-            for c, o in zip(batch, res):
-                c.process_block(o)
-            t2 = time.perf_counter()
-            prof["correlate"] += t1 - t0
-            prof["channels"] += t2 - t1
+            t_ch = [0.0]
+
+            def ready(j: int, outs: list, batch=batch, t_ch=t_ch) -> None:
+                # a channel's block needs only its own rows: the channels of the kernel's
+                # leading part are processed while its worker correlates the others
+                tc = time.perf_counter()
+                batch[j].process_block(outs)
+                t_ch[0] += time.perf_counter() - tc
+
+            bank.correlate(x, n_comp, buf0, slots, batch, ready)
+            prof["correlate"] += time.perf_counter() - t0 - t_ch[0]
+            prof["channels"] += t_ch[0]
             prof["steps"] += 1
         self._collect_ephemerides()
         numba.set_num_threads(threads_before)
