@@ -24,6 +24,7 @@ Loosely coupled (paper 000 eq 8-9, paper 003 eq 13-14): :class:`LooseMeasurement
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -55,25 +56,22 @@ def _dr_e_dllh_of(lat: float, h: float, C_n_e: np.ndarray) -> np.ndarray:
                             C_n_e[:, 2]])
 
 
-#: ``(lat, lon, h), C1, C2`` of the last position :func:`_position_matrices` computed.
-_LAST_POSITION: tuple = ((), None, None)
-
-
 def _position_matrices(llh) -> tuple[np.ndarray, np.ndarray]:
     """``C1`` (:func:`dr_e_dllh`) and ``C2 = C_n_e`` at ``llh`` (rad, rad, m), read-only.
 
-    The last position's are kept: the deep loop sets the geometry twice per interval at
-    the same INS position (the filter's channels, then every channel for the feedback)."""
-    global _LAST_POSITION
-    key = (float(llh[0]), float(llh[1]), float(llh[2]))
-    last = _LAST_POSITION
-    if last[0] == key:
-        return last[1], last[2]
-    C2 = C_e_n(key[0], key[1]).T
-    C1 = _dr_e_dllh_of(key[0], key[2], C2)
+    The last position's are kept (:func:`_position_matrices_at`): the deep loop sets the
+    geometry twice per interval at the same INS position (the filter's channels, then every
+    channel for the feedback)."""
+    return _position_matrices_at(float(llh[0]), float(llh[1]), float(llh[2]))
+
+
+@functools.lru_cache(maxsize=1)
+def _position_matrices_at(lat: float, lon: float, h: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_position_matrices` at one position, cached (read-only arrays)."""
+    C2 = C_e_n(lat, lon).T
+    C1 = _dr_e_dllh_of(lat, h, C2)
     C1.flags.writeable = False
     C2.flags.writeable = False
-    _LAST_POSITION = (key, C1, C2)
     return C1, C2
 
 
