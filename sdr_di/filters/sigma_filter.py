@@ -131,7 +131,8 @@ class UKF(SigmaPointFilter):
     alpha, beta, kappa : float
         Scaled-UT parameters (defaults 0.5, 2, 0; see
         :class:`~sdr_di.filters.sigma_points.MerweScaledSigmaPoints`).
-    Others as :class:`SigmaPointFilter`.
+    **kwargs
+        The other parameters, as :class:`SigmaPointFilter`.
     """
 
     kind = "UKF"
