@@ -140,8 +140,8 @@ def _run_receiver(path: Path, out: Path, search: str) -> dict:
 
 _MODE_CHILD = """
 import json, resource, sys, time
-from sdr_di.deep import DeepConfig
-from sdr_di.deep.run_deep import run_deep
+from sdr_di.integration.receiver import DeepConfig
+from sdr_di.integration.run_integrated import run_deep
 from sdr_di.receiver.run_scalar import open_source
 from sdr_di.receiver.threads import split_stats
 path, out, mode, filt = sys.argv[1:5]

@@ -49,8 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 _CHILD = """
 import json, resource, sys, threading, time
 from pathlib import Path
-from sdr_di.deep.run_deep import run_deep
-from sdr_di.deep.vector_loop import DeepConfig
+from sdr_di.integration.run_integrated import run_deep
+from sdr_di.integration.receiver import DeepConfig
 from sdr_di.receiver.run_scalar import open_source
 
 def sched(tid=None):

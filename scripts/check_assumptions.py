@@ -41,8 +41,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sdr_di.deep.run_deep import run_deep
-from sdr_di.deep.vector_loop import DeepConfig
+from sdr_di.integration.run_integrated import run_deep
+from sdr_di.integration.receiver import DeepConfig
 from sdr_di.errors import SdrDiError
 from sdr_di.integration.assumptions import apply_to_deep, parse_assumptions
 from sdr_di.io.imu_files import read_truth

@@ -53,8 +53,8 @@ def main(argv: list[str] | None = None) -> None:
 
     import sdr_di
     from sdr_di.cli import main as cli
-    from sdr_di.deep.run_deep import run_deep
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.receiver import DeepConfig
     from sdr_di.receiver.accuracy import solution_vs_truth
     from sdr_di.receiver.run_scalar import open_source
 

@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sdr_di.deep import DeepConfig, DeepReceiver
-from sdr_di.deep.vector_loop import MODES
+from sdr_di.integration.receiver import DeepConfig, DeepReceiver
+from sdr_di.integration.receiver import MODES
 from sdr_di.io.atomic import atomic_open, ensure_output_dir
 
 ROOT = Path(__file__).resolve().parents[1]

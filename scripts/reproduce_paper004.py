@@ -51,7 +51,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from sdr_di.deep import DeepConfig, DeepReceiver
+from sdr_di.integration.receiver import DeepConfig, DeepReceiver
 from sdr_di.experiments.filter_figures import parse_filter_spec
 from sdr_di.filters import FILTER_NAMES
 from sdr_di.io.imu_files import read_imu, read_truth

@@ -421,7 +421,7 @@ def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
                          f"{', '.join(FILTER_NAMES)}")
     if args.filter_rate is None:
         return
-    from .deep.run_deep import companion_files
+    from .integration.run_integrated import companion_files
     from .io.imu_files import read_imu
 
     imu_path = args.imu or companion_files(source, skip=("truth",))["imu"]
@@ -434,8 +434,8 @@ def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
 
 
 def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
-    from .deep.run_deep import run_deep
-    from .deep.vector_loop import DeepConfig
+    from .integration.run_integrated import run_deep
+    from .integration.receiver import DeepConfig
 
     # the filter name is checked by the receiver before its start-up (make_filter)
     kw = {"filter": (args.filter or "ff-aukf").strip().lower(), "output_rate_hz": args.rate,

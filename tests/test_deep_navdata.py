@@ -232,9 +232,9 @@ _H = 18010          # hand-over: 10 ms after subframe 3 ended (ms of the frame)
 def _handed_over_subframe_3(nav):
     """A scalar channel of C27 that confirmed subframes 1-2 of a frame and still held
     subframe 3 (ended 10 ms before the hand-over), the loop decoder
-    :func:`~sdr_di.deep.vector_loop._handover_decoder` made of it, the loop's prompts after
+    :func:`~sdr_di.integration.receiver._handover_decoder` made of it, the loop's prompts after
     the hand-over (the signal there, 35 dB-Hz) and the record of the frame."""
-    from sdr_di.deep.vector_loop import _handover_decoder
+    from sdr_di.integration.receiver import _handover_decoder
     from sdr_di.receiver.channel import Channel
 
     eph = {r.toe: r for r in nav.records[27]}[367200.0]
@@ -336,8 +336,8 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     here, metres), the clock errors by up to ~1 m. The error from 2 s after the last switch
     must be below 0.3 m and below a fifth of the ionosphere bias."""
     import sdr_di.orbits.rinex_nav as rinex_nav
-    from sdr_di.deep.run_deep import run_deep
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.receiver import DeepConfig
     from sdr_di.receiver.run_scalar import open_source
 
     def change(e):
@@ -394,8 +394,8 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
     sets would complete only at +34 s), so there is no warning and the loop starts with the
     broadcast Klobuchar model."""
     import sdr_di.orbits.rinex_nav as rinex_nav
-    from sdr_di.deep.run_deep import run_deep
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.receiver import DeepConfig
     from sdr_di.receiver.run_scalar import open_source
 
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav))
@@ -412,7 +412,7 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
 
 
 def test_deep_config_checks_iono_wait():
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.receiver import DeepConfig
 
     assert DeepConfig().iono_wait_s == 30.0
     for bad in (-1.0, math.inf, math.nan):

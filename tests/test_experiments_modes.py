@@ -130,7 +130,7 @@ def test_errors_csv_columns(tmp_path):
 
 
 def _has_modes() -> bool:
-    from sdr_di.deep import DeepConfig
+    from sdr_di.integration.receiver import DeepConfig
 
     return "mode" in {f.name for f in dataclasses.fields(DeepConfig)}
 

@@ -1,7 +1,7 @@
 """Deep mode's measurement source: vector tracking of every handed-over channel.
 
 :class:`VectorTracking` is the :class:`~sdr_di.integration.loop.MeasurementSource` of the
-deep receiver (:class:`~sdr_di.deep.vector_loop.DeepReceiver`) in the mode-independent
+deep receiver (:class:`~sdr_di.integration.receiver.DeepReceiver`) in the mode-independent
 :class:`~sdr_di.integration.loop.IntegrationLoop`. Per filter interval it commands every
 channel's code and carrier NCOs from the propagated INS and clock, correlates, runs the
 pre-filters and the channel management, and forms ``z`` and ``R`` (paper 004 eq 7-9, 34);
@@ -10,7 +10,7 @@ pre-filters) and takes up navigation data decoded meanwhile (a new ephemeris or 
 model moves the state, the NCOs and the pre-filters together).
 
 The decisions it implements (coherent pre-filter blocks, channel management and its
-thresholds, navigation data) are the notes of :mod:`sdr_di.deep.vector_loop`, called
+thresholds, navigation data) are the notes of :mod:`sdr_di.integration.receiver`, called
 *module notes* below.
 """
 
@@ -153,7 +153,7 @@ class VectorTracking:
     cfg : DeepConfig
     source : IfSource
     chans : list of _Chan
-        Handed-over channels (:meth:`~sdr_di.deep.vector_loop.DeepReceiver.
+        Handed-over channels (:meth:`~sdr_di.integration.receiver.DeepReceiver.
         _handover_channels`).
     navdata : NavDataInForce
     clock : SampleClock

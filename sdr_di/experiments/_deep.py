@@ -355,7 +355,7 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     (``ValueError``, ``FloatingPointError``, ``numpy.linalg.LinAlgError``) are returned as
     ``error`` text, not raised: a filter that fails is a result of the experiment.
     """
-    from ..deep import DeepConfig, DeepReceiver
+    from ..integration.receiver import DeepConfig, DeepReceiver
     from ..errors import SdrDiError
 
     if mode != "deep":

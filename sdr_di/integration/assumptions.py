@@ -42,7 +42,7 @@ Scenario.hash` covers the scenario without ``[assume]``).
 
 API for callers (``run``, ``lc``, the experiments): :func:`load_assumptions`,
 :func:`parse_assumptions`, :func:`apply_to_lc`, :func:`apply_to_deep` (any dataclass with
-the :class:`~sdr_di.deep.vector_loop.DeepConfig` assumption fields), and
+the :class:`~sdr_di.integration.receiver.DeepConfig` assumption fields), and
 :meth:`Assumptions.record` for a run's summary.
 """
 

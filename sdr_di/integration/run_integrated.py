@@ -1,6 +1,6 @@
 """``sdr-di run --mode deep|loose|tight``: IF file + IMU file -> receiver -> solution files.
 
-The mode is ``DeepConfig.mode`` (:mod:`~sdr_di.deep.vector_loop`): deep, or loose / tight on
+The mode is ``DeepConfig.mode`` (:mod:`~sdr_di.integration.receiver`): deep, or loose / tight on
 the scalar receiver's own fixes / observables (docs/coupling.md); every mode writes the same
 files under its own name (``MODE`` below: ``deep``, ``loose`` or ``tight``).
 
@@ -52,7 +52,7 @@ from ..receiver.navdata import NavDataWarning
 from ..receiver.run_scalar import search_assistance
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import TrackingConfig
-from .vector_loop import DeepConfig, DeepReceiver, DeepResult, check_imu_span
+from .receiver import DeepConfig, DeepReceiver, DeepResult, check_imu_span
 
 __all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
 

@@ -131,9 +131,9 @@ from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import ChannelState
 from ..signal.navmsg import klobuchar_of_subframe
-from .bit_power import BitPower
-from .navdecode import ChannelNavDecoder
-from .vector_tracking import SampleClock, VectorTracking, _Chan
+from ..deep.bit_power import BitPower
+from ..deep.navdecode import ChannelNavDecoder
+from ..deep.vector_tracking import SampleClock, VectorTracking, _Chan
 
 __all__ = ["MODES", "DeepConfig", "DeepReceiver", "DeepResult", "HandoverError",
            "IntegrationConfig", "check_imu_span"]
