@@ -95,8 +95,8 @@ def _generate(out: Path, sc, reuse: bool) -> Path:
 
 def _study_note(sc) -> str:
     """Where this single run stands in ``studies/paper004.toml`` (its baseline cell)."""
-    from sdr_di.experiments.campaign import run_seed
-    from sdr_di.experiments.study_spec import load_study
+    from sdr_di.studies.campaign import run_seed
+    from sdr_di.studies.spec import load_study
 
     spec = load_study(REPO / "studies" / "paper004.toml")
     seeds = [run_seed(spec.base_seed, i) for i in range(spec.runs)]

@@ -633,7 +633,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run(sub)
     _add_acquire(sub)
     _add_lc(sub)
-    from .experiments.commands import add_parsers as add_experiment_parsers
+    from .studies.commands import add_parsers as add_experiment_parsers
 
     add_experiment_parsers(sub)
     return parser

@@ -18,7 +18,7 @@ import pytest
 
 from sdr_di.errors import ExperimentError
 from sdr_di.experiments import count_change, outage
-from sdr_di.experiments.aggregate import aggregate, single_stats
+from sdr_di.studies.aggregate import aggregate, single_stats
 from sdr_di.experiments.filter_figures import filter_names_in, parse_filter_spec
 from sdr_di.experiments.registry import get_experiment, parse_params
 from sdr_di.experiments.variants import (
