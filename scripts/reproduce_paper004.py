@@ -51,7 +51,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from sdr_di.integration.receiver import DeepConfig, DeepReceiver
+from sdr_di.integration.receiver import IntegrationConfig, IntegratedReceiver
 from sdr_di.experiments.filter_figures import parse_filter_spec
 from sdr_di.filters import FILTER_NAMES
 from sdr_di.io.imu_files import read_imu, read_truth
@@ -149,7 +149,7 @@ def main(argv=None) -> int:
     for f in filters:
         src = open_source(bin_)
         name, options = parse_filter_spec("reproduce_paper004", f)
-        rx = DeepReceiver(DeepConfig(filter=name, filter_rate_hz=args.filter_rate,
+        rx = IntegratedReceiver(IntegrationConfig(filter=name, filter_rate_hz=args.filter_rate,
                                      filter_options=options))
         t0 = time.perf_counter()
         res = rx.run(src, imu, prns=prns, nav=nav, truth=truth)

@@ -435,7 +435,7 @@ def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
 
 def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     from .integration.run_integrated import run_deep
-    from .integration.receiver import DeepConfig
+    from .integration.receiver import IntegrationConfig
 
     # the filter name is checked by the receiver before its start-up (make_filter)
     kw = {"filter": (args.filter or "ff-aukf").strip().lower(), "output_rate_hz": args.rate,
@@ -449,10 +449,10 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     if args.iono_wait is not None:
         kw["iono_wait_s"] = args.iono_wait
     try:
-        cfg = DeepConfig(**kw)
+        cfg = IntegrationConfig(**kw)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.assume is not None:  # --assume over DeepConfig's defaults (docs/assumptions.md)
+    if args.assume is not None:  # --assume over IntegrationConfig's defaults (docs/assumptions.md)
         from .integration.assumptions import apply_to_deep, load_assumptions
 
         cfg = apply_to_deep(cfg, load_assumptions(args.assume))

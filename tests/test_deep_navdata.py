@@ -337,7 +337,7 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     must be below 0.3 m and below a fifth of the ionosphere bias."""
     import sdr_di.orbits.rinex_nav as rinex_nav
     from sdr_di.integration.run_integrated import run_deep
-    from sdr_di.integration.receiver import DeepConfig
+    from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.receiver.run_scalar import open_source
 
     def change(e):
@@ -346,7 +346,7 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav, change))
     src = open_source(late_start_file / "default.bin")
     out = late_start_file / "run"
-    summ = run_deep(src, out, config=DeepConfig(filter="ekf", iono_wait_s=0.0),
+    summ = run_deep(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=0.0),
                     progress=False)
     err = capsys.readouterr().err
     assert err.count("sdr-di: warning:") == 1 and "without ionosphere" in err
@@ -395,13 +395,13 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
     broadcast Klobuchar model."""
     import sdr_di.orbits.rinex_nav as rinex_nav
     from sdr_di.integration.run_integrated import run_deep
-    from sdr_di.integration.receiver import DeepConfig
+    from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.receiver.run_scalar import open_source
 
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav))
     src = open_source(late_start_file / "default.bin")
     out = late_start_file / "run_wait"
-    run_deep(src, out, config=DeepConfig(filter="ekf"), progress=False, duration_s=27.0)
+    run_deep(src, out, config=IntegrationConfig(filter="ekf"), progress=False, duration_s=27.0)
     assert "warning" not in capsys.readouterr().err
     s = json.loads((out / "default_deep_summary.json").read_text())
     assert s["warnings"] == []
@@ -412,9 +412,9 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
 
 
 def test_deep_config_checks_iono_wait():
-    from sdr_di.integration.receiver import DeepConfig
+    from sdr_di.integration.receiver import IntegrationConfig
 
-    assert DeepConfig().iono_wait_s == 30.0
+    assert IntegrationConfig().iono_wait_s == 30.0
     for bad in (-1.0, math.inf, math.nan):
         with pytest.raises(ValueError, match="iono_wait_s"):
-            DeepConfig(iono_wait_s=bad)
+            IntegrationConfig(iono_wait_s=bad)

@@ -2,7 +2,7 @@
 options, the mode parameter of count-change / outage / weak-signal, the shared per-variant
 bookkeeping (:mod:`sdr_di.experiments.variants`), and the outage's time to a good solution.
 
-The loose/tight end-to-end test needs the receiver's coupling modes (``DeepConfig.mode``);
+The loose/tight end-to-end test needs the receiver's coupling modes (``IntegrationConfig.mode``);
 it is skipped where the receiver has none.
 """
 
@@ -130,9 +130,9 @@ def test_errors_csv_columns(tmp_path):
 
 
 def _has_modes() -> bool:
-    from sdr_di.integration.receiver import DeepConfig
+    from sdr_di.integration.receiver import IntegrationConfig
 
-    return "mode" in {f.name for f in dataclasses.fields(DeepConfig)}
+    return "mode" in {f.name for f in dataclasses.fields(IntegrationConfig)}
 
 
 @pytest.mark.slow

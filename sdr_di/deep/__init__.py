@@ -24,9 +24,12 @@ alias_modules(__name__, {"vector_loop": "sdr_di.integration.receiver",
                          "run_deep": "sdr_di.integration.run_integrated"})
 
 __getattr__ = forwarding_getattr(__name__, {
-    name: "sdr_di.integration.receiver" for name in (
-        "MODES", "DeepConfig", "DeepReceiver", "DeepResult", "HandoverError",
-        "IntegrationConfig")})
+    "MODES": "sdr_di.integration.receiver",
+    "HandoverError": "sdr_di.integration.receiver",
+    "IntegrationConfig": "sdr_di.integration.receiver",
+    "DeepConfig": "sdr_di.integration.receiver:IntegrationConfig",
+    "DeepReceiver": "sdr_di.integration.receiver:IntegratedReceiver",
+    "DeepResult": "sdr_di.integration.receiver:IntegrationResult"})
 
 __all__ = [
     "NcoCommand",

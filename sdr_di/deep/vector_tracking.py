@@ -1,7 +1,7 @@
 """Deep mode's measurement source: vector tracking of every handed-over channel.
 
 :class:`VectorTracking` is the :class:`~sdr_di.integration.loop.MeasurementSource` of the
-deep receiver (:class:`~sdr_di.integration.receiver.DeepReceiver`) in the mode-independent
+deep receiver (:class:`~sdr_di.integration.receiver.IntegratedReceiver`) in the mode-independent
 :class:`~sdr_di.integration.loop.IntegrationLoop`. Per filter interval it commands every
 channel's code and carrier NCOs from the propagated INS and clock, correlates, runs the
 pre-filters and the channel management, and forms ``z`` and ``R`` (paper 004 eq 7-9, 34);
@@ -52,7 +52,7 @@ from .nco import nco_commands, predict_ranges
 from .prefilter import PreFilterBank
 
 if TYPE_CHECKING:
-    from .vector_loop import DeepConfig
+    from .vector_loop import IntegrationConfig
 
 __all__ = ["SampleClock", "VectorTracking"]
 
@@ -150,10 +150,10 @@ class VectorTracking:
 
     Parameters
     ----------
-    cfg : DeepConfig
+    cfg : IntegrationConfig
     source : IfSource
     chans : list of _Chan
-        Handed-over channels (:meth:`~sdr_di.integration.receiver.DeepReceiver.
+        Handed-over channels (:meth:`~sdr_di.integration.receiver.IntegratedReceiver.
         _handover_channels`).
     navdata : NavDataInForce
     clock : SampleClock
@@ -168,9 +168,9 @@ class VectorTracking:
         Early-late spacing of the scalar receiver's correlators [chips].
     """
 
-    def __init__(self, cfg: DeepConfig, source: IfSource, chans: list, navdata: NavDataInForce,
-                 clock: SampleClock, stop: int, profile: dict, *, handover: tuple,
-                 spacing_chips: float) -> None:
+    def __init__(self, cfg: IntegrationConfig, source: IfSource, chans: list,
+                 navdata: NavDataInForce, clock: SampleClock, stop: int, profile: dict, *,
+                 handover: tuple, spacing_chips: float) -> None:
         self.cfg, self.source, self.chans, self.clock = cfg, source, chans, clock
         self.fs = source.sampling_rate_hz
         self.stop, self.profile = stop, profile
@@ -466,7 +466,7 @@ class VectorTracking:
 
     def row(self) -> dict:
         """Channel columns of a solution row: C/N0 [dB-Hz] and the navigation data taken up
-        since the previous row (``DeepResult.nav_change``)."""
+        since the previous row (``IntegrationResult.nav_change``)."""
         out = {"cn0": [c.cn0_dbhz for c in self.chans], "nav": self.nav_log.flag}
         self.nav_log.flag = 0
         return out
@@ -592,7 +592,7 @@ class _NavLog:
     def __init__(self, navdata: NavDataInForce, chans: list, iono, t_s: float, week: int,
                  sow: float) -> None:
         self.navdata = navdata
-        self.flag = 0        # changes since the last output row (DeepResult.nav_change)
+        self.flag = 0        # changes since the last output row (IntegrationResult.nav_change)
         self.ephemerides: dict = {f"C{c.prn:02d}": [] for c in chans}
         self.ionosphere: list = []
         self.steps: list = []

@@ -1,6 +1,6 @@
 """Deep (INS-aided vector tracking) receiver: scalar start-up, hand-over, federated loop.
 
-Paper 004 Fig. 1, federated architecture. Data flow of :meth:`DeepReceiver.run`::
+Paper 004 Fig. 1, federated architecture. Data flow of :meth:`IntegratedReceiver.run`::
 
     scalar start-up (ScalarReceiver: acquisition, loops, NH/bit/frame sync, decoding, WLS PVT)
         --hand-over-->  for every interval [k0, k1) of T = 1 / filter_rate_hz:
@@ -15,7 +15,7 @@ Paper 004 Fig. 1, federated architecture. Data flow of :meth:`DeepReceiver.run`:
     the pre-filters shifted by the correction's projection on each channel (their NCOs move
     by it in the next interval).
 
-Modes (``DeepConfig.mode``, ``sdr-di run --mode``): ``"deep"`` (above), ``"loose"`` and
+Modes (``IntegrationConfig.mode``, ``sdr-di run --mode``): ``"deep"`` (above), ``"loose"`` and
 ``"tight"`` (docs/coupling.md). All three share the scalar start-up, the hand-over rule and
 time, the INS alignment, the filter and its ``Q``/``P0``, and the integration loop; loose and
 tight take their measurements from the scalar receiver, which keeps tracking after the
@@ -24,12 +24,12 @@ hand-over without any feedback from the filter: its WLS fixes (loose,
 :mod:`~sdr_di.integration.tight_ranges`), every ``1 / gnss_rate_hz`` s
 (:mod:`~sdr_di.integration.gnss_epochs`). So the three report over the same time window.
 
-Code: :meth:`DeepReceiver._vector_loop` hands over and runs the mode-independent
+Code: :meth:`IntegratedReceiver._vector_loop` hands over and runs the mode-independent
 :class:`~sdr_di.integration.loop.IntegrationLoop` (INS propagation, filter predict/update,
 closed-loop feedback, solution rows) with deep mode's measurement source,
 :class:`~sdr_di.deep.vector_tracking.VectorTracking` (NCO commands, correlation,
 pre-filters and channel management, the NCO and pre-filter share of the feedback,
-navigation data taken up). :meth:`DeepReceiver._scalar_coupled_loop` runs the same loop
+navigation data taken up). :meth:`IntegratedReceiver._scalar_coupled_loop` runs the same loop
 with the loose or tight source, without the NCO feedback.
 
 Decisions
@@ -108,6 +108,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .._deprecated import forwarding_getattr
 from ..errors import ImuDataError, SdrDiError
 from ..filters import make_filter
 from ..frames import ecef_to_llh, radii_of_curvature
@@ -135,10 +136,10 @@ from ..deep.bit_power import BitPower
 from ..deep.navdecode import ChannelNavDecoder
 from ..deep.vector_tracking import SampleClock, VectorTracking, _Chan
 
-__all__ = ["MODES", "DeepConfig", "DeepReceiver", "DeepResult", "HandoverError",
-           "IntegrationConfig", "check_imu_span"]
+__all__ = ["MODES", "HandoverError", "IntegratedReceiver", "IntegrationConfig",
+           "IntegrationResult", "check_imu_span"]
 
-#: Coupling modes of :class:`DeepReceiver` (module notes).
+#: Coupling modes of :class:`IntegratedReceiver` (module notes).
 MODES = ("deep", "loose", "tight")
 #: Interval of the scalar start-up's output epochs (the hand-over rule runs on them) [s].
 _EPOCH_S = 0.1
@@ -146,7 +147,7 @@ _EPOCH_S = 0.1
 
 
 def clock_model(clock: str | OscillatorSpec) -> ClockModel:
-    """The filter's two-state clock for ``DeepConfig.clock``: a preset name of
+    """The filter's two-state clock for ``IntegrationConfig.clock``: a preset name of
     :data:`~sdr_di.oscillator.CLOCK_PRESETS` (the table the truth oscillator uses) or an
     :class:`~sdr_di.oscillator.OscillatorSpec` (flicker mapped:
     :meth:`ClockModel.from_oscillator`)."""
@@ -158,9 +159,9 @@ class HandoverError(SdrDiError):
 
 
 @dataclasses.dataclass
-class DeepConfig:
+class IntegrationConfig:
     """Settings of the receiver in any coupling mode (module notes give the reasons for the
-    defaults; :data:`IntegrationConfig` is the same class).
+    defaults).
 
     Attributes
     ----------
@@ -296,12 +297,8 @@ class DeepConfig:
         return max(1, round(1.0 / (_EPOCH_S * self.gnss_rate_hz)))
 
 
-#: The receiver's settings under a mode-neutral name (the class keeps its first name).
-IntegrationConfig = DeepConfig
-
-
 @dataclasses.dataclass
-class DeepResult:
+class IntegrationResult:
     """Output of a run in any mode (solution rows at the output rate, after feedback).
 
     Attributes
@@ -427,18 +424,19 @@ def gnss_alignment(v_n, f_b, w_ib_b, g: float = 9.80) -> np.ndarray:
     return C
 
 
-class DeepReceiver:
+class IntegratedReceiver:
     """INS-aided vector-tracking receiver (module notes).
 
     Parameters
     ----------
-    config : DeepConfig, optional
+    config : IntegrationConfig, optional
     scalar : ScalarReceiver, optional
         Start-up receiver (default ``ScalarReceiver(log=False)``).
     """
 
-    def __init__(self, config: DeepConfig | None = None, scalar: ScalarReceiver | None = None):
-        self.config = config or DeepConfig()
+    def __init__(self, config: IntegrationConfig | None = None,
+                 scalar: ScalarReceiver | None = None):
+        self.config = config or IntegrationConfig()
         self.scalar = scalar or ScalarReceiver(log=False)
         self.profile: dict = {}
 
@@ -446,7 +444,7 @@ class DeepReceiver:
     def run(self, source: IfSource, imu, *, prns=None, nav=None, truth=None,
             progress: Callable[[float, int, int], None] | None = None,
             duration_s: float | None = None,
-            assist: dict[int, float | None] | None = None) -> DeepResult:
+            assist: dict[int, float | None] | None = None) -> IntegrationResult:
         """Run the deep receiver over ``source`` with the IMU record ``imu``.
 
         Parameters
@@ -602,7 +600,7 @@ class DeepReceiver:
 
     # ------------------------------------------------------------------------------------
     def _vector_loop(self, source, imu, off, n_per, stop, rx, engine, navdata,
-                     hand, truth, progress, t_scalar, t_all) -> DeepResult:
+                     hand, truth, progress, t_scalar, t_all) -> IntegrationResult:
         """Hand-over from the scalar start-up and the vector loop to the end of the file.
 
         Hand-over: channels (:meth:`_handover_channels`), INS alignment (:meth:`_align_ins`),
@@ -654,8 +652,9 @@ class DeepReceiver:
 
     def _result(self, loop: IntegrationLoop, clock: SampleClock, prns: tuple, kf,
                 adapt0: float, k_grid0: int, prof: dict, t_all: float,
-                navigation: dict) -> DeepResult:
-        """The loop's rows and the run's profile as a :class:`DeepResult` (every mode)."""
+                navigation: dict) -> IntegrationResult:
+        """The loop's rows and the run's profile as an :class:`IntegrationResult` (every
+        mode)."""
         fs = loop.fs
         k0 = loop.k0
         prof["total"] = time.perf_counter() - t_all
@@ -666,7 +665,7 @@ class DeepReceiver:
         prof["realtime_factor"] = prof["processed_s"] / prof["total"] if prof["total"] else 0.0
         self.profile = prof
         col = loop.columns(len(prns))
-        return DeepResult(
+        return IntegrationResult(
             t=col["t"], week=clock.week, sow=col["sow"], llh=col["llh"], v_n=col["v"],
             att=col["att"], clock_bias_m=col["b"], clock_drift_mps=col["d"], n_used=col["n"],
             att_err=col["ae"], vel_err=col["ve"], pos_err=col["pe"],
@@ -726,7 +725,7 @@ class DeepReceiver:
         return {"thread": thread, "loop": loop, "src": src, "clock": clock, "kf": kf,
                 "adapt0": adapt0, "k_grid0": k_grid0, "prof": prof}
 
-    def _finish_scalar_coupled_loop(self, hand, epochs, t_scalar, t_all) -> DeepResult:
+    def _finish_scalar_coupled_loop(self, hand, epochs, t_scalar, t_all) -> IntegrationResult:
         """Loose or tight mode: wait for the loop (:meth:`_start_scalar_coupled_loop`),
         keep the channel columns of the handed-over PRNs and of those the receiver acquired
         later, in that order."""
@@ -856,7 +855,7 @@ class DeepReceiver:
         return kf, process, meas
 
 
-def _inject_initial_errors(ins: StrapdownINS, cfg: DeepConfig) -> None:
+def _inject_initial_errors(ins: StrapdownINS, cfg: IntegrationConfig) -> None:
     """Add the configured initial errors to the aligned INS (errors = computed - true, as the
     filter's states): attitude ``C_b_n <- exp(-[phi x]) C_b_n`` for the ENU rotation vector
     ``phi``, velocity ``v_n += dv``, position ``+= (dE, dN, dU)`` [m] (the INS feedback
@@ -902,3 +901,10 @@ def _handover_decoder(sc, epoch: int, ms0: int) -> ChannelNavDecoder:
         e0, bits = runs[-1]
         dec.seed(e0 + shift, bits)
     return dec
+
+
+#: Names of the first release (deep mode came first), kept for one release.
+__getattr__ = forwarding_getattr(__name__, {
+    "DeepConfig": f"{__name__}:IntegrationConfig",
+    "DeepReceiver": f"{__name__}:IntegratedReceiver",
+    "DeepResult": f"{__name__}:IntegrationResult"})
