@@ -13,7 +13,8 @@ import pytest
 
 from sdr_di.cli import main
 from sdr_di.constants import F_B3I
-from sdr_di.integration.receiver import IntegrationConfig, clock_model
+from sdr_di.integration.config import IntegrationConfig
+from sdr_di.integration.filter_setup import clock_model
 from sdr_di.errors import AssumptionsError, ScenarioError
 from sdr_di.integration.assumptions import (
     apply_to_deep,

@@ -441,7 +441,7 @@ def test_every_filter_runs_the_deep_measurement_model_with_a_changing_channel_co
 def test_gnss_alignment_recovers_a_banked_turn():
     """TRIAD from velocity and IMU: level flight, and a 20 deg/s coordinated turn at 20 m/s
     (35 deg bank) while climbing."""
-    from sdr_di.integration.receiver import gnss_alignment
+    from sdr_di.integration.alignment import gnss_alignment
     from sdr_di.frames import euler_to_C_b_n
     from sdr_di.ins.error_model import dcm_to_rotvec
 

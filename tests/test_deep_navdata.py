@@ -232,9 +232,9 @@ _H = 18010          # hand-over: 10 ms after subframe 3 ended (ms of the frame)
 def _handed_over_subframe_3(nav):
     """A scalar channel of C27 that confirmed subframes 1-2 of a frame and still held
     subframe 3 (ended 10 ms before the hand-over), the loop decoder
-    :func:`~sdr_di.integration.receiver._handover_decoder` made of it, the loop's prompts after
+    :func:`~sdr_di.integration.handover.handover_decoder` made of it, the loop's prompts after
     the hand-over (the signal there, 35 dB-Hz) and the record of the frame."""
-    from sdr_di.integration.receiver import _handover_decoder
+    from sdr_di.integration.handover import handover_decoder
     from sdr_di.receiver.channel import Channel
 
     eph = {r.toe: r for r in nav.records[27]}[367200.0]
@@ -251,7 +251,7 @@ def _handed_over_subframe_3(nav):
     sc.epoch = _H + _SC_OFF                # next epoch: the hand-over's
     sc.bit_runs = [[_SC_OFF, bytearray(nb.bits[:_H // 20].tolist())]]
     ms0 = round(nb.t0 * 1000) - _LOOP_OFF
-    dec = _handover_decoder(sc, _H + _LOOP_OFF, ms0)
+    dec = handover_decoder(sc, _H + _LOOP_OFF, ms0)
     p = _prompts(nb.bits, 20, _H, 5 * 20, np.random.default_rng(3))
     return sc, dec, p, want
 

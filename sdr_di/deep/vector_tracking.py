@@ -20,7 +20,6 @@ import copy
 import dataclasses
 import math
 import time
-from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -28,6 +27,7 @@ import numpy as np
 from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
 from ..errors import SdrDiError
 from ..frames import llh_to_ecef
+from ..integration.config import IntegrationConfig
 from ..integration.loop import IntegrationLoop, Interval, Measurements
 from ..integration.measurements import RangeRateMeasurementModel
 from ..receiver._numba_correlate_bits import correlate_epl_bits
@@ -50,9 +50,6 @@ from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
 from .prefilter import PreFilterBank
-
-if TYPE_CHECKING:
-    from .vector_loop import IntegrationConfig
 
 __all__ = ["SampleClock", "VectorTracking"]
 
@@ -153,8 +150,7 @@ class VectorTracking:
     cfg : IntegrationConfig
     source : IfSource
     chans : list of _Chan
-        Handed-over channels (:meth:`~sdr_di.integration.receiver.IntegratedReceiver.
-        _handover_channels`).
+        Handed-over channels (:func:`~sdr_di.integration.handover.handover_channels`).
     navdata : NavDataInForce
     clock : SampleClock
     stop : int
