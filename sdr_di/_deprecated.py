@@ -39,7 +39,7 @@ def _caller_stacklevel() -> int:
             f = f.f_back
             continue
         level += 1
-        if name != __file__:
+        if name not in (__file__, importlib.__file__):     # import_module is the machinery
             return level
         f = f.f_back
     return 1
