@@ -76,26 +76,14 @@ def _add_generate(sub) -> None:
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
-    from .scenario import DEFAULT_SCENARIO, REPO_ROOT, load_scenario
-    from .sim.generate import generate_files
+    from .api import generate
 
-    sc = load_scenario(args.scenario or DEFAULT_SCENARIO)
-    kind = None
-    if args.sample_format is not None:
-        from .io.sample_formats import get_format
-
-        fmt = get_format(args.sample_format)
-        kind = "complex" if fmt.is_complex else "real"
-        args.sample_format = fmt.name
-    sc = sc.with_overrides(
-        duration_s=args.duration, seed=args.seed, sampling_rate_hz=args.fs,
-        if_hz=args.if_hz, sample_format=args.sample_format, kind=kind,
-        quantization_bits=args.bits, cn0_dbhz=args.cn0, ephemeris=args.ephemeris,
-        prns=args.prn,
-    )
-    out = args.out or (REPO_ROOT / "signals" / "out")
-    files = generate_files(sc, out, name=args.name, progress=not args.no_progress)
-    for label, path in files.items():
+    files = generate(args.out, scenario=args.scenario, name=args.name,
+                     duration_s=args.duration, seed=args.seed, sampling_rate_hz=args.fs,
+                     if_hz=args.if_hz, sample_format=args.sample_format, bits=args.bits,
+                     cn0_dbhz=args.cn0, ephemeris=args.ephemeris, prns=args.prn,
+                     progress=not args.no_progress)
+    for label, path in files.files.items():
         print(f"{label:9s} {path}")
     return 0
 
