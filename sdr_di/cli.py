@@ -683,7 +683,7 @@ def _quiet_after_interrupt() -> None:
 
     families = ("distributed", "tornado", "asyncio")
     # children too: one with a level of its own (Dask sets tornado.application's) ignores
-    # its parent's (the same rule as experiments.campaign.quiet_loggers, kept here so that
+    # its parent's (the same rule as studies.campaign.quiet_loggers, kept here so that
     # an interrupt during start-up does not import Dask)
     for name in [*families, *(n for n in list(logging.root.manager.loggerDict)
                               if n.split(".", 1)[0] in families)]:

@@ -1,5 +1,5 @@
 """Navigation data in force (receiver/navdata.py) and the deep loop's decoding after the
-hand-over (deep/navdecode.py, vector_loop.py), issue 18."""
+hand-over (deep/navdecode.py, integration/handover.py), issue 18."""
 
 from __future__ import annotations
 
