@@ -140,13 +140,13 @@ def _run_receiver(path: Path, out: Path, search: str) -> dict:
 
 _MODE_CHILD = """
 import json, resource, sys, time
-from sdr_di.deep import DeepConfig
-from sdr_di.deep.run_deep import run_deep
+from sdr_di.integration.receiver import IntegrationConfig
+from sdr_di.integration.run_integrated import run_deep
 from sdr_di.receiver.run_scalar import open_source
 from sdr_di.receiver.threads import split_stats
 path, out, mode, filt = sys.argv[1:5]
 c0 = time.thread_time()
-res = run_deep(open_source(path), out, config=DeepConfig(mode=mode, filter=filt),
+res = run_deep(open_source(path), out, config=IntegrationConfig(mode=mode, filter=filt),
                progress=False)
 prof = {k: v for k, v in res.result.profile.items() if isinstance(v, (int, float))}
 print("RESULT", json.dumps({"profile": prof, "handover_s": res.result.handover_s,

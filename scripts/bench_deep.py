@@ -49,8 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 _CHILD = """
 import json, resource, sys, threading, time
 from pathlib import Path
-from sdr_di.deep.run_deep import run_deep
-from sdr_di.deep.vector_loop import DeepConfig
+from sdr_di.integration.run_integrated import run_deep
+from sdr_di.integration.receiver import IntegrationConfig
 from sdr_di.receiver.run_scalar import open_source
 
 def sched(tid=None):
@@ -66,7 +66,7 @@ meta = json.loads(Path(path).with_suffix('.json').read_text())
 prns = [s['prn'] for s in meta['satellites']]
 s0 = sched()
 t0 = time.perf_counter()
-res = run_deep(open_source(path), out, config=DeepConfig(filter=filt, filter_rate_hz=rate),
+res = run_deep(open_source(path), out, config=IntegrationConfig(filter=filt, filter_rate_hz=rate),
                prns=prns, progress=False)
 wall, cpu_main = time.perf_counter() - t0, time.thread_time()   # main thread, from start
 s1 = sched()

@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> None:
     sys.path.insert(0, str(REPO))
-    from sdr_di.experiments.study_spec import load_study
+    from sdr_di.studies.spec import load_study
 
     spec = load_study(args.spec)
     tasks = len(spec.cells) * args.runs

@@ -41,8 +41,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sdr_di.deep.run_deep import run_deep
-from sdr_di.deep.vector_loop import DeepConfig
+from sdr_di.integration.run_integrated import run_deep
+from sdr_di.integration.receiver import IntegrationConfig
 from sdr_di.errors import SdrDiError
 from sdr_di.integration.assumptions import apply_to_deep, parse_assumptions
 from sdr_di.io.imu_files import read_truth
@@ -63,7 +63,7 @@ def _scenario(truth_osc: str, seed: int, fs: float, duration: float):
     return sc.with_overrides(seed=seed, sampling_rate_hz=fs, duration_s=duration)
 
 
-def _run(paths: dict, out: Path, cfg: DeepConfig) -> dict:
+def _run(paths: dict, out: Path, cfg: IntegrationConfig) -> dict:
     src = open_source(str(paths["if"]))
     t0 = time.process_time()
     res = run_deep(src, out, config=cfg, progress=False).result
@@ -142,11 +142,11 @@ def main(argv: list[str] | None = None) -> int:
                     for assumed in ("tcxo", "ocxo"):
                         a = parse_assumptions({"oscillator": {"preset": assumed}}, assumed)
                         runs.append((f"2x2 truth={truth_osc} assumed={assumed}",
-                                     apply_to_deep(DeepConfig(filter=args.filter), a)))
+                                     apply_to_deep(IntegrationConfig(filter=args.filter), a)))
                 if truth_osc == args.heading_truth and not args.skip_heading:
                     for f in ("ekf", "ukf"):
                         runs.append((f"heading20 {f}",
-                                     apply_to_deep(DeepConfig(filter=f), heading)))
+                                     apply_to_deep(IntegrationConfig(filter=f), heading)))
                 for label, cfg in runs:
                     try:
                         r = _run(paths, d / "run", cfg)

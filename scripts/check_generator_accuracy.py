@@ -53,8 +53,8 @@ def main(argv: list[str] | None = None) -> None:
 
     import sdr_di
     from sdr_di.cli import main as cli
-    from sdr_di.deep.run_deep import run_deep
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.receiver.accuracy import solution_vs_truth
     from sdr_di.receiver.run_scalar import open_source
 
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> None:
             if "deep" in args.modes:
                 prns = [s["prn"] for s in meta["satellites"]]
                 res = run_deep(open_source(d / "default.bin"), d / f"deep{sfx}",
-                               config=DeepConfig(filter="ekf"), prns=prns, progress=False)
+                               config=IntegrationConfig(filter="ekf"), prns=prns, progress=False)
                 m = res.metrics
                 rows["deep"].append((m["pos_m_rmse"], m["vel_mps_rmse"], m["att_deg_rmse"]))
                 print(f"seed {seed} (synthesis v{synth}) deep ekf: pos {m['pos_m_rmse']:.3f} m, "

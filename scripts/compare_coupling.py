@@ -10,7 +10,7 @@ Usage::
 For every seed the default scenario (``signals/default.toml``: paper 004's motion, MEMS IMU,
 7 satellites at 40 dB-Hz; the seed draws the IMU errors and the signal noise) is generated
 once at ``--fs`` for ``--duration`` s into a temporary folder, and each mode runs on the same
-IF, IMU and truth files with the same filter (``DeepConfig(mode=..., filter=...)``; the
+IF, IMU and truth files with the same filter (``IntegrationConfig(mode=..., filter=...)``; the
 ephemeris file as assistance, as ``sdr-di run`` does). The three modes hand over at the same
 sample (the same scalar start-up and rule) and report over the same window: from the
 hand-over to the end of the file.
@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sdr_di.deep import DeepConfig, DeepReceiver
-from sdr_di.deep.vector_loop import MODES
+from sdr_di.integration.receiver import IntegrationConfig, IntegratedReceiver
+from sdr_di.integration.receiver import MODES
 from sdr_di.io.atomic import atomic_open, ensure_output_dir
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,7 +51,7 @@ FIGURES = (("pos_m_rmse", "position RMSE", "m"), ("pos_m_max", "position max", "
 
 
 def run_seed(seed: int, args: argparse.Namespace) -> dict:
-    """Generate one seed's files and run every mode on them; ``{mode: DeepResult}``."""
+    """Generate one seed's files and run every mode on them; ``{mode: IntegrationResult}``."""
     from sdr_di.experiments._deep import generated_inputs
     from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
 
@@ -60,9 +60,9 @@ def run_seed(seed: int, args: argparse.Namespace) -> dict:
     out = {}
     with generated_inputs(sc) as inp:
         for mode in args.modes:
-            cfg = DeepConfig(filter=args.filter, mode=mode, gnss_rate_hz=args.gnss_rate)
+            cfg = IntegrationConfig(filter=args.filter, mode=mode, gnss_rate_hz=args.gnss_rate)
             t0 = time.process_time()
-            res = DeepReceiver(cfg).run(inp.source, inp.imu, prns=inp.prns, nav=inp.nav,
+            res = IntegratedReceiver(cfg).run(inp.source, inp.imu, prns=inp.prns, nav=inp.nav,
                                         truth=inp.truth)
             cpu = time.process_time() - t0
             m = res.metrics()

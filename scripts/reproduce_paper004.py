@@ -51,7 +51,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from sdr_di.deep import DeepConfig, DeepReceiver
+from sdr_di.integration.receiver import IntegrationConfig, IntegratedReceiver
 from sdr_di.experiments.filter_figures import parse_filter_spec
 from sdr_di.filters import FILTER_NAMES
 from sdr_di.io.imu_files import read_imu, read_truth
@@ -95,8 +95,8 @@ def _generate(out: Path, sc, reuse: bool) -> Path:
 
 def _study_note(sc) -> str:
     """Where this single run stands in ``studies/paper004.toml`` (its baseline cell)."""
-    from sdr_di.experiments.campaign import run_seed
-    from sdr_di.experiments.study_spec import load_study
+    from sdr_di.studies.campaign import run_seed
+    from sdr_di.studies.spec import load_study
 
     spec = load_study(REPO / "studies" / "paper004.toml")
     seeds = [run_seed(spec.base_seed, i) for i in range(spec.runs)]
@@ -149,7 +149,7 @@ def main(argv=None) -> int:
     for f in filters:
         src = open_source(bin_)
         name, options = parse_filter_spec("reproduce_paper004", f)
-        rx = DeepReceiver(DeepConfig(filter=name, filter_rate_hz=args.filter_rate,
+        rx = IntegratedReceiver(IntegrationConfig(filter=name, filter_rate_hz=args.filter_rate,
                                      filter_options=options))
         t0 = time.perf_counter()
         res = rx.run(src, imu, prns=prns, nav=nav, truth=truth)

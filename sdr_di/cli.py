@@ -76,26 +76,14 @@ def _add_generate(sub) -> None:
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
-    from .scenario import DEFAULT_SCENARIO, REPO_ROOT, load_scenario
-    from .sim.generate import generate_files
+    from .api import generate
 
-    sc = load_scenario(args.scenario or DEFAULT_SCENARIO)
-    kind = None
-    if args.sample_format is not None:
-        from .io.sample_formats import get_format
-
-        fmt = get_format(args.sample_format)
-        kind = "complex" if fmt.is_complex else "real"
-        args.sample_format = fmt.name
-    sc = sc.with_overrides(
-        duration_s=args.duration, seed=args.seed, sampling_rate_hz=args.fs,
-        if_hz=args.if_hz, sample_format=args.sample_format, kind=kind,
-        quantization_bits=args.bits, cn0_dbhz=args.cn0, ephemeris=args.ephemeris,
-        prns=args.prn,
-    )
-    out = args.out or (REPO_ROOT / "signals" / "out")
-    files = generate_files(sc, out, name=args.name, progress=not args.no_progress)
-    for label, path in files.items():
+    files = generate(args.out, scenario=args.scenario, name=args.name,
+                     duration_s=args.duration, seed=args.seed, sampling_rate_hz=args.fs,
+                     if_hz=args.if_hz, sample_format=args.sample_format, bits=args.bits,
+                     cn0_dbhz=args.cn0, ephemeris=args.ephemeris, prns=args.prn,
+                     progress=not args.no_progress)
+    for label, path in files.files.items():
         print(f"{label:9s} {path}")
     return 0
 
@@ -421,7 +409,7 @@ def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
                          f"{', '.join(FILTER_NAMES)}")
     if args.filter_rate is None:
         return
-    from .deep.run_deep import companion_files
+    from .integration.run_integrated import companion_files
     from .io.imu_files import read_imu
 
     imu_path = args.imu or companion_files(source, skip=("truth",))["imu"]
@@ -434,8 +422,8 @@ def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
 
 
 def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
-    from .deep.run_deep import run_deep
-    from .deep.vector_loop import DeepConfig
+    from .integration.run_integrated import run_deep
+    from .integration.receiver import IntegrationConfig
 
     # the filter name is checked by the receiver before its start-up (make_filter)
     kw = {"filter": (args.filter or "ff-aukf").strip().lower(), "output_rate_hz": args.rate,
@@ -449,10 +437,10 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     if args.iono_wait is not None:
         kw["iono_wait_s"] = args.iono_wait
     try:
-        cfg = DeepConfig(**kw)
+        cfg = IntegrationConfig(**kw)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if args.assume is not None:  # --assume over DeepConfig's defaults (docs/assumptions.md)
+    if args.assume is not None:  # --assume over IntegrationConfig's defaults (docs/assumptions.md)
         from .integration.assumptions import apply_to_deep, load_assumptions
 
         cfg = apply_to_deep(cfg, load_assumptions(args.assume))
@@ -633,7 +621,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run(sub)
     _add_acquire(sub)
     _add_lc(sub)
-    from .experiments.commands import add_parsers as add_experiment_parsers
+    from .studies.commands import add_parsers as add_experiment_parsers
 
     add_experiment_parsers(sub)
     return parser
@@ -695,7 +683,7 @@ def _quiet_after_interrupt() -> None:
 
     families = ("distributed", "tornado", "asyncio")
     # children too: one with a level of its own (Dask sets tornado.application's) ignores
-    # its parent's (the same rule as experiments.campaign.quiet_loggers, kept here so that
+    # its parent's (the same rule as studies.campaign.quiet_loggers, kept here so that
     # an interrupt during start-up does not import Dask)
     for name in [*families, *(n for n in list(logging.root.manager.loggerDict)
                               if n.split(".", 1)[0] in families)]:

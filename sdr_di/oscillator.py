@@ -3,7 +3,7 @@
 One table (:data:`CLOCK_PRESETS`) serves both worlds: the truth oscillator the generator
 applies to the IF (:mod:`sdr_di.sim.oscillator`, scenario ``[oscillator]``) and the clock the
 integration filter assumes (:class:`~sdr_di.ins.error_model.ClockModel`, assumptions
-``[oscillator]``, ``DeepConfig.clock``). It lives here, below ``sim/`` and ``ins/``, so that
+``[oscillator]``, ``IntegrationConfig.clock``). It lives here, below ``sim/`` and ``ins/``, so that
 neither imports the other.
 
 Model (IEEE Std 1139; Barnes et al. 1971): the fractional frequency ``y = dx/dt`` of the

@@ -13,7 +13,8 @@ import pytest
 
 from sdr_di.cli import main
 from sdr_di.constants import F_B3I
-from sdr_di.deep.vector_loop import DeepConfig, clock_model
+from sdr_di.integration.config import IntegrationConfig
+from sdr_di.integration.filter_setup import clock_model
 from sdr_di.errors import AssumptionsError, ScenarioError
 from sdr_di.integration.assumptions import (
     apply_to_deep,
@@ -52,7 +53,7 @@ def _scenario(raw, duration=0.02, fs=2.5e6):
 def test_apply_to_deep_sets_every_belief():
     a = parse_assumptions(FULL, "a.toml")
     assert a.changes_q
-    cfg = apply_to_deep(DeepConfig(), a)
+    cfg = apply_to_deep(IntegrationConfig(), a)
     assert cfg.imu.gyro_bias_deg_h == 2.0 and cfg.imu.accel_bias_mg == 1.0  # tactical grade
     assert cfg.bias_time_s == 600.0 and cfg.clock.preset == "ocxo"
     assert (cfg.noise_policy, cfg.sigma_range_m, cfg.sigma_rate_mps) == ("fixed", 3.0, 0.2)
@@ -64,7 +65,7 @@ def test_apply_to_deep_sets_every_belief():
     json.dumps(rec)
     assert rec["given"]["source"] == "a.toml" and rec["oscillator"]["preset"] == "ocxo"
     # an injected error without a P0 is believed: the sigma is at least the error
-    cfg2 = apply_to_deep(DeepConfig(), parse_assumptions(
+    cfg2 = apply_to_deep(IntegrationConfig(), parse_assumptions(
         {"initial_errors": {"att_deg": [0, 0, -15]}}, "b"))
     assert cfg2.p0_att_deg == (0.05, 0.05, 15.0)
 

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from sdr_di.cli import main
-from sdr_di.deep.run_deep import DEEP_COLUMNS
+from sdr_di.integration.run_integrated import DEEP_COLUMNS
 
 BLOCK = (16.0, 26.0)          # 4 of 7 satellites blocked [s]
 COL = {c: i for i, c in enumerate(DEEP_COLUMNS)}
@@ -466,7 +466,7 @@ def test_run_modules_leave_the_slow_imports_out():
     import subprocess
     import sys
 
-    code = ("import sys, sdr_di.deep.run_deep, sdr_di.integration.loop_process; "
+    code = ("import sys, sdr_di.integration.run_integrated, sdr_di.integration.loop_process; "
             "print(sorted(m for m in ('scipy.stats', 'scipy.optimize') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()

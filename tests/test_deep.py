@@ -14,8 +14,6 @@ import pytest
 from sdr_di.cli import main
 from sdr_di.constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I
 from sdr_di.deep import (
-    DeepConfig,
-    DeepReceiver,
     PreFilterBank,
     nco_commands,
     predict_ranges,
@@ -25,6 +23,7 @@ from sdr_di.deep.bit_power import BitPower
 from sdr_di.deep.vector_tracking import _Chan, _epoch_rows
 from sdr_di.errors import FilterError, ImuDataError
 from sdr_di.frames import llh_to_ecef
+from sdr_di.integration.receiver import IntegrationConfig, IntegratedReceiver
 from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.scenario import REPO_ROOT
 from sdr_di.signal.navmsg import assistance_klobuchar
@@ -397,11 +396,11 @@ def test_deep_receiver_rejects_bad_settings(gen26):
     src = open_source(gen26 / "default.bin")
     imu = read_imu(gen26 / "default_imu.csv")
     with pytest.raises(FilterError, match="unknown filter"):
-        DeepReceiver(DeepConfig(filter="nope")).run(src, imu, prns=[27])
+        IntegratedReceiver(IntegrationConfig(filter="nope")).run(src, imu, prns=[27])
     with pytest.raises(ImuDataError, match="needs the reference"):
-        DeepReceiver(DeepConfig(align="truth")).run(src, imu, prns=[27], truth=None)
+        IntegratedReceiver(IntegrationConfig(align="truth")).run(src, imu, prns=[27], truth=None)
     with pytest.raises(ValueError, match="align"):
-        DeepConfig(align="compass")
+        IntegrationConfig(align="compass")
     shutil.rmtree(gen26 / "none", ignore_errors=True)
 
 
@@ -442,7 +441,7 @@ def test_every_filter_runs_the_deep_measurement_model_with_a_changing_channel_co
 def test_gnss_alignment_recovers_a_banked_turn():
     """TRIAD from velocity and IMU: level flight, and a 20 deg/s coordinated turn at 20 m/s
     (35 deg bank) while climbing."""
-    from sdr_di.deep.vector_loop import gnss_alignment
+    from sdr_di.integration.alignment import gnss_alignment
     from sdr_di.frames import euler_to_C_b_n
     from sdr_di.ins.error_model import dcm_to_rotvec
 
@@ -460,9 +459,9 @@ def test_gnss_alignment_recovers_a_banked_turn():
 
 @pytest.mark.parametrize("mode", ["deep", "loose", "tight"])
 def test_iono_wait_option_reaches_the_handover_rule(gen26, tmp_path, monkeypatch, mode):
-    """``run --iono-wait S`` sets ``DeepConfig.iono_wait_s`` of every integrated mode (the
+    """``run --iono-wait S`` sets ``IntegrationConfig.iono_wait_s`` of every integrated mode (the
     default config keeps 30 s); the run itself is stopped at ``run_deep``'s door."""
-    import sdr_di.deep.run_deep as rd
+    import sdr_di.integration.run_integrated as rd
 
     seen = []
 

@@ -1,5 +1,5 @@
 """Navigation data in force (receiver/navdata.py) and the deep loop's decoding after the
-hand-over (deep/navdecode.py, vector_loop.py), issue 18."""
+hand-over (deep/navdecode.py, integration/handover.py), issue 18."""
 
 from __future__ import annotations
 
@@ -232,9 +232,9 @@ _H = 18010          # hand-over: 10 ms after subframe 3 ended (ms of the frame)
 def _handed_over_subframe_3(nav):
     """A scalar channel of C27 that confirmed subframes 1-2 of a frame and still held
     subframe 3 (ended 10 ms before the hand-over), the loop decoder
-    :func:`~sdr_di.deep.vector_loop._handover_decoder` made of it, the loop's prompts after
+    :func:`~sdr_di.integration.handover.handover_decoder` made of it, the loop's prompts after
     the hand-over (the signal there, 35 dB-Hz) and the record of the frame."""
-    from sdr_di.deep.vector_loop import _handover_decoder
+    from sdr_di.integration.handover import handover_decoder
     from sdr_di.receiver.channel import Channel
 
     eph = {r.toe: r for r in nav.records[27]}[367200.0]
@@ -251,7 +251,7 @@ def _handed_over_subframe_3(nav):
     sc.epoch = _H + _SC_OFF                # next epoch: the hand-over's
     sc.bit_runs = [[_SC_OFF, bytearray(nb.bits[:_H // 20].tolist())]]
     ms0 = round(nb.t0 * 1000) - _LOOP_OFF
-    dec = _handover_decoder(sc, _H + _LOOP_OFF, ms0)
+    dec = handover_decoder(sc, _H + _LOOP_OFF, ms0)
     p = _prompts(nb.bits, 20, _H, 5 * 20, np.random.default_rng(3))
     return sc, dec, p, want
 
@@ -336,8 +336,8 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     here, metres), the clock errors by up to ~1 m. The error from 2 s after the last switch
     must be below 0.3 m and below a fifth of the ionosphere bias."""
     import sdr_di.orbits.rinex_nav as rinex_nav
-    from sdr_di.deep.run_deep import run_deep
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.receiver.run_scalar import open_source
 
     def change(e):
@@ -346,7 +346,7 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav, change))
     src = open_source(late_start_file / "default.bin")
     out = late_start_file / "run"
-    summ = run_deep(src, out, config=DeepConfig(filter="ekf", iono_wait_s=0.0),
+    summ = run_deep(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=0.0),
                     progress=False)
     err = capsys.readouterr().err
     assert err.count("sdr-di: warning:") == 1 and "without ionosphere" in err
@@ -394,14 +394,14 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
     sets would complete only at +34 s), so there is no warning and the loop starts with the
     broadcast Klobuchar model."""
     import sdr_di.orbits.rinex_nav as rinex_nav
-    from sdr_di.deep.run_deep import run_deep
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.receiver.run_scalar import open_source
 
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav))
     src = open_source(late_start_file / "default.bin")
     out = late_start_file / "run_wait"
-    run_deep(src, out, config=DeepConfig(filter="ekf"), progress=False, duration_s=27.0)
+    run_deep(src, out, config=IntegrationConfig(filter="ekf"), progress=False, duration_s=27.0)
     assert "warning" not in capsys.readouterr().err
     s = json.loads((out / "default_deep_summary.json").read_text())
     assert s["warnings"] == []
@@ -412,9 +412,9 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
 
 
 def test_deep_config_checks_iono_wait():
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.receiver import IntegrationConfig
 
-    assert DeepConfig().iono_wait_s == 30.0
+    assert IntegrationConfig().iono_wait_s == 30.0
     for bad in (-1.0, math.inf, math.nan):
         with pytest.raises(ValueError, match="iono_wait_s"):
-            DeepConfig(iono_wait_s=bad)
+            IntegrationConfig(iono_wait_s=bad)

@@ -15,7 +15,8 @@ import cloudpickle
 import pytest
 
 from sdr_di.errors import CampaignError
-from sdr_di.experiments import Experiment, render_report, run_campaign, run_seed
+from sdr_di.experiments import Experiment
+from sdr_di.studies import render_report, run_campaign, run_seed
 
 # the test-only experiments below travel to the workers by value (no import of this file)
 cloudpickle.register_pickle_by_value(sys.modules[__name__])

@@ -14,14 +14,12 @@ from sdr_di.experiments import (
     experiment_names,
     get_experiment,
     noise_mismatch,
-    outputs,
     parse_params,
     plotting,
-    render_report,
-    run_experiment,
 )
-from sdr_di.experiments.aggregate import aggregate
-from sdr_di.experiments.commands import add_parsers
+from sdr_di.studies import outputs, render_report, run_experiment
+from sdr_di.studies.aggregate import aggregate
+from sdr_di.studies.commands import add_parsers
 
 
 def _cli(argv: list[str]) -> int:

@@ -20,7 +20,7 @@ import pytest
 
 from sdr_di.errors import ExperimentError
 from sdr_di.experiments import count_change, outage, weak_signal
-from sdr_di.experiments.aggregate import single_stats
+from sdr_di.studies.aggregate import single_stats
 from sdr_di.experiments.registry import get_experiment, parse_params
 
 FS = 2.5e6

@@ -13,7 +13,7 @@ import pytest
 
 from sdr_di.errors import SdrDiError
 from sdr_di.experiments import jamming
-from sdr_di.experiments.commands import add_parsers
+from sdr_di.studies.commands import add_parsers
 from sdr_di.sim.interference import effective_cn0_dbhz
 
 

@@ -2,7 +2,7 @@
 options, the mode parameter of count-change / outage / weak-signal, the shared per-variant
 bookkeeping (:mod:`sdr_di.experiments.variants`), and the outage's time to a good solution.
 
-The loose/tight end-to-end test needs the receiver's coupling modes (``DeepConfig.mode``);
+The loose/tight end-to-end test needs the receiver's coupling modes (``IntegrationConfig.mode``);
 it is skipped where the receiver has none.
 """
 
@@ -18,7 +18,7 @@ import pytest
 
 from sdr_di.errors import ExperimentError
 from sdr_di.experiments import count_change, outage
-from sdr_di.experiments.aggregate import aggregate, single_stats
+from sdr_di.studies.aggregate import aggregate, single_stats
 from sdr_di.experiments.filter_figures import filter_names_in, parse_filter_spec
 from sdr_di.experiments.registry import get_experiment, parse_params
 from sdr_di.experiments.variants import (
@@ -130,9 +130,9 @@ def test_errors_csv_columns(tmp_path):
 
 
 def _has_modes() -> bool:
-    from sdr_di.deep import DeepConfig
+    from sdr_di.integration.receiver import IntegrationConfig
 
-    return "mode" in {f.name for f in dataclasses.fields(DeepConfig)}
+    return "mode" in {f.name for f in dataclasses.fields(IntegrationConfig)}
 
 
 @pytest.mark.slow

@@ -100,7 +100,7 @@ def test_same_size_other_content_is_refused(complete_set, tmp_path):
 
 
 def test_deep_mode_refuses_a_mixed_imu_and_uses_the_given_sidecar(complete_set, tmp_path):
-    from sdr_di.deep.run_deep import companion_files
+    from sdr_di.integration.run_integrated import companion_files
 
     d = _copy(complete_set, tmp_path / "set")
     # a sidecar under another name, in another folder, naming the set's files: deep mode must

@@ -18,9 +18,9 @@ from scipy import stats
 
 from sdr_di.errors import StudyError
 from sdr_di.experiments import Experiment, register_experiment
-from sdr_di.experiments.paired import claim_verdict, compare_pair, holm, t_interval
-from sdr_di.experiments.study import run_study
-from sdr_di.experiments.study_spec import load_study, parse_study
+from sdr_di.studies.paired import claim_verdict, compare_pair, holm, t_interval
+from sdr_di.studies.study import run_study
+from sdr_di.studies.spec import load_study, parse_study
 
 REPO = Path(__file__).resolve().parents[1]
 cloudpickle.register_pickle_by_value(sys.modules[__name__])
@@ -190,7 +190,7 @@ def _csv(path: Path) -> list[dict]:
 
 
 def test_study_machinery_failures_resumption_and_refusal(tmp_path):
-    from sdr_di.experiments.campaign import run_seed
+    from sdr_di.studies.campaign import run_seed
 
     seeds = [run_seed(0, i) for i in range(6)]
     spec = parse_study(_fake_spec(6, bad_seed=seeds[2], div_seed=seeds[3]))
@@ -253,7 +253,7 @@ def test_study_machinery_failures_resumption_and_refusal(tmp_path):
 
 
 def test_a_killed_worker_loses_only_its_task_which_runs_again_on_resume(tmp_path):
-    from sdr_di.experiments.campaign import run_seed
+    from sdr_di.studies.campaign import run_seed
 
     seeds = [run_seed(0, i) for i in range(3)]
     raw = _fake_spec(3, bad_seed=seeds[1])
@@ -278,7 +278,7 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
     counted while the other runs are kept, the IF file shared by the two cells, and a second
     run of the same spec skipping every finished run."""
     from sdr_di.experiments import _deep, variants
-    from sdr_di.experiments.campaign import run_seed
+    from sdr_di.studies.campaign import run_seed
 
     spec = load_study(REPO / "studies" / "smoke.toml")
     out = tmp_path / "smoke"
@@ -326,7 +326,7 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
 def _run_cli(argv: list[str]) -> int:
     import argparse
 
-    from sdr_di.experiments.commands import add_parsers
+    from sdr_di.studies.commands import add_parsers
 
     parser = argparse.ArgumentParser(prog="sdr-di")
     add_parsers(parser.add_subparsers(dest="command", required=True))
@@ -348,7 +348,7 @@ def test_cli_bad_input_is_a_one_line_error_before_any_work(tmp_path, argv, msg):
 
 
 def test_cli_refuses_a_folder_with_another_study(tmp_path, capsys):
-    from sdr_di.experiments.execute import write_json
+    from sdr_di.studies.execute import write_json
 
     out = tmp_path / "o"
     out.mkdir()

@@ -1,35 +1,37 @@
-"""Deep integration: per-channel pre-filters, INS-aided NCO commands, the vector loop.
+"""Deep integration's own parts: per-channel pre-filters, INS-aided NCO commands, the
+vector-tracking measurement source.
 
-``vector_loop``      :class:`DeepReceiver`: scalar start-up, hand-over, the integration loop,
-                     in any coupling mode (``DeepConfig.mode``: deep, loose, tight;
-                     docs/coupling.md)
-``vector_tracking``  deep mode's measurement source in that loop (NCOs, correlators,
-                     pre-filters, channel management, NCO feedback, navigation data)
+``vector_tracking``  deep mode's measurement source in the integration loop (NCOs,
+                     correlators, pre-filters, channel management, NCO feedback, navigation
+                     data)
 ``nco``              predicted ranges and NCO commands from the INS
 ``prefilter``        per-channel pre-filters (``_numba_prefilter`` kernel)
 ``bit_power``        C/N0 from bit-synchronous prompt sums
 ``navdecode``        navigation message decoding after the hand-over
-``run_deep``         files in, solution and summary out (``sdr-di run --mode deep|loose|tight``)
+
+The receiver that runs every coupling mode (scalar start-up, hand-over, the integration
+loop) is :mod:`sdr_di.integration.receiver`; its file runner is
+:mod:`sdr_di.integration.run_integrated`. Their old names here (``sdr_di.deep.vector_loop``,
+``sdr_di.deep.run_deep``, ``sdr_di.deep.DeepReceiver`` ...) still import, with a
+:class:`DeprecationWarning`, until the next release.
 """
 
+from .._deprecated import alias_modules, forwarding_getattr
 from .nco import NcoCommand, RangePrediction, nco_commands, predict_ranges
 from .prefilter import PreFilterBank, discriminator_variances
-from .vector_loop import (
-    MODES,
-    DeepConfig,
-    DeepReceiver,
-    DeepResult,
-    HandoverError,
-    IntegrationConfig,
-)
+
+alias_modules(__name__, {"vector_loop": "sdr_di.integration.receiver",
+                         "run_deep": "sdr_di.integration.run_integrated"})
+
+__getattr__ = forwarding_getattr(__name__, {
+    "MODES": "sdr_di.integration.receiver",
+    "HandoverError": "sdr_di.integration.receiver",
+    "IntegrationConfig": "sdr_di.integration.receiver",
+    "DeepConfig": "sdr_di.integration.receiver:IntegrationConfig",
+    "DeepReceiver": "sdr_di.integration.receiver:IntegratedReceiver",
+    "DeepResult": "sdr_di.integration.receiver:IntegrationResult"})
 
 __all__ = [
-    "MODES",
-    "DeepConfig",
-    "DeepReceiver",
-    "DeepResult",
-    "HandoverError",
-    "IntegrationConfig",
     "NcoCommand",
     "PreFilterBank",
     "RangePrediction",

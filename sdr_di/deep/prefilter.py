@@ -26,7 +26,7 @@ Dynamics from one epoch start to the next: ``dtau += beta T df`` (carrier-aided 
 drift and the clock frequency noise the NCO commands cannot predict), plus small
 ``q_tau``, ``q_phi`` per epoch.
 
-Interaction with the vector loop (:mod:`sdr_di.deep.vector_loop`):
+Interaction with the vector loop (:mod:`sdr_di.integration.receiver`):
 
 * **outputs** at the integration-filter rate: ``dtau``, ``df`` and their variances, turned
   into the measurements of paper 004 eq 8-9, ``drho = (c / f_code) dtau`` and

@@ -1,7 +1,7 @@
 """Deep mode's measurement source: vector tracking of every handed-over channel.
 
 :class:`VectorTracking` is the :class:`~sdr_di.integration.loop.MeasurementSource` of the
-deep receiver (:class:`~sdr_di.deep.vector_loop.DeepReceiver`) in the mode-independent
+deep receiver (:class:`~sdr_di.integration.receiver.IntegratedReceiver`) in the mode-independent
 :class:`~sdr_di.integration.loop.IntegrationLoop`. Per filter interval it commands every
 channel's code and carrier NCOs from the propagated INS and clock, correlates, runs the
 pre-filters and the channel management, and forms ``z`` and ``R`` (paper 004 eq 7-9, 34);
@@ -10,7 +10,7 @@ pre-filters) and takes up navigation data decoded meanwhile (a new ephemeris or 
 model moves the state, the NCOs and the pre-filters together).
 
 The decisions it implements (coherent pre-filter blocks, channel management and its
-thresholds, navigation data) are the notes of :mod:`sdr_di.deep.vector_loop`, called
+thresholds, navigation data) are the notes of :mod:`sdr_di.integration.receiver`, called
 *module notes* below.
 """
 
@@ -20,7 +20,6 @@ import copy
 import dataclasses
 import math
 import time
-from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -28,6 +27,7 @@ import numpy as np
 from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
 from ..errors import SdrDiError
 from ..frames import llh_to_ecef
+from ..integration.config import IntegrationConfig
 from ..integration.loop import IntegrationLoop, Interval, Measurements
 from ..integration.measurements import RangeRateMeasurementModel
 from ..receiver._numba_correlate_bits import correlate_epl_bits
@@ -50,9 +50,6 @@ from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
 from .prefilter import PreFilterBank
-
-if TYPE_CHECKING:
-    from .vector_loop import DeepConfig
 
 __all__ = ["SampleClock", "VectorTracking"]
 
@@ -150,11 +147,10 @@ class VectorTracking:
 
     Parameters
     ----------
-    cfg : DeepConfig
+    cfg : IntegrationConfig
     source : IfSource
     chans : list of _Chan
-        Handed-over channels (:meth:`~sdr_di.deep.vector_loop.DeepReceiver.
-        _handover_channels`).
+        Handed-over channels (:func:`~sdr_di.integration.handover.handover_channels`).
     navdata : NavDataInForce
     clock : SampleClock
     stop : int
@@ -168,9 +164,9 @@ class VectorTracking:
         Early-late spacing of the scalar receiver's correlators [chips].
     """
 
-    def __init__(self, cfg: DeepConfig, source: IfSource, chans: list, navdata: NavDataInForce,
-                 clock: SampleClock, stop: int, profile: dict, *, handover: tuple,
-                 spacing_chips: float) -> None:
+    def __init__(self, cfg: IntegrationConfig, source: IfSource, chans: list,
+                 navdata: NavDataInForce, clock: SampleClock, stop: int, profile: dict, *,
+                 handover: tuple, spacing_chips: float) -> None:
         self.cfg, self.source, self.chans, self.clock = cfg, source, chans, clock
         self.fs = source.sampling_rate_hz
         self.stop, self.profile = stop, profile
@@ -466,7 +462,7 @@ class VectorTracking:
 
     def row(self) -> dict:
         """Channel columns of a solution row: C/N0 [dB-Hz] and the navigation data taken up
-        since the previous row (``DeepResult.nav_change``)."""
+        since the previous row (``IntegrationResult.nav_change``)."""
         out = {"cn0": [c.cn0_dbhz for c in self.chans], "nav": self.nav_log.flag}
         self.nav_log.flag = 0
         return out
@@ -592,7 +588,7 @@ class _NavLog:
     def __init__(self, navdata: NavDataInForce, chans: list, iono, t_s: float, week: int,
                  sow: float) -> None:
         self.navdata = navdata
-        self.flag = 0        # changes since the last output row (DeepResult.nav_change)
+        self.flag = 0        # changes since the last output row (IntegrationResult.nav_change)
         self.ephemerides: dict = {f"C{c.prn:02d}": [] for c in chans}
         self.ionosphere: list = []
         self.steps: list = []

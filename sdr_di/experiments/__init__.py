@@ -1,16 +1,22 @@
-"""Robustness experiments, Monte Carlo campaigns on Dask, and their reports (issue 6).
+"""Robustness experiments (issue 6): each a small module run with a seed on generated files.
 
 * :mod:`.registry`: experiments by name; an experiment is a small module with ``NAME``,
   ``default_params`` and ``run(params, seed, out_dir) -> dict`` of scalar figures, plus
   optional ``check_params``, ``tables`` and ``plots`` hooks (``docs/experiments.md``).
 * :mod:`.noise_mismatch`: wrong Q (paper 000) or wrong R (paper 003) for every filter.
-* :func:`run_experiment`: one run (``sdr-di robustness``).
-* :func:`run_campaign`: ``runs`` seeded runs in parallel on a Dask cluster (local processes
-  by default, or a scheduler address), aggregated (``sdr-di campaign``).
-* :func:`render_report`: one self-contained HTML page of a result folder (``sdr-di report``).
+* :mod:`.count_change`, :mod:`.outage`, :mod:`.weak_signal`, :mod:`.jamming`: the receiver
+  modes under a changing satellite count, a blockage, a C/N0 sweep, a jammer ramp.
+* :mod:`.compare`: every filter and mode on the same files (the run of a study cell).
+* :mod:`.variants`, :mod:`._deep`, :mod:`.filter_figures`, :mod:`.plotting`: their shared
+  pieces (one receiver variant on shared files, generated inputs, figure names, PNG plots).
+
+Running experiments (one run, Monte Carlo campaigns on Dask, studies with paired
+statistics) and their reports are the package :mod:`sdr_di.studies`. Their old names here
+(``sdr_di.experiments.campaign``, ``sdr_di.experiments.run_campaign`` ...) still import,
+with a :class:`DeprecationWarning`, until the next release.
 """
 
-from .campaign import CampaignResult, run_campaign, run_seed
+from .._deprecated import alias_modules, forwarding_getattr
 from .registry import (
                        Experiment,
                        experiment_names,
@@ -18,19 +24,26 @@ from .registry import (
                        parse_params,
                        register_experiment,
 )
-from .report import render_report
-from .single_run import RunResult, run_experiment
+
+_MOVED = {name: f"sdr_di.studies.{name}" for name in (
+    "aggregate", "campaign", "commands", "execute", "outputs", "paired", "single_run",
+    "study", "study_report", "tables", "tasks")}
+_MOVED.update(study_spec="sdr_di.studies.spec", report="sdr_di.studies.campaign_report")
+alias_modules(__name__, _MOVED)
+
+__getattr__ = forwarding_getattr(__name__, {
+    "CampaignResult": "sdr_di.studies.campaign",
+    "run_campaign": "sdr_di.studies.campaign",
+    "run_seed": "sdr_di.studies.campaign",
+    "render_report": "sdr_di.studies.campaign_report",
+    "RunResult": "sdr_di.studies.single_run",
+    "run_experiment": "sdr_di.studies.single_run",
+})
 
 __all__ = [
-    "CampaignResult",
     "Experiment",
-    "RunResult",
     "experiment_names",
     "get_experiment",
     "parse_params",
     "register_experiment",
-    "render_report",
-    "run_campaign",
-    "run_experiment",
-    "run_seed",
 ]

@@ -342,33 +342,34 @@ class DeepRun:
 
 def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
                      assume: dict | None = None, **config: Any) -> DeepRun:
-    """Run :class:`~sdr_di.deep.DeepReceiver` with ``filter_name`` in ``mode`` on ``inputs``.
+    """Run :class:`~sdr_di.integration.receiver.IntegratedReceiver` with ``filter_name`` in
+    ``mode`` on ``inputs``.
 
     ``mode`` (``"loose"``, ``"tight"``, ``"deep"``) is the receiver's coupling
-    (``DeepConfig.mode``); ``"deep"`` is the configuration's default and is not passed, so
+    (``IntegrationConfig.mode``); ``"deep"`` is the configuration's default and is not passed, so
     the call also works with a receiver that predates the modes. ``assume`` is the filter's
     assumptions (an experiment's ``assume`` dict, :func:`parse_assume`), applied to the
     configuration as ``--assume`` is. ``config`` are further
-    :class:`~sdr_di.deep.DeepConfig` fields.
+    :class:`~sdr_di.integration.receiver.IntegrationConfig` fields.
 
     Exceptions of the package (:class:`~sdr_di.errors.SdrDiError`) and numerical failures
     (``ValueError``, ``FloatingPointError``, ``numpy.linalg.LinAlgError``) are returned as
     ``error`` text, not raised: a filter that fails is a result of the experiment.
     """
-    from ..deep import DeepConfig, DeepReceiver
+    from ..integration.receiver import IntegrationConfig, IntegratedReceiver
     from ..errors import SdrDiError
 
     if mode != "deep":
         config["mode"] = mode
     scalar = CountingScalarReceiver(log=False)
     try:
-        cfg = DeepConfig(filter=filter_name, **config)
+        cfg = IntegrationConfig(filter=filter_name, **config)
         a = parse_assume(assume)
         if a is not None:
             from ..integration.assumptions import apply_to_deep
 
             cfg = apply_to_deep(cfg, a)
-        rx = DeepReceiver(cfg, scalar=scalar)
+        rx = IntegratedReceiver(cfg, scalar=scalar)
         res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
                      truth=inputs.truth)
     except (SdrDiError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
@@ -383,7 +384,8 @@ def record_run(fig: dict, name: str, dr: DeepRun) -> Any:
 
     ``<name>.completed`` (1 when every error row is finite), and either ``<name>.error``
     (the run failed: returns None) or ``<name>.handover_s`` and
-    ``<name>.acq_after_handover`` (returns the :class:`~sdr_di.deep.DeepResult`).
+    ``<name>.acq_after_handover`` (returns the
+    :class:`~sdr_di.integration.receiver.IntegrationResult`).
     """
     res = dr.result
     if res is None:

@@ -44,7 +44,7 @@ __all__ = ["MODES", "Variant", "entry_label", "loop_config", "mode_list", "nan_f
            "run_variants", "split_entry",
            "variant_label", "variant_list", "variant_rows", "write_errors_csv"]
 
-#: Coupling modes of the integration loop (``DeepConfig.mode``).
+#: Coupling modes of the integration loop (``IntegrationConfig.mode``).
 MODES = ("loose", "tight", "deep")
 
 
@@ -128,7 +128,8 @@ def variant_list(exp: str, filters: str, modes: str = "deep") -> list[Variant]:
 
 
 def loop_config(params: dict, **fixed: Any) -> dict:
-    """:class:`~sdr_di.deep.DeepConfig` keywords from an experiment's parameters.
+    """:class:`~sdr_di.integration.receiver.IntegrationConfig` keywords from an experiment's
+    parameters.
 
     ``filter_rate_hz``, ``output_rate_hz``, ``gnss_rate_hz`` (loose/tight fix or observable
     rate) and ``deep_cn0_min_dbhz`` (the loop's channel gate, as ``cn0_min_dbhz``) are taken
@@ -200,7 +201,8 @@ def run_variants(inputs: Inputs, variants: Sequence[Variant], cfg: dict, fig: di
         The run's generated files (:class:`~._deep.generated_inputs`).
     variants : sequence of Variant
     cfg : dict
-        :class:`~sdr_di.deep.DeepConfig` keywords shared by the variants (:func:`loop_config`).
+        :class:`~sdr_di.integration.receiver.IntegrationConfig` keywords shared by the
+        variants (:func:`loop_config`).
     fig : dict
         The run's figures, updated in place.
     out_dir : Path
@@ -211,7 +213,7 @@ def run_variants(inputs: Inputs, variants: Sequence[Variant], cfg: dict, fig: di
     Returns
     -------
     dict
-        ``{label: DeepResult}`` of the variants that completed, in order.
+        ``{label: IntegrationResult}`` of the variants that completed, in order.
     """
     series: dict = {}
     for v in variants:

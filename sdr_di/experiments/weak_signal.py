@@ -19,11 +19,11 @@ drops by exactly that many dB). No new scenario key was needed.
   the deep receiver's start-up (decoded records first, then the navigation file: without it
   the scalar PVT waits ~30 s for every ephemeris to be decoded). A channel is *kept* at an
   epoch when it is in ``TRACK`` with code lock and used in the position fix.
-* ``loose``, ``tight``, ``deep``: :class:`~sdr_di.deep.DeepReceiver` in that coupling
-  (``DeepConfig.mode``; ``filter``, default ``ff-aukf``; 10 Hz rows). A channel is *kept*
+* ``loose``, ``tight``, ``deep``: :class:`~sdr_di.integration.receiver.IntegratedReceiver`
+  in that coupling (``IntegrationConfig.mode``; ``filter``, default ``ff-aukf``; 10 Hz rows). A channel is *kept*
   when it is in the filter's measurement vector (loose: in the WLS fix fed to the filter).
-  ``deep_cn0_min_dbhz`` (default ``none``: the :class:`~sdr_di.deep.DeepConfig` default) is
-  the loop's channel C/N0 gate.
+  ``deep_cn0_min_dbhz`` (default ``none``: the
+  :class:`~sdr_di.integration.receiver.IntegrationConfig` default) is the loop's channel C/N0 gate.
 
 **Pass at a level**: over the evaluation window (``settle_s`` after the step to the end) every
 channel is kept in at least ``keep_fraction`` (default 0.95) of the epochs, the last epoch has

@@ -13,6 +13,9 @@
                   covariances (``sdr-di run --mode loose``; ``lc`` is the simulated one)
 ``tight_ranges``  tight mode's source: pseudoranges and rates into paper 004 eq 6-12
 ``loop_process``  loose and tight mode's loop in a child process behind the receiver
+``receiver``      the receiver of every integrated mode: scalar start-up, hand-over, then
+                  the loop with deep's, loose's or tight's source (docs/coupling.md)
+``run_integrated`` files in, solution and summary out (``sdr-di run --mode deep|loose|tight``)
 
 The process model is :class:`sdr_di.ins.error_model.InsErrorModel`.
 """

@@ -2,7 +2,7 @@
 kept apart from the truth the files were generated with (DESIGN section 7; docs/assumptions.md).
 
 An assumptions file has up to five tables, each optional; what is absent keeps the
-consumer's own default (``DeepConfig`` for ``run``, ``[lc]``/``LcSettings`` for ``lc``)::
+consumer's own default (``IntegrationConfig`` for ``run``, ``[lc]``/``LcSettings`` for ``lc``)::
 
     [imu]                  # filter Q and P0 of the IMU states
     grade = "mems"         # preset of the scenario's IMU_GRADES; the terms below override
@@ -42,7 +42,7 @@ Scenario.hash` covers the scenario without ``[assume]``).
 
 API for callers (``run``, ``lc``, the experiments): :func:`load_assumptions`,
 :func:`parse_assumptions`, :func:`apply_to_lc`, :func:`apply_to_deep` (any dataclass with
-the :class:`~sdr_di.deep.vector_loop.DeepConfig` assumption fields), and
+the :class:`~sdr_di.integration.receiver.IntegrationConfig` assumption fields), and
 :meth:`Assumptions.record` for a run's summary.
 """
 
@@ -337,7 +337,7 @@ def apply_to_lc(settings, a: Assumptions):
 
 
 def apply_to_deep(cfg, a: Assumptions):
-    """A copy of a ``DeepConfig`` (or any dataclass with its assumption fields: ``imu``,
+    """A copy of an ``IntegrationConfig`` (or any dataclass with its assumption fields: ``imu``,
     ``bias_time_s``, ``clock``, ``noise_policy``, ``sigma_range_m``, ``sigma_rate_mps``,
     ``p0_att_deg``, ``p0_vel_mps``, ``p0_pos_m``, ``p0_clock``, ``init_att_err_deg``,
     ``init_vel_err_mps``, ``init_pos_err_m``, ``assumptions``) with ``a`` applied.
@@ -436,9 +436,9 @@ def truth_record(scenario) -> dict:
 
 
 def deep_beliefs(cfg) -> dict:
-    """Summary entry of what a ``DeepConfig``'s filter believed (after :func:`apply_to_deep`):
-    IMU spec, bias time, oscillator (with the two-state coefficients its ``Q`` uses),
-    measurement-noise policy, ``P0`` sigmas, initial errors and the mapping given."""
+    """Summary entry of what an ``IntegrationConfig``'s filter believed (after
+    :func:`apply_to_deep`): IMU spec, bias time, oscillator (with the two-state coefficients
+    its ``Q`` uses), measurement-noise policy, ``P0`` sigmas, initial errors and the mapping given."""
     from ..ins.error_model import ClockModel
     from ..oscillator import CLOCK_PRESETS
 

@@ -26,7 +26,7 @@ marks an ionosphere change by identity), so the rows are the thread's bit for bi
 be pickled (a filter holding a closure), or the caller is a daemonic
 ``multiprocessing`` worker (which may not have children), or ``SDR_DI_LOOP_THREAD=1``
 is set; the thread otherwise. The child can be started before the loop exists
-(:class:`LoopChild`: ``DeepReceiver.run`` starts it at the receiver's first output epoch,
+(:class:`LoopChild`: ``IntegratedReceiver.run`` starts it at the receiver's first output epoch,
 after the acquisition, whose FFT search uses every core, so that its interpreter start
 and imports run in the seconds before the hand-over on the core tracking leaves idle,
 not beside the loop's first epochs).

@@ -853,7 +853,7 @@ class Channel:
 
         At the deep hand-over this channel stops in lock; the vector loop's decoder, with its
         own C/N0 test and the same assembler, holds these until that test confirms them
-        (:func:`~sdr_di.deep.vector_loop._handover_decoder`). Passing them on unconfirmed
+        (:func:`~sdr_di.integration.handover.handover_decoder`). Passing them on unconfirmed
         would take a subframe whose last bits came after a blockage began; dropping them
         would lose a subframe that ended less than 0.12 s before the hand-over (its data
         set would wait a whole frame).

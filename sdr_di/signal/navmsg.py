@@ -779,7 +779,7 @@ class HeldSubframes:
     def take(self) -> list[tuple[int, dict]]:
         """Every held subframe with its end, ``(end, sf)`` oldest first, for another holder
         to go on holding until its own test (the deep hand-over: the scalar channel's
-        subframes move to the vector loop's decoder, :mod:`~sdr_di.deep.vector_loop`);
+        subframes move to the vector loop's decoder, :mod:`~sdr_di.integration.receiver`);
         none held here after."""
         out = self._held
         self._held = []

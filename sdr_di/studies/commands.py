@@ -108,7 +108,7 @@ def _params(args: argparse.Namespace):
     import math
 
     from ..io.atomic import check_output_dir
-    from .registry import get_experiment, parse_params
+    from ..experiments.registry import get_experiment, parse_params
 
     exp = get_experiment(args.experiment)
     overrides = {}
@@ -195,7 +195,7 @@ def cmd_study(args: argparse.Namespace) -> int:
 
     from ..io.atomic import check_output_dir
     from .study import _check_folder, run_study
-    from .study_spec import load_study
+    from .spec import load_study
 
     spec = load_study(args.spec)
     check_output_dir(args.out)
@@ -236,11 +236,11 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def _render(folder: Path) -> Path:
-    """:func:`~sdr_di.experiments.report.render_report`, each warning (a run record it could
+    """:func:`~sdr_di.studies.campaign_report.render_report`, each warning (a run record it could
     not read) printed as one line ``sdr-di: warning: ...`` on stderr."""
     import warnings
 
-    from .report import ReportWarning, render_report
+    from .campaign_report import ReportWarning, render_report
 
     if (Path(folder) / "study.json").is_file():
         from .study_report import render_study_report

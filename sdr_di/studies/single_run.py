@@ -10,7 +10,7 @@ from ..errors import CampaignError
 from ..io.atomic import ensure_output_dir
 from .execute import execute_run, write_files
 from .outputs import write_single_outputs
-from .registry import Experiment, get_experiment, parse_params
+from ..experiments.registry import Experiment, get_experiment, parse_params
 
 __all__ = ["RunResult", "run_experiment"]
 

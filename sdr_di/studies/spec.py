@@ -60,9 +60,9 @@ import tomllib
 from pathlib import Path
 
 from ..errors import SdrDiError, StudyError
-from .filter_figures import parse_filter_spec
-from .registry import get_experiment, parse_params
-from .variants import MODES, split_entry
+from ..experiments.filter_figures import parse_filter_spec
+from ..experiments.registry import get_experiment, parse_params
+from ..experiments.variants import MODES, split_entry
 
 __all__ = ["QUANTITY_KEYS", "Cell", "Claim", "StudySpec", "load_study", "parse_study"]
 

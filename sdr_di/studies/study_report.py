@@ -20,10 +20,10 @@ import math
 from pathlib import Path
 
 from ..io.atomic import atomic_open
-from . import plotting
+from ..experiments import plotting
 from .execute import read_json
-from .report import CSS, img_html, sig, table_html
-from .study_spec import QUANTITY_KEYS
+from .campaign_report import CSS, img_html, sig, table_html
+from .spec import QUANTITY_KEYS
 from .tables import read_csv_table
 
 __all__ = ["render_study_report"]

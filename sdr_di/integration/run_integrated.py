@@ -1,8 +1,8 @@
 """``sdr-di run --mode deep|loose|tight``: IF file + IMU file -> receiver -> solution files.
 
-The mode is ``DeepConfig.mode`` (:mod:`~sdr_di.deep.vector_loop`): deep, or loose / tight on
-the scalar receiver's own fixes / observables (docs/coupling.md); every mode writes the same
-files under its own name (``MODE`` below: ``deep``, ``loose`` or ``tight``).
+The mode is ``IntegrationConfig.mode`` (:mod:`~sdr_di.integration.receiver`): deep, or
+loose / tight on the scalar receiver's own fixes / observables (docs/coupling.md); every
+mode writes the same files under its own name (``MODE`` below: ``deep``, ``loose`` or ``tight``).
 
 Companion files default to the ones the IF file's sidecar names (``imu_file``,
 ``truth_file``, ``ephemeris_file``, relative to the sidecar): the IMU record (required), the
@@ -52,7 +52,7 @@ from ..receiver.navdata import NavDataWarning
 from ..receiver.run_scalar import search_assistance
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import TrackingConfig
-from .vector_loop import DeepConfig, DeepReceiver, DeepResult, check_imu_span
+from .receiver import IntegrationConfig, IntegratedReceiver, IntegrationResult, check_imu_span
 
 __all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
 
@@ -69,7 +69,7 @@ class DeepRunSummary:
     """What a deep run produced."""
 
     files: dict
-    result: DeepResult
+    result: IntegrationResult
     metrics: dict
     wall_s: float
 
@@ -99,7 +99,7 @@ def companion_files(source: IfSource, skip: tuple[str, ...] = ()) -> dict:
     return out
 
 
-def write_deep_csv(path: Path, res: DeepResult) -> Path:
+def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
     """Write the solution rows (atomic)."""
     data = np.column_stack([
         res.t, np.full(res.t.size, res.week), res.sow, np.degrees(res.llh[:, :2]),
@@ -124,7 +124,7 @@ def _finite(v):
     return v
 
 
-def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None = None,
+def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig | None = None,
              imu_path: str | Path | None = None, truth_path: str | Path | None = None,
              nav_path: str | Path | None = None, assist: bool = True, prns=None,
              stem: str | None = None, progress: bool = True,
@@ -154,7 +154,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
     from ..io.imu_files import read_imu, read_truth
     from ..orbits.rinex_nav import load_nav
 
-    cfg = config or DeepConfig()
+    cfg = config or IntegrationConfig()
     comp = companion_files(source, skip=tuple(k for k, p in (("imu", imu_path),
                                                               ("truth", truth_path))
                                               if p is not None))
@@ -197,7 +197,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
             bar.set_postfix_str(f"x{rt:.2f} real time, {n_used}/{n_ch} in the vector")
 
     try:
-        rx = DeepReceiver(cfg, scalar=None if tracking is None
+        rx = IntegratedReceiver(cfg, scalar=None if tracking is None
                           else ScalarReceiver(config=tracking, log=False))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", NavDataWarning)

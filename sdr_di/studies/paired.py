@@ -22,7 +22,7 @@ failed, the variant raised, or its RMSE is not finite) has no value.
   step-down has no interval form of its own), so a *corrected interval* covers all ``m``
   differences at once with probability at least ``1 - alpha``.
 
-A claim (:class:`~.study_spec.Claim`) holds in a cell when, for every quantity it names,
+A claim (:class:`~.spec.Claim`) holds in a cell when, for every quantity it names,
 the filter wins at least ``min_wins`` seeds, the uncorrected one-sided sign-test p is at most
 ``max_sign_p`` and (when asked) the corrected interval of the spec's kind lies below 0; it is
 *reversed* when the other filter meets the same criterion; otherwise it is *not shown*.

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from ..errors import ExperimentError
 from ..io.atomic import atomic_open, ensure_output_dir
-from .registry import Experiment
+from ..experiments.registry import Experiment
 
 __all__ = ["MAX_FILE_BYTES", "execute_run", "failed_record", "json_safe", "read_json",
            "restore_floats", "write_files", "write_json", "write_run_record"]

@@ -46,7 +46,7 @@ from ..io.atomic import ensure_output_dir
 from .aggregate import aggregate
 from .execute import execute_run, write_json, write_run_record
 from .outputs import write_campaign_outputs
-from .registry import Experiment, get_experiment, parse_params
+from ..experiments.registry import Experiment, get_experiment, parse_params
 from .tasks import Task, run_tasks
 
 __all__ = ["CampaignResult", "run_campaign", "run_seed"]
@@ -182,7 +182,7 @@ def run_campaign(experiment: str | Experiment, params: Mapping | None = None, ru
     Parameters
     ----------
     experiment : str or Experiment
-        Registered name (``"noise-mismatch"``) or an :class:`~.registry.Experiment`.
+        Registered name (``"noise-mismatch"``) or an :class:`~sdr_di.experiments.registry.Experiment`.
     params : mapping, optional
         Typed parameter values overriding the experiment's defaults.
     runs : int

@@ -1,6 +1,6 @@
 """Deep (INS-aided vector tracking) receiver: scalar start-up, hand-over, federated loop.
 
-Paper 004 Fig. 1, federated architecture. Data flow of :meth:`DeepReceiver.run`::
+Paper 004 Fig. 1, federated architecture. Data flow of :meth:`IntegratedReceiver.run`::
 
     scalar start-up (ScalarReceiver: acquisition, loops, NH/bit/frame sync, decoding, WLS PVT)
         --hand-over-->  for every interval [k0, k1) of T = 1 / filter_rate_hz:
@@ -15,7 +15,7 @@ Paper 004 Fig. 1, federated architecture. Data flow of :meth:`DeepReceiver.run`:
     the pre-filters shifted by the correction's projection on each channel (their NCOs move
     by it in the next interval).
 
-Modes (``DeepConfig.mode``, ``sdr-di run --mode``): ``"deep"`` (above), ``"loose"`` and
+Modes (``IntegrationConfig.mode``, ``sdr-di run --mode``): ``"deep"`` (above), ``"loose"`` and
 ``"tight"`` (docs/coupling.md). All three share the scalar start-up, the hand-over rule and
 time, the INS alignment, the filter and its ``Q``/``P0``, and the integration loop; loose and
 tight take their measurements from the scalar receiver, which keeps tracking after the
@@ -24,12 +24,12 @@ hand-over without any feedback from the filter: its WLS fixes (loose,
 :mod:`~sdr_di.integration.tight_ranges`), every ``1 / gnss_rate_hz`` s
 (:mod:`~sdr_di.integration.gnss_epochs`). So the three report over the same time window.
 
-Code: :meth:`DeepReceiver._vector_loop` hands over and runs the mode-independent
+Code: :meth:`IntegratedReceiver._vector_loop` hands over and runs the mode-independent
 :class:`~sdr_di.integration.loop.IntegrationLoop` (INS propagation, filter predict/update,
 closed-loop feedback, solution rows) with deep mode's measurement source,
 :class:`~sdr_di.deep.vector_tracking.VectorTracking` (NCO commands, correlation,
 pre-filters and channel management, the NCO and pre-filter share of the feedback,
-navigation data taken up). :meth:`DeepReceiver._scalar_coupled_loop` runs the same loop
+navigation data taken up). :meth:`IntegratedReceiver._scalar_coupled_loop` runs the same loop
 with the loose or tight source, without the NCO feedback.
 
 Decisions
@@ -49,7 +49,7 @@ Decisions
 * **INS initial alignment**: ``align="truth"``: from the first record of the reference (the
   scenario's initial state, paper 004 Table 3) at the IMU start, then coasting on the IMU
   until the hand-over, where position and velocity are replaced by the WLS fix;
-  ``align="gnss"``: at the hand-over from the fix velocity and the IMU (:func:`gnss_alignment`:
+  ``align="gnss"``: at the hand-over from the fix velocity and the IMU (:func:`~.alignment.gnss_alignment`:
   heading along the velocity, tilt from the specific force with the turn's centripetal
   acceleration; the vehicle must move).
 * **Time**: IMU sample ``i`` (BDT epoch in its header) is IF sample
@@ -95,25 +95,21 @@ Decisions
   pseudoranges come from a carrier-aided DLL whose errors are correlated over a fraction
   of a second: fed at 50 Hz as white noise they make the filter overconfident.
 * **Process noise** from the IMU spec (random walks; bias random walk reaching the spec in
-  ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`ClockModel`).
+  ``bias_time_s``), default paper 004 Table 4 (MEMS); clock: TCXO (:class:`~sdr_di.ins.error_model.ClockModel`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 import warnings
 from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import ImuDataError, SdrDiError
-from ..filters import make_filter
-from ..frames import ecef_to_llh, radii_of_curvature
-from ..ins.error_model import ClockModel, InsErrorModel, process_noise
-from ..ins.imu import ImuErrorModel
-from ..ins.mechanization import StrapdownINS
+from .._deprecated import forwarding_getattr
+from ..deep.vector_tracking import SampleClock, VectorTracking
+from ..errors import ImuDataError
 from ..integration.assumptions import FixedNoiseSource
 from ..integration.gnss_epochs import GnssEpochRecorder
 from ..integration.loop import IntegrationLoop
@@ -122,7 +118,6 @@ from ..integration.loose_fixes import LooseFixSource
 from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
 from ..integration.metrics import summarize
 from ..integration.tight_ranges import TightRangeSource
-from ..oscillator import CLOCK_PRESETS, OscillatorSpec
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataInForce, NavDataWarning
 from ..receiver.observables import ReceiverTime
@@ -130,178 +125,17 @@ from ..receiver.prediction import FixPredictor
 from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import ChannelState
-from ..signal.navmsg import klobuchar_of_subframe
-from .bit_power import BitPower
-from .navdecode import ChannelNavDecoder
-from .vector_tracking import SampleClock, VectorTracking, _Chan
+from .alignment import align_ins
+from .config import MODES, SCALAR_EPOCH_S, IntegrationConfig
+from .filter_setup import check_filter, make_integration_filter
+from .handover import HandoverError, handover_channels, offer_subframe_klobuchar
 
-__all__ = ["MODES", "DeepConfig", "DeepReceiver", "DeepResult", "HandoverError",
-           "IntegrationConfig", "check_imu_span"]
-
-#: Coupling modes of :class:`DeepReceiver` (module notes).
-MODES = ("deep", "loose", "tight")
-#: Interval of the scalar start-up's output epochs (the hand-over rule runs on them) [s].
-_EPOCH_S = 0.1
-
-
-
-def clock_model(clock: str | OscillatorSpec) -> ClockModel:
-    """The filter's two-state clock for ``DeepConfig.clock``: a preset name of
-    :data:`~sdr_di.oscillator.CLOCK_PRESETS` (the table the truth oscillator uses) or an
-    :class:`~sdr_di.oscillator.OscillatorSpec` (flicker mapped:
-    :meth:`ClockModel.from_oscillator`)."""
-    return ClockModel.from_oscillator(CLOCK_PRESETS[clock] if isinstance(clock, str) else clock)
-
-
-class HandoverError(SdrDiError):
-    """The scalar start-up never reached a state the vector loop can take over."""
+__all__ = ["MODES", "HandoverError", "IntegratedReceiver", "IntegrationConfig",
+           "IntegrationResult", "check_imu_span"]
 
 
 @dataclasses.dataclass
-class DeepConfig:
-    """Settings of the receiver in any coupling mode (module notes give the reasons for the
-    defaults; :data:`IntegrationConfig` is the same class).
-
-    Attributes
-    ----------
-    mode : str
-        ``"deep"`` (the filter closes the tracking loops), ``"loose"`` (WLS fixes) or
-        ``"tight"`` (pseudoranges and rates): :data:`MODES`.
-    gnss_rate_hz : float
-        Measurement rate of loose and tight [Hz] (module notes): 10 Hz divided by a whole
-        number, at most the filter rate; unused in deep mode.
-    filter : str
-        Integration filter (registry name, :data:`sdr_di.filters.FILTER_NAMES`).
-    filter_rate_hz : float
-        Integration-filter and NCO-command rate [Hz]; must divide the IMU rate.
-    output_rate_hz : float
-        Solution rows [Hz] (paper 004: 5 Hz).
-    align : str
-        ``"truth"`` or ``"gnss"`` (module notes).
-    handover_wait_s : float
-        Seconds after the first fix to wait for every tracked channel before handing over
-        with at least 4.
-    cn0_min_dbhz, cn0_hysteresis_db, cn0_window_ms, fast_margin_db, loss_margin_db, nis_p_min
-        Channel management (module notes): C/N0 gate [dB-Hz] and its hysteresis [dB], C/N0
-        window [ms], the thresholds of the 60 ms and 120 ms tests below the gate [dB], and
-        the pre-filter NIS test's false-alarm probability.
-    coherent_ms : int
-        Longest coherent pre-filter block [ms] (module notes); blocks never cross a data
-        bit, so D1 channels use at most 20 ms and D2 channels 2 ms. 1 = one update per
-        code epoch.
-    imu : ImuErrorModel
-        IMU spec for ``Q`` and ``P0`` (random walks, biases; default paper 004 Table 4).
-    bias_time_s : float
-        Time for the bias random walk to reach the spec [s].
-    clock : str or OscillatorSpec
-        Receiver oscillator the clock states' process noise assumes (paper 004 eq 4): a
-        preset of :data:`~sdr_di.oscillator.CLOCK_PRESETS` (``"tcxo"``, the default,
-        ``"ocxo"``, ``"ideal"``; Brown & Hwang) or an ``OscillatorSpec``; its flicker term
-        is mapped into the two-state model (:func:`clock_model`).
-    noise_policy, sigma_range_m, sigma_rate_mps
-        The filter's ``R``: ``"cn0"`` (pre-filter variances, from C/N0) or ``"fixed"``
-        (these sigmas [m, m/s] on every range and range rate).
-    p0_vel_mps, p0_pos_m : tuple or None
-        ``P0`` sigmas (E, N, U) [m/s, m]; None: 0.1 m/s and the fix's position sigma (at
-        least 1 m). A given position sigma is floored by the fix's.
-    p0_clock : tuple or None
-        ``(clock bias [m], clock drift [m/s])`` sigmas of ``P0`` (None for either: the
-        fix's 1.5x position sigma and 0.1 m/s).
-    init_att_err_deg, init_vel_err_mps, init_pos_err_m : tuple
-        Errors injected into the INS at the alignment (E, N, U): attitude as a rotation
-        vector (computed = exp(-[phi x]) true; U = heading) [deg], velocity [m/s],
-        position [m] (docs/assumptions.md).
-    assumptions : dict or None
-        Record of the assumptions applied (:func:`~sdr_di.integration.assumptions.
-        apply_to_deep`), written into the run's summary.
-    prefilter : dict
-        Keyword arguments of :class:`~sdr_di.deep.prefilter.PreFilterBank`.
-    filter_options : dict
-        Options of :func:`~sdr_di.filters.make_filter` (e.g. ``window`` of ``ff-aukf``).
-    p0_att_deg : tuple
-        Initial attitude sigmas (E, N, U) [deg] for ``align="truth"`` (``"gnss"`` uses
-        (3, 3, 5) deg: the no-sideslip, coordinated-turn assumptions).
-    chunk_ms : int
-        Samples read per refill [ms].
-    iono_wait_s : float
-        Seconds after the first fix the hand-over waits for ionosphere coefficients (from the
-        assistance file or the signal) before it goes ahead without them, with a warning;
-        the loop switches the model on when they are decoded (module notes).
-    """
-
-    filter: str = "ff-aukf"
-    filter_rate_hz: float = 50.0
-    output_rate_hz: float = 5.0
-    align: str = "truth"
-    handover_wait_s: float = 6.0
-    cn0_min_dbhz: float = 20.0
-    cn0_window_ms: int = 200
-    fast_margin_db: float = 3.0
-    loss_margin_db: float = 6.0
-    cn0_hysteresis_db: float = 2.0
-    nis_p_min: float = 1e-4
-    imu: ImuErrorModel = dataclasses.field(default_factory=ImuErrorModel)
-    bias_time_s: float = 3600.0
-    clock: str | OscillatorSpec = "tcxo"
-    noise_policy: str = "cn0"
-    sigma_range_m: float | None = None
-    sigma_rate_mps: float | None = None
-    p0_vel_mps: tuple | None = None
-    p0_pos_m: tuple | None = None
-    p0_clock: tuple | None = None
-    init_att_err_deg: tuple = (0.0, 0.0, 0.0)
-    init_vel_err_mps: tuple = (0.0, 0.0, 0.0)
-    init_pos_err_m: tuple = (0.0, 0.0, 0.0)
-    assumptions: dict | None = None
-    prefilter: dict = dataclasses.field(default_factory=dict)
-    filter_options: dict = dataclasses.field(default_factory=dict)
-    p0_att_deg: tuple = (0.05, 0.05, 0.1)
-    chunk_ms: int = 200
-    coherent_ms: int = 20
-    iono_wait_s: float = 30.0
-    mode: str = "deep"
-    gnss_rate_hz: float = 5.0
-
-    def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
-        g = self.gnss_rate_hz
-        m = 1.0 / (_EPOCH_S * g) if isinstance(g, (int, float)) and g > 0 else math.nan
-        if not (math.isfinite(m) and m >= 1.0 - 1e-9 and abs(m - round(m)) < 1e-9):
-            raise ValueError(f"gnss_rate_hz must be 10 Hz divided by a whole number (10, 5, "
-                             f"2.5, 2, 1, ...), got {g!r}")
-        if not isinstance(self.clock, OscillatorSpec) and self.clock not in CLOCK_PRESETS:
-            raise ValueError(f"clock must be one of {', '.join(CLOCK_PRESETS)}, got "
-                             f"{self.clock!r}")
-        if self.noise_policy not in ("cn0", "fixed") or (self.noise_policy == "fixed" and not (
-                self.sigma_range_m and self.sigma_rate_mps)):
-            raise ValueError(f"noise_policy must be 'cn0' or 'fixed' (with sigma_range_m and "
-                             f"sigma_rate_mps > 0), got {self.noise_policy!r}")
-        if self.align not in ("truth", "gnss"):
-            raise ValueError(f"align must be 'truth' or 'gnss', got {self.align!r}")
-        for name in ("filter_rate_hz", "output_rate_hz"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be > 0, got {v!r}")
-        v = self.iono_wait_s
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-            raise ValueError(f"iono_wait_s must be >= 0, got {v!r}")
-        if self.mode != "deep" and self.gnss_rate_hz > self.filter_rate_hz + 1e-9:
-            raise ValueError(f"gnss_rate_hz {self.gnss_rate_hz:g} must not exceed the filter "
-                             f"rate {self.filter_rate_hz:g} Hz")
-
-    @property
-    def gnss_every(self) -> int:
-        """Scalar output epochs (0.1 s) per loose/tight measurement epoch."""
-        return max(1, round(1.0 / (_EPOCH_S * self.gnss_rate_hz)))
-
-
-#: The receiver's settings under a mode-neutral name (the class keeps its first name).
-IntegrationConfig = DeepConfig
-
-
-@dataclasses.dataclass
-class DeepResult:
+class IntegrationResult:
     """Output of a run in any mode (solution rows at the output rate, after feedback).
 
     Attributes
@@ -392,53 +226,19 @@ def _imu_offset_s(source: IfSource, imu) -> float:
     return (imu.week - source.start_week) * 604800.0 + (imu.sow - source.start_sow)
 
 
-def gnss_alignment(v_n, f_b, w_ib_b, g: float = 9.80) -> np.ndarray:
-    """Body-to-ENU rotation from the GNSS velocity and the IMU at one instant (TRIAD).
-
-    Assumes no sideslip (the velocity lies along the body Front axis) and a turn about the
-    specific-force axis: the horizontal centripetal acceleration is ``omega x v`` with
-    ``omega`` the gyro rate about the measured specific force, so the specific force in ENU
-    is ``f_n = omega_up x v_n + (0, 0, g)``. TRIAD then pairs ``f_n`` with the measured
-    ``f_b`` (primary: tilt, including the bank of a coordinated turn) and ``v_n`` with the
-    Front axis (secondary: heading); ``omega_up`` is re-evaluated about the estimated Up axis
-    (4 passes).
-
-    Parameters
-    ----------
-    v_n : (3,) ENU velocity [m/s]; f_b : (3,) specific force [m/s^2] and w_ib_b : (3,)
-        angular rate [rad/s], body Right-Front-Up, averaged around the instant.
-    """
-    v = np.asarray(v_n, float)
-    fb = np.asarray(f_b, float)
-    wb = np.asarray(w_ib_b, float)
-
-    def frame(a, b):
-        t1 = a / np.linalg.norm(a)
-        t2 = np.cross(a, b)
-        t2 /= np.linalg.norm(t2)
-        return np.column_stack([t1, t2, np.cross(t1, t2)])
-
-    up_b = fb / max(np.linalg.norm(fb), 1e-9)     # first guess of the Up axis in the body
-    body = frame(fb, np.array([0.0, 1.0, 0.0]))
-    for _ in range(4):                             # turn rate about the estimated Up axis
-        w_up = float(np.dot(wb, up_b))
-        C = frame(np.array([-w_up * v[1], w_up * v[0], g]), v) @ body.T
-        up_b = C.T @ np.array([0.0, 0.0, 1.0])
-    return C
-
-
-class DeepReceiver:
+class IntegratedReceiver:
     """INS-aided vector-tracking receiver (module notes).
 
     Parameters
     ----------
-    config : DeepConfig, optional
+    config : IntegrationConfig, optional
     scalar : ScalarReceiver, optional
         Start-up receiver (default ``ScalarReceiver(log=False)``).
     """
 
-    def __init__(self, config: DeepConfig | None = None, scalar: ScalarReceiver | None = None):
-        self.config = config or DeepConfig()
+    def __init__(self, config: IntegrationConfig | None = None,
+                 scalar: ScalarReceiver | None = None):
+        self.config = config or IntegrationConfig()
         self.scalar = scalar or ScalarReceiver(log=False)
         self.profile: dict = {}
 
@@ -446,7 +246,7 @@ class DeepReceiver:
     def run(self, source: IfSource, imu, *, prns=None, nav=None, truth=None,
             progress: Callable[[float, int, int], None] | None = None,
             duration_s: float | None = None,
-            assist: dict[int, float | None] | None = None) -> DeepResult:
+            assist: dict[int, float | None] | None = None) -> IntegrationResult:
         """Run the deep receiver over ``source`` with the IMU record ``imu``.
 
         Parameters
@@ -492,10 +292,7 @@ class DeepReceiver:
             raise ValueError(f"filter rate {cfg.filter_rate_hz} Hz must divide the IMU rate "
                              f"{imu.rate_hz} Hz")
         n_per = round(n_per)
-        # filter name check before the (long) start-up
-        make_filter(cfg.filter, InsErrorModel(), RangeRateMeasurementModel(), np.zeros(17),
-                    np.eye(17), np.eye(17), None, dt=1.0 / cfg.filter_rate_hz,
-                    **cfg.filter_options)
+        check_filter(cfg)              # filter name check before the (long) start-up
         if cfg.align == "truth" and truth is None:
             raise ImuDataError("align='truth' needs the reference (truth) file; use "
                                "align='gnss' without one")
@@ -516,7 +313,7 @@ class DeepReceiver:
         def take_up(sample, ephs):
             navdata.offer_decoded(ephs, rx.klobuchar, sample / fs)
             if navdata.iono_source != "broadcast":
-                _offer_subframe_klobuchar(rx, navdata, sample / fs)
+                offer_subframe_klobuchar(rx, navdata, sample / fs)
             engine.ephemerides, engine.iono = navdata, navdata.klobuchar
 
         def after_handover(sample, obs, ephs):
@@ -576,7 +373,7 @@ class DeepReceiver:
 
         t0 = time.perf_counter()
         try:
-            rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=_EPOCH_S,
+            rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=SCALAR_EPOCH_S,
                    stop_sample=stop, assist=assist)
         except BaseException:
             recorder.close()
@@ -602,11 +399,12 @@ class DeepReceiver:
 
     # ------------------------------------------------------------------------------------
     def _vector_loop(self, source, imu, off, n_per, stop, rx, engine, navdata,
-                     hand, truth, progress, t_scalar, t_all) -> DeepResult:
+                     hand, truth, progress, t_scalar, t_all) -> IntegrationResult:
         """Hand-over from the scalar start-up and the vector loop to the end of the file.
 
-        Hand-over: channels (:meth:`_handover_channels`), INS alignment (:meth:`_align_ins`),
-        clock from the fix, integration filter (:meth:`_make_filter`), pre-filters from the
+        Hand-over: channels (:func:`~.handover.handover_channels`), INS alignment
+        (:func:`~.alignment.align_ins`), clock from the fix, integration filter
+        (:func:`~.filter_setup.make_integration_filter`), pre-filters from the
         scalar loops (:meth:`~sdr_di.deep.vector_tracking.VectorTracking.start`). Then the
         mode-independent
         :class:`~sdr_di.integration.loop.IntegrationLoop` runs with
@@ -617,7 +415,7 @@ class DeepReceiver:
         sol = hand["sol"]
         k_h = int(hand["sample"])
         clock = SampleClock.of(engine.builder.rx_time, fs)
-        chans = self._handover_channels(rx, navdata, hand, clock)
+        chans = handover_channels(cfg, rx, navdata, hand, clock)
         # ---- IMU grid: the loop starts on the first IMU sample after the hand-over
         dt_imu = 1.0 / imu.rate_hz
         t_if = imu.t + off                     # IF-relative time of each IMU sample
@@ -625,10 +423,10 @@ class DeepReceiver:
         i_h = max(i_h, 1)
         T = n_per * dt_imu
         k_grid0 = round(t_if[i_h] * fs)
-        ins, llh_fix, att_sig = self._align_ins(imu, truth, sol, t_if, i_h, k_h / fs)
+        ins, llh_fix, att_sig = align_ins(cfg, imu, truth, sol, t_if, i_h, k_h / fs)
         clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
         clk_d = float(sol.clock_drift_mps)
-        kf, process, meas = self._make_filter(T, sol, llh_fix, att_sig)
+        kf, process, meas = make_integration_filter(cfg, T, sol, llh_fix, att_sig)
 
         prof = {"scalar": t_scalar, "read": 0.0, "nco": 0.0, "correlate": 0.0,
                 "prefilter": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
@@ -654,8 +452,9 @@ class DeepReceiver:
 
     def _result(self, loop: IntegrationLoop, clock: SampleClock, prns: tuple, kf,
                 adapt0: float, k_grid0: int, prof: dict, t_all: float,
-                navigation: dict) -> DeepResult:
-        """The loop's rows and the run's profile as a :class:`DeepResult` (every mode)."""
+                navigation: dict) -> IntegrationResult:
+        """The loop's rows and the run's profile as an :class:`IntegrationResult` (every
+        mode)."""
         fs = loop.fs
         k0 = loop.k0
         prof["total"] = time.perf_counter() - t_all
@@ -666,7 +465,7 @@ class DeepReceiver:
         prof["realtime_factor"] = prof["processed_s"] / prof["total"] if prof["total"] else 0.0
         self.profile = prof
         col = loop.columns(len(prns))
-        return DeepResult(
+        return IntegrationResult(
             t=col["t"], week=clock.week, sow=col["sow"], llh=col["llh"], v_n=col["v"],
             att=col["att"], clock_bias_m=col["b"], clock_drift_mps=col["d"], n_used=col["n"],
             att_err=col["ae"], vel_err=col["ve"], pos_err=col["pe"],
@@ -697,12 +496,12 @@ class DeepReceiver:
         i_h = max(int(np.searchsorted(t_if, max(k_h, hand["next_start"]) / fs)), 1)
         T = n_per / imu.rate_hz
         k_grid0 = round(t_if[i_h] * fs)
-        ins, llh_fix, att_sig = self._align_ins(imu, truth, sol, t_if, i_h, k_h / fs)
+        ins, llh_fix, att_sig = align_ins(cfg, imu, truth, sol, t_if, i_h, k_h / fs)
         clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
         clk_d = float(sol.clock_drift_mps)
         loose = cfg.mode == "loose"
         model = LooseMeasurementModel() if loose else RangeRateMeasurementModel()
-        kf, process, meas = self._make_filter(T, sol, llh_fix, att_sig, model)
+        kf, process, meas = make_integration_filter(cfg, T, sol, llh_fix, att_sig, model)
         others = sorted(set(int(p) for p in rx.channels) - set(hand["prns"]))
         prns = tuple(hand["prns"]) + tuple(others)
         prof = {"scalar": 0.0, "measure": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
@@ -726,7 +525,7 @@ class DeepReceiver:
         return {"thread": thread, "loop": loop, "src": src, "clock": clock, "kf": kf,
                 "adapt0": adapt0, "k_grid0": k_grid0, "prof": prof}
 
-    def _finish_scalar_coupled_loop(self, hand, epochs, t_scalar, t_all) -> DeepResult:
+    def _finish_scalar_coupled_loop(self, hand, epochs, t_scalar, t_all) -> IntegrationResult:
         """Loose or tight mode: wait for the loop (:meth:`_start_scalar_coupled_loop`),
         keep the channel columns of the handed-over PRNs and of those the receiver acquired
         later, in that order."""
@@ -746,159 +545,14 @@ class DeepReceiver:
         return self._result(loop, run["clock"], prns, run["kf"], run["adapt0"],
                             run["k_grid0"], prof, t_all, src.navigation)
 
-    # ------------------------------------------------------------------------------------
-    def _handover_channels(self, rx: ScalarReceiver, navdata: NavDataInForce, hand: dict,
-                           clock: SampleClock) -> list[_Chan]:
-        """Vector-loop state of every handed-over channel, from its scalar channel: next
-        code epoch (sample and number on the satellite clock), carrier phase, C/N0, the
-        ephemeris in force at the fix and the navigation decoder with its subframe in
-        progress."""
-        cfg = self.config
-        sol = hand["sol"]
-        S0 = clock.S0
-        chans: list[_Chan] = []
-        for i, prn in enumerate(hand["prns"]):
-            c = rx.channels[prn]
-            s = int(c.next_start)
-            o = c.observation_at(s)
-            eph = navdata.select(prn, sol.week, sol.sow)
-            e = round((o.t_tx_sow - S0) * 1000.0)
-            bit_ms = 20 if c.is_d1 else 2
-            chans.append(_Chan(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s, epoch=e,
-                               phase=float(c.phi),
-                               power=BitPower(max(cfg.cn0_window_ms // bit_ms, 2)),
-                               bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz),
-                               nav=_handover_decoder(c, e, round(S0 * 1000.0))))
-        return chans
-
-    def _align_ins(self, imu, truth, sol, t_if: np.ndarray, i_h: int, t_fix_s: float):
-        """INS at IMU sample ``i_h`` (module notes, *INS initial alignment*).
-
-        Position and velocity are the WLS fix moved to ``t_if[i_h]``; attitude from the
-        reference (``align="truth"``, INS coasting on the IMU from the reference's first
-        record) or from the fix velocity and the IMU (``"gnss"``, :func:`gnss_alignment`).
-
-        Returns
-        -------
-        ins : StrapdownINS
-        llh_fix : (3,) the fix position at ``t_if[i_h]`` [rad, rad, m]
-        att_sig : (3,) initial attitude sigmas (E, N, U) [rad]
-        """
-        cfg = self.config
-        dt_imu = 1.0 / imu.rate_hz
-        r_fix = sol.r_e + sol.v_e * (t_if[i_h] - t_fix_s)
-        llh_fix = ecef_to_llh(r_fix)
-        if cfg.align == "truth":
-            ins = StrapdownINS(truth.llh[0], truth.v_n[0], C_b_n=truth.C_b_n[0],
-                               t=float(imu.t[0]))
-            ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], dt_imu)
-            for i in range(1, i_h + 1):
-                ins.step(imu.f_b[i], imu.w_ib_b[i], float(imu.t[i] - imu.t[i - 1]))
-            ins.llh = np.array(llh_fix, float)
-            ins.v_n = np.array(sol.v_n, float)
-            att_sig = np.radians(np.asarray(cfg.p0_att_deg, float))
-        else:
-            v = np.asarray(sol.v_n, float)
-            sp = math.hypot(v[0], v[1])
-            if sp < 2.0:
-                raise HandoverError(f"align='gnss' needs a moving receiver at the hand-over "
-                                    f"(horizontal speed {sp:.2f} m/s < 2 m/s)")
-            lo, hi = max(i_h - 10, 0), min(i_h + 11, len(imu.t))
-            C0 = gnss_alignment(v, imu.f_b[lo:hi].mean(axis=0), imu.w_ib_b[lo:hi].mean(axis=0))
-            ins = StrapdownINS(llh_fix, v, C_b_n=C0, t=float(imu.t[i_h]))
-            ins.set_previous_increments(imu.f_b[i_h], imu.w_ib_b[i_h], dt_imu)
-            att_sig = np.radians([3.0, 3.0, 5.0])
-        _inject_initial_errors(ins, cfg)
-        return ins, llh_fix, att_sig
-
-    def _make_filter(self, T: float, sol, llh_fix, att_sig, meas=None):
-        """Integration filter of the configured name over interval ``T`` [s].
-
-        ``Q`` from the IMU spec and the clock model (:func:`~sdr_di.ins.error_model.
-        process_noise`); ``P0``: the attitude sigmas ``att_sig``, 0.1 m/s, the fix's
-        position sigma (at least 1 m; 1.5x for height and clock bias), the bias specs and
-        0.1 m/s of clock drift.
-
-        ``meas``: the filter's measurement model (default
-        :class:`~sdr_di.integration.measurements.RangeRateMeasurementModel`; loose:
-        :class:`~sdr_di.integration.measurements.LooseMeasurementModel`).
-
-        Returns
-        -------
-        kf, process (InsErrorModel), meas (the filter's measurement model)
-        """
-        cfg = self.config
-        gb, ab = cfg.imu.gyro_bias_si, cfg.imu.accel_bias_si
-        Q0 = process_noise(T, gyro_random_walk_si=cfg.imu.gyro_random_walk_si,
-                           accel_random_walk_si=cfg.imu.accel_random_walk_si,
-                           gyro_bias_si=gb, accel_bias_si=ab, bias_time_s=cfg.bias_time_s,
-                           clock=clock_model(cfg.clock))
-        lat0, h0 = float(llh_fix[0]), float(llh_fix[2])
-        R_M, R_N = (float(r) for r in radii_of_curvature(lat0))
-        cov = np.asarray(sol.cov, float)
-        s_pos = math.sqrt(max(np.trace(cov[:3, :3]) / 3.0, 0.25)) if np.all(
-            np.isfinite(cov[:3, :3])) else 2.0
-        s_pos = max(s_pos, 1.0)
-        s_vel = np.full(3, 0.1) if cfg.p0_vel_mps is None else np.asarray(cfg.p0_vel_mps)
-        s_enu = np.array([s_pos, s_pos, 1.5 * s_pos]) if cfg.p0_pos_m is None else np.maximum(
-            np.asarray(cfg.p0_pos_m, float), [s_pos, s_pos, 1.5 * s_pos])
-        s_clk = [1.5 * s_pos, 0.1]
-        for i, v in enumerate(cfg.p0_clock or (None, None)):
-            if v is not None:
-                s_clk[i] = v
-        p0 = np.r_[att_sig ** 2, s_vel ** 2,
-                   (s_enu[1] / (R_M + h0)) ** 2, (s_enu[0] / ((R_N + h0) * math.cos(lat0))) ** 2,
-                   s_enu[2] ** 2, [gb ** 2] * 3, [ab ** 2] * 3, s_clk[0] ** 2, s_clk[1] ** 2]
-        process = InsErrorModel(clock_model(cfg.clock))
-        meas = RangeRateMeasurementModel() if meas is None else meas
-        kf = make_filter(cfg.filter, process, meas, np.zeros(17), np.diag(p0), Q0, None, dt=T,
-                         **cfg.filter_options)
-        return kf, process, meas
 
 
-def _inject_initial_errors(ins: StrapdownINS, cfg: DeepConfig) -> None:
-    """Add the configured initial errors to the aligned INS (errors = computed - true, as the
-    filter's states): attitude ``C_b_n <- exp(-[phi x]) C_b_n`` for the ENU rotation vector
-    ``phi``, velocity ``v_n += dv``, position ``+= (dE, dN, dU)`` [m] (the INS feedback
-    :meth:`~sdr_di.ins.mechanization.StrapdownINS.correct` with the errors negated)."""
-    phi = np.radians(np.asarray(cfg.init_att_err_deg, float))
-    dv = np.asarray(cfg.init_vel_err_mps, float)
-    dp = np.asarray(cfg.init_pos_err_m, float)
-    if not (np.any(phi) or np.any(dv) or np.any(dp)):
-        return
-    lat, h = float(ins.llh[0]), float(ins.llh[2])
-    R_M, R_N = (float(r) for r in radii_of_curvature(lat))
-    dllh = np.array([dp[1] / (R_M + h), dp[0] / ((R_N + h) * math.cos(lat)), dp[2]])
-    ins.correct(-phi, -dv, -dllh)
-
-
-def _offer_subframe_klobuchar(rx: ScalarReceiver, navdata: NavDataInForce, t_s: float) -> None:
-    """Offer the Klobuchar set of the latest D1 subframe 1 any scalar channel decoded (the
-    channels give the coefficients only with a complete ephemeris, up to 18 s later)."""
-    for c in rx.channels.values():
-        for d in reversed(c.subframes[-5:]):
-            k = klobuchar_of_subframe(d)
-            if k is not None:
-                navdata.offer_klobuchar(k, t_s)
-                return
-
-
-def _handover_decoder(sc, epoch: int, ms0: int) -> ChannelNavDecoder:
-    """Navigation decoder of a handed-over channel.
-
-    It takes the scalar channel ``sc``'s assembler, the bits of its subframe in progress and
-    the subframes it still held for the lock confirmation, which wait for the loop's own
-    test (:mod:`~sdr_di.deep.navdecode` notes). ``sc``'s epoch counter moves to the loop's
-    numbering, in which ``sc``'s next epoch is ``epoch``; ``ms0`` is the satellite-clock
-    millisecond of the week of loop epoch 0 (a held subframe's end, an epoch edge after its
-    last bit, becomes the bit number ``ceil((ms0 + loop epoch) / bit_ms)``).
-    """
-    dec = ChannelNavDecoder(sc.prn, sc.is_d1, ms0, sc.assembler)
-    shift = epoch - int(sc.epoch)            # loop epoch = scalar epoch + shift
-    for end, sf in sc.take_unconfirmed():
-        dec.hold(sf, -(-(ms0 + end + shift) // dec.bit_ms))
-    runs = sc.demodulated_bits()
-    if runs:
-        e0, bits = runs[-1]
-        dec.seed(e0 + shift, bits)
-    return dec
+#: Names of the first release (deep mode came first), kept for one release.
+__getattr__ = forwarding_getattr(__name__, {
+    "DeepConfig": f"{__name__}:IntegrationConfig",
+    "DeepReceiver": f"{__name__}:IntegratedReceiver",
+    "DeepResult": f"{__name__}:IntegrationResult",
+    # helpers that moved to the named modules of the hand-over, alignment, filter set-up
+    "clock_model": "sdr_di.integration.filter_setup",
+    "gnss_alignment": "sdr_di.integration.alignment",
+    "_handover_decoder": "sdr_di.integration.handover:handover_decoder"})

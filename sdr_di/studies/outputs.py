@@ -19,10 +19,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import plotting
+from ..experiments import plotting
 from .aggregate import single_stats
 from .execute import write_json
-from .registry import Experiment
+from ..experiments.registry import Experiment
 from .tables import stats_rows, write_table
 
 __all__ = ["write_campaign_outputs", "write_single_outputs"]

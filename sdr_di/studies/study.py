@@ -8,7 +8,7 @@ Execution
   seed, so that the files of a seed are generated once, reused by every cell that can, and
   deleted when the seed's last task is done.
 * **File cache** (``DIR/cache``): a generated file is kept under a hash of only the
-  scenario keys it depends on (:func:`~._deep.file_keys`): cells that differ in IMU errors
+  scenario keys it depends on (:func:`~sdr_di.experiments._deep.file_keys`): cells that differ in IMU errors
   share the IF file, cells that differ in the filter's assumptions, the mode or the filter
   rate share every file. Local workers share the folder; on a cluster whose workers do not
   see ``DIR``, each generates its own (correct, slower).
@@ -16,11 +16,11 @@ Execution
   cluster by default, ``scheduler`` for a cluster; ``workers=0`` runs them in this process).
   Each record is written to ``runs/<cell>_<seed>.json`` the moment it arrives, so a killed
   worker loses only its task and an interrupted study keeps what it had.
-* **Resumption**: ``study.json`` holds the spec hash (:attr:`~.study_spec.StudySpec.hash`).
+* **Resumption**: ``study.json`` holds the spec hash (:attr:`~.spec.StudySpec.hash`).
   Re-running the same spec into the same folder skips every (cell, seed) with a record of
   that hash (except tasks lost with their worker, which run again); a different spec is
   refused unless ``force``. A forced rerun keeps every run whose cell run key
-  (:meth:`~.study_spec.StudySpec.run_key`: what decides the cell's runs, not its name, the
+  (:meth:`~.spec.StudySpec.run_key`: what decides the cell's runs, not its name, the
   other cells or the claims) is unchanged, moved under the cell's new index, and removes the
   others: adding a cell (say, the combination that one-factor results point to) or rewording
   a claim reruns nothing else. ``runs`` may grow: the first seeds are the same.
@@ -42,7 +42,7 @@ import numpy as np
 
 from ..errors import StudyError
 from ..io.atomic import ensure_output_dir
-from ._deep import FILE_CACHE
+from ..experiments._deep import FILE_CACHE
 from .campaign import _client, _quiet_on_sigint, run_seed
 from .execute import (
     execute_run,
@@ -52,11 +52,11 @@ from .execute import (
     write_run_record,
 )
 from .paired import Comparison, claim_verdict, compare_pair, holm
-from .registry import get_experiment
-from .study_spec import QUANTITY_KEYS, StudySpec, spec_summary
+from ..experiments.registry import get_experiment
+from .spec import QUANTITY_KEYS, StudySpec, spec_summary
 from .tables import write_table
 from .tasks import Task, run_tasks, run_tasks_here
-from .variants import entry_label
+from ..experiments.variants import entry_label
 
 __all__ = ["StudyResult", "execute_cell_run", "run_study", "summarize_study"]
 
@@ -155,7 +155,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
     Parameters
     ----------
     spec : StudySpec
-        :func:`~.study_spec.load_study`.
+        :func:`~.spec.load_study`.
     out_dir : path
         Output folder.
     runs : int, optional

@@ -1,0 +1,160 @@
+"""Settings of the integrated receiver in any coupling mode: :class:`IntegrationConfig`.
+
+The reasons for the defaults are the notes of :mod:`sdr_di.integration.receiver`. This module
+imports nothing of the receiver, so the measurement sources (deep mode's
+:mod:`~sdr_di.deep.vector_tracking`) can name the settings without an import circle.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from ..ins.imu import ImuErrorModel
+from ..oscillator import CLOCK_PRESETS, OscillatorSpec
+
+__all__ = ["MODES", "SCALAR_EPOCH_S", "IntegrationConfig"]
+
+#: Coupling modes of :class:`IntegratedReceiver` (receiver notes).
+MODES = ("deep", "loose", "tight")
+#: Interval of the scalar start-up's output epochs (the hand-over rule runs on them) [s].
+SCALAR_EPOCH_S = 0.1
+
+
+@dataclasses.dataclass
+class IntegrationConfig:
+    """Settings of the receiver in any coupling mode (receiver notes give the reasons for the
+    defaults).
+
+    Attributes
+    ----------
+    mode : str
+        ``"deep"`` (the filter closes the tracking loops), ``"loose"`` (WLS fixes) or
+        ``"tight"`` (pseudoranges and rates): :data:`MODES`.
+    gnss_rate_hz : float
+        Measurement rate of loose and tight [Hz] (receiver notes): 10 Hz divided by a whole
+        number, at most the filter rate; unused in deep mode.
+    filter : str
+        Integration filter (registry name, :data:`sdr_di.filters.FILTER_NAMES`).
+    filter_rate_hz : float
+        Integration-filter and NCO-command rate [Hz]; must divide the IMU rate.
+    output_rate_hz : float
+        Solution rows [Hz] (paper 004: 5 Hz).
+    align : str
+        ``"truth"`` or ``"gnss"`` (receiver notes).
+    handover_wait_s : float
+        Seconds after the first fix to wait for every tracked channel before handing over
+        with at least 4.
+    cn0_min_dbhz, cn0_hysteresis_db, cn0_window_ms, fast_margin_db, loss_margin_db, nis_p_min
+        Channel management (receiver notes): C/N0 gate [dB-Hz] and its hysteresis [dB], C/N0
+        window [ms], the thresholds of the 60 ms and 120 ms tests below the gate [dB], and
+        the pre-filter NIS test's false-alarm probability.
+    coherent_ms : int
+        Longest coherent pre-filter block [ms] (receiver notes); blocks never cross a data
+        bit, so D1 channels use at most 20 ms and D2 channels 2 ms. 1 = one update per
+        code epoch.
+    imu : ImuErrorModel
+        IMU spec for ``Q`` and ``P0`` (random walks, biases; default paper 004 Table 4).
+    bias_time_s : float
+        Time for the bias random walk to reach the spec [s].
+    clock : str or OscillatorSpec
+        Receiver oscillator the clock states' process noise assumes (paper 004 eq 4): a
+        preset of :data:`~sdr_di.oscillator.CLOCK_PRESETS` (``"tcxo"``, the default,
+        ``"ocxo"``, ``"ideal"``; Brown & Hwang) or an ``OscillatorSpec``; its flicker term
+        is mapped into the two-state model (:func:`clock_model`).
+    noise_policy, sigma_range_m, sigma_rate_mps
+        The filter's ``R``: ``"cn0"`` (pre-filter variances, from C/N0) or ``"fixed"``
+        (these sigmas [m, m/s] on every range and range rate).
+    p0_vel_mps, p0_pos_m : tuple or None
+        ``P0`` sigmas (E, N, U) [m/s, m]; None: 0.1 m/s and the fix's position sigma (at
+        least 1 m). A given position sigma is floored by the fix's.
+    p0_clock : tuple or None
+        ``(clock bias [m], clock drift [m/s])`` sigmas of ``P0`` (None for either: the
+        fix's 1.5x position sigma and 0.1 m/s).
+    init_att_err_deg, init_vel_err_mps, init_pos_err_m : tuple
+        Errors injected into the INS at the alignment (E, N, U): attitude as a rotation
+        vector (computed = exp(-[phi x]) true; U = heading) [deg], velocity [m/s],
+        position [m] (docs/assumptions.md).
+    assumptions : dict or None
+        Record of the assumptions applied (:func:`~sdr_di.integration.assumptions.
+        apply_to_deep`), written into the run's summary.
+    prefilter : dict
+        Keyword arguments of :class:`~sdr_di.deep.prefilter.PreFilterBank`.
+    filter_options : dict
+        Options of :func:`~sdr_di.filters.make_filter` (e.g. ``window`` of ``ff-aukf``).
+    p0_att_deg : tuple
+        Initial attitude sigmas (E, N, U) [deg] for ``align="truth"`` (``"gnss"`` uses
+        (3, 3, 5) deg: the no-sideslip, coordinated-turn assumptions).
+    chunk_ms : int
+        Samples read per refill [ms].
+    iono_wait_s : float
+        Seconds after the first fix the hand-over waits for ionosphere coefficients (from the
+        assistance file or the signal) before it goes ahead without them, with a warning;
+        the loop switches the model on when they are decoded (receiver notes).
+    """
+
+    filter: str = "ff-aukf"
+    filter_rate_hz: float = 50.0
+    output_rate_hz: float = 5.0
+    align: str = "truth"
+    handover_wait_s: float = 6.0
+    cn0_min_dbhz: float = 20.0
+    cn0_window_ms: int = 200
+    fast_margin_db: float = 3.0
+    loss_margin_db: float = 6.0
+    cn0_hysteresis_db: float = 2.0
+    nis_p_min: float = 1e-4
+    imu: ImuErrorModel = dataclasses.field(default_factory=ImuErrorModel)
+    bias_time_s: float = 3600.0
+    clock: str | OscillatorSpec = "tcxo"
+    noise_policy: str = "cn0"
+    sigma_range_m: float | None = None
+    sigma_rate_mps: float | None = None
+    p0_vel_mps: tuple | None = None
+    p0_pos_m: tuple | None = None
+    p0_clock: tuple | None = None
+    init_att_err_deg: tuple = (0.0, 0.0, 0.0)
+    init_vel_err_mps: tuple = (0.0, 0.0, 0.0)
+    init_pos_err_m: tuple = (0.0, 0.0, 0.0)
+    assumptions: dict | None = None
+    prefilter: dict = dataclasses.field(default_factory=dict)
+    filter_options: dict = dataclasses.field(default_factory=dict)
+    p0_att_deg: tuple = (0.05, 0.05, 0.1)
+    chunk_ms: int = 200
+    coherent_ms: int = 20
+    iono_wait_s: float = 30.0
+    mode: str = "deep"
+    gnss_rate_hz: float = 5.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {self.mode!r}")
+        g = self.gnss_rate_hz
+        m = 1.0 / (SCALAR_EPOCH_S * g) if isinstance(g, (int, float)) and g > 0 else math.nan
+        if not (math.isfinite(m) and m >= 1.0 - 1e-9 and abs(m - round(m)) < 1e-9):
+            raise ValueError(f"gnss_rate_hz must be 10 Hz divided by a whole number (10, 5, "
+                             f"2.5, 2, 1, ...), got {g!r}")
+        if not isinstance(self.clock, OscillatorSpec) and self.clock not in CLOCK_PRESETS:
+            raise ValueError(f"clock must be one of {', '.join(CLOCK_PRESETS)}, got "
+                             f"{self.clock!r}")
+        if self.noise_policy not in ("cn0", "fixed") or (self.noise_policy == "fixed" and not (
+                self.sigma_range_m and self.sigma_rate_mps)):
+            raise ValueError(f"noise_policy must be 'cn0' or 'fixed' (with sigma_range_m and "
+                             f"sigma_rate_mps > 0), got {self.noise_policy!r}")
+        if self.align not in ("truth", "gnss"):
+            raise ValueError(f"align must be 'truth' or 'gnss', got {self.align!r}")
+        for name in ("filter_rate_hz", "output_rate_hz"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be > 0, got {v!r}")
+        v = self.iono_wait_s
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            raise ValueError(f"iono_wait_s must be >= 0, got {v!r}")
+        if self.mode != "deep" and self.gnss_rate_hz > self.filter_rate_hz + 1e-9:
+            raise ValueError(f"gnss_rate_hz {self.gnss_rate_hz:g} must not exceed the filter "
+                             f"rate {self.filter_rate_hz:g} Hz")
+
+    @property
+    def gnss_every(self) -> int:
+        """Scalar output epochs (0.1 s) per loose/tight measurement epoch."""
+        return max(1, round(1.0 / (SCALAR_EPOCH_S * self.gnss_rate_hz)))

@@ -1,0 +1,148 @@
+"""The package tree (issue 27 item 1): old import names still work for one release with a
+DeprecationWarning, the new names import without one, and no module imports another that
+imports it back."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import pytest
+
+import sdr_di
+
+PKG = Path(sdr_di.__file__).parent
+
+#: old module -> new module
+MOVED_MODULES = {
+    "sdr_di.deep.vector_loop": "sdr_di.integration.receiver",
+    "sdr_di.deep.run_deep": "sdr_di.integration.run_integrated",
+    "sdr_di.experiments.study_spec": "sdr_di.studies.spec",
+    "sdr_di.experiments.report": "sdr_di.studies.campaign_report",
+    **{f"sdr_di.experiments.{m}": f"sdr_di.studies.{m}" for m in (
+        "aggregate", "campaign", "commands", "execute", "outputs", "paired", "single_run",
+        "study", "study_report", "tables", "tasks")},
+}
+
+#: (old module, old name) -> (new module, new name)
+MOVED_NAMES = {
+    ("sdr_di.deep", "DeepReceiver"): ("sdr_di.integration.receiver", "IntegratedReceiver"),
+    ("sdr_di.deep", "DeepConfig"): ("sdr_di.integration.config", "IntegrationConfig"),
+    ("sdr_di.deep", "IntegrationConfig"): ("sdr_di.integration.config", "IntegrationConfig"),
+    ("sdr_di.deep", "DeepResult"): ("sdr_di.integration.receiver", "IntegrationResult"),
+    ("sdr_di.deep", "HandoverError"): ("sdr_di.integration.handover", "HandoverError"),
+    ("sdr_di.deep", "MODES"): ("sdr_di.integration.config", "MODES"),
+    ("sdr_di.integration.receiver", "DeepConfig"): ("sdr_di.integration.config",
+                                                    "IntegrationConfig"),
+    ("sdr_di.integration.receiver", "DeepReceiver"): ("sdr_di.integration.receiver",
+                                                      "IntegratedReceiver"),
+    ("sdr_di.integration.receiver", "clock_model"): ("sdr_di.integration.filter_setup",
+                                                     "clock_model"),
+    ("sdr_di.integration.receiver", "gnss_alignment"): ("sdr_di.integration.alignment",
+                                                        "gnss_alignment"),
+    ("sdr_di.experiments", "run_campaign"): ("sdr_di.studies.campaign", "run_campaign"),
+    ("sdr_di.experiments", "render_report"): ("sdr_di.studies.campaign_report",
+                                              "render_report"),
+    ("sdr_di.experiments", "run_experiment"): ("sdr_di.studies.single_run",
+                                               "run_experiment"),
+}
+
+
+@pytest.mark.parametrize("old, new", sorted(MOVED_MODULES.items()))
+def test_old_module_names_import_the_new_modules_with_a_warning(old, new):
+    sys.modules.pop(old, None)
+    with pytest.warns(DeprecationWarning, match=f"{old} is deprecated.*{new}") as rec:
+        mod = importlib.import_module(old)
+    assert mod is importlib.import_module(new)
+    assert mod.__spec__.name == new               # the module keeps its own identity
+    assert rec[0].filename == __file__            # the warning points at the importer
+
+
+@pytest.mark.parametrize("old, new", sorted(MOVED_NAMES.items()))
+def test_old_names_resolve_to_the_new_objects_with_a_warning(old, new):
+    with pytest.warns(DeprecationWarning, match=f"{old[0]}.{old[1]} is deprecated"):
+        obj = getattr(importlib.import_module(old[0]), old[1])
+    assert obj is getattr(importlib.import_module(new[0]), new[1])
+
+
+def test_unknown_names_still_raise_attribute_error():
+    import sdr_di.deep
+    import sdr_di.experiments
+
+    for mod in (sdr_di.deep, sdr_di.experiments, importlib.import_module(
+            "sdr_di.integration.receiver")):
+        with pytest.raises(AttributeError), warnings.catch_warnings():
+            warnings.simplefilter("error")
+            mod.no_such_name          # noqa: B018
+
+
+def test_new_names_import_without_deprecation_warnings():
+    """Every module of the package, the CLI and the scripts' imports: no DeprecationWarning
+    from sdr-di's own old names (a fresh interpreter, warnings as errors)."""
+    mods = sorted(".".join(p.relative_to(PKG.parent).with_suffix("").parts)
+                  for p in PKG.rglob("*.py") if p.name != "__init__.py")
+    code = ("import importlib, warnings\n"
+            "warnings.filterwarnings('error', message='.*is deprecated and will be removed',"
+            " category=DeprecationWarning)\n"
+            f"for m in {mods!r}:\n    importlib.import_module(m)\n")
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """sdr_di's module graph: module-level imports (TYPE_CHECKING blocks included)."""
+    mods = {}
+    for p in PKG.rglob("*.py"):
+        rel = p.relative_to(PKG.parent).with_suffix("")
+        mods[".".join(rel.parts[:-1] if rel.name == "__init__" else rel.parts)] = p
+    graph = {}
+    for name, p in mods.items():
+        pkg = name if p.name == "__init__.py" else name.rpartition(".")[0]
+        body = list(ast.parse(p.read_text()).body)
+        for n in list(body):
+            if isinstance(n, ast.If):
+                body += n.body
+        deps = set()
+        for n in body:
+            if isinstance(n, ast.ImportFrom):
+                base = pkg
+                for _ in range(n.level - 1):
+                    base = base.rpartition(".")[0]
+                m = (f"{base}.{n.module}" if n.module else base) if n.level else n.module
+                for a in n.names:
+                    deps.add(f"{m}.{a.name}" if f"{m}.{a.name}" in mods else m)
+            elif isinstance(n, ast.Import):
+                deps.update(a.name for a in n.names)
+        graph[name] = {d for d in deps if d in mods and d != name}
+    return graph
+
+
+def test_no_module_import_cycles():
+    """No module-level import circle (deep/vector_loop <-> deep/vector_tracking was one)."""
+    graph = _import_graph()
+    state: dict[str, int] = {}
+    cycles = []
+
+    def visit(v, path):
+        state[v] = 1
+        for w in graph[v]:
+            if state.get(w) == 1:
+                cycles.append(path[path.index(w):] + [w])
+            elif w not in state:
+                visit(w, path + [w])
+        state[v] = 2
+
+    for v in sorted(graph):
+        if v not in state:
+            visit(v, [v])
+    assert not cycles, cycles
+
+
+def test_studies_import_experiments_never_the_reverse():
+    graph = _import_graph()
+    up = {(a, b) for a, deps in graph.items() for b in deps
+          if a.startswith("sdr_di.experiments") and b.startswith("sdr_di.studies")}
+    assert not up, up
