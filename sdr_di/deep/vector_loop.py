@@ -109,7 +109,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import ImuDataError, SdrDiError
-from ..filters import make_filter
+from ..filters import filter_record, make_filter
 from ..frames import ecef_to_llh, radii_of_curvature
 from ..ins.error_model import ClockModel, InsErrorModel, process_noise
 from ..ins.imu import ImuErrorModel
@@ -323,6 +323,8 @@ class DeepResult:
         over the filter epochs since the previous row (about 1 when ``R`` is consistent)
     handover_s : time of the hand-over [s since file start]
     filter_name : str;  adaptation_s : float (time in the adaptive rule, if any)
+    filter_used : dict, the built filter's record (:func:`~sdr_di.filters.filter_record`:
+        spec, class, options, Q0/P0 diagonals), the summary's ``assumptions.filter``
     profile : dict (seconds per stage: scalar, read, nco, correlate, prefilter, filter, ins)
     nav_change : (n,) int, navigation data taken up since the previous row: 0 none, bit 1
         an ephemeris, bit 2 the ionosphere model
@@ -353,6 +355,7 @@ class DeepResult:
     nav_change: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, int))
     navigation: dict = dataclasses.field(default_factory=dict)
     mode: str = "deep"
+    filter_used: dict | None = None
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
@@ -673,7 +676,8 @@ class DeepReceiver:
             prns=prns, used=col["used"], cn0_dbhz=col["cn0"],
             nis=col["nis"], handover_s=k_grid0 / fs, filter_name=kf.name,
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
-            nav_change=col["nav"], navigation=navigation, mode=self.config.mode)
+            nav_change=col["nav"], navigation=navigation, mode=self.config.mode,
+            filter_used=getattr(self, "filter_used", None))
 
     # ------------------------------------------------------------------------------------
     def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, rx, engine, hand,
@@ -853,6 +857,8 @@ class DeepReceiver:
         meas = RangeRateMeasurementModel() if meas is None else meas
         kf = make_filter(cfg.filter, process, meas, np.zeros(17), np.diag(p0), Q0, None, dt=T,
                          **cfg.filter_options)
+        # the summary's record of what the filter uses, read from the built filter
+        self.filter_used = filter_record(kf, cfg.filter, cfg.filter_options)
         return kf, process, meas
 
 
