@@ -15,7 +15,8 @@ entry-point group ``sdr_di.filters``
     ``[project.entry-points."sdr_di.filters"]``; the name is loaded on first use;
 ``package.module:Attribute``
     an import path, anywhere a filter name is taken (``--filter``, study specs); the module
-    must be importable (on ``sys.path``: installed, or run from the folder that holds it).
+    must be importable: installed, on ``PYTHONPATH``, or under the current folder (a module
+    not found on ``sys.path`` is looked for there, as ``python -m`` does).
 
 A plugin that cannot be imported, is not callable, or returns an object without the interface
 raises :class:`~sdr_di.errors.FilterError` (one line; the CLI exits 2 before any work).
@@ -25,6 +26,8 @@ from __future__ import annotations
 
 import importlib
 import importlib.metadata
+import os
+import sys
 from collections.abc import Callable
 
 import numpy as np
@@ -103,12 +106,27 @@ def is_import_path(name: str) -> bool:
     return ":" in str(name)
 
 
+def _import_module(mod_name: str):
+    """``importlib.import_module``; a module not found is looked for in the current folder
+    too, as ``python -m`` does (the ``sdr-di`` script's own folder is on ``sys.path``, the
+    folder it is run from is not)."""
+    try:
+        return importlib.import_module(mod_name)
+    except ModuleNotFoundError as exc:
+        cwd = os.getcwd()
+        top = mod_name.partition(".")[0]
+        if exc.name not in (top, mod_name) or cwd in sys.path or "" in sys.path:
+            raise
+        sys.path.append(cwd)
+        return importlib.import_module(mod_name)
+
+
 def _import(path: str) -> Callable:
     mod_name, _, attr = path.partition(":")
     if not mod_name or not attr:
         raise FilterError(f"filter {path!r}: an import path is package.module:Name")
     try:
-        obj = importlib.import_module(mod_name)
+        obj = _import_module(mod_name)
     except Exception as exc:  # ImportError, or the module's own error while importing
         raise FilterError(f"filter {path!r}: cannot import {mod_name!r} "
                           f"({type(exc).__name__}: {exc})") from None
