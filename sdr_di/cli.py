@@ -570,6 +570,9 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     kw = {"filter": name}
     if spec.options:
         kw["filter_options"] = {**st.filter_options, **spec.options}
+    # a plugin's interface, before the output folder is made
+    _probe_filter(name, {**st.options_by_filter.get(name, {}),
+                         **kw.get("filter_options", st.filter_options)}, 1.0)
     for opt, key in ((args.q_scale, "q_scale"), (args.r_scale, "r_scale")):
         if opt is not None:
             if not opt > 0:
