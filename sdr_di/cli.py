@@ -260,9 +260,12 @@ def _add_run(sub) -> None:
                    "their predicted Doppler (a cold start with assistance data)")
     _add_file_options(p)
     g = p.add_argument_group("deep, loose and tight modes")
-    g.add_argument("--filter", default=None,
-                   help="integration filter (default ff-aukf; any of ekf, ukf, ckf, ff-aukf, "
-                   "rae-aukf, ml-q-ukf, sage-husa-ukf, q-scaling-ekf, q-scaling-ukf, ml-r-ckf)")
+    g.add_argument("--filter", default=None, metavar="NAME[:OPT=VALUE...]",
+                   help="integration filter and its options (default ff-aukf; any of ekf, "
+                   "ukf, ckf, ff-aukf, rae-aukf, ml-q-ukf, sage-husa-ukf, q-scaling-ekf, "
+                   "q-scaling-ukf, ml-r-ckf, a plugin name, or an import path "
+                   "package.module:Name; e.g. ff-aukf:q_states=nominal; sdr-di filters "
+                   "lists the options)")
     g.add_argument("--imu", type=Path, default=None,
                    help="IMU file (default: the sidecar's imu_file)")
     g.add_argument("--truth", type=Path, default=None,
@@ -401,12 +404,9 @@ def _check_if_file(path: Path) -> None:
 
 
 def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
-    """Filter name, and a filter rate that divides the IMU rate, before the start-up."""
-    from .filters import FILTER_NAMES
-
-    if cfg.filter not in FILTER_NAMES:
-        raise UsageError(f"--filter: unknown filter {cfg.filter!r}; valid names: "
-                         f"{', '.join(FILTER_NAMES)}")
+    """Filter (built with its options: a plugin's import and interface), and a filter rate
+    that divides the IMU rate, before the start-up."""
+    _probe_filter(cfg.filter, cfg.filter_options, 1.0 / cfg.filter_rate_hz)
     if args.filter_rate is None:
         return
     from .integration.run_integrated import companion_files
@@ -421,12 +421,25 @@ def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
                              f"rate {rate:g} Hz of {imu_path}")
 
 
-def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
-    from .integration.run_integrated import run_deep
-    from .integration.receiver import IntegrationConfig
+def _probe_filter(name: str, options: dict, dt: float) -> None:
+    """Build the integration filter once on the 17-state models (FilterError: one line)."""
+    import numpy as np
 
-    # the filter name is checked by the receiver before its start-up (make_filter)
-    kw = {"filter": (args.filter or "ff-aukf").strip().lower(), "output_rate_hz": args.rate,
+    from .filters import make_filter
+    from .ins.error_model import InsErrorModel
+    from .integration.measurements import RangeRateMeasurementModel
+
+    make_filter(name, InsErrorModel(), RangeRateMeasurementModel(), np.zeros(17), np.eye(17),
+                np.eye(17), None, dt=dt, **options)
+
+
+def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
+    from .filters import parse_filter_spec
+    from .integration.receiver import IntegrationConfig
+    from .integration.run_integrated import run_deep
+
+    spec = parse_filter_spec(args.filter or "ff-aukf")  # typed options; FilterError: exit 2
+    kw = {"filter": spec.name, "filter_options": spec.options, "output_rate_hz": args.rate,
           "mode": args.mode}
     if args.gnss_rate is not None:
         kw["gnss_rate_hz"] = args.gnss_rate
@@ -491,8 +504,10 @@ def _add_lc(sub) -> None:
     p.add_argument("--scenario", type=Path, default=None,
                    help="scenario TOML with an optional [lc] table (default: "
                    "signals/default.toml)")
-    p.add_argument("--filter", default=None, help="filter name (ekf, ukf, ckf, ff-aukf, "
-                   "rae-aukf, ml-q-ukf, sage-husa-ukf, q-scaling-ekf, q-scaling-ukf, ml-r-ckf)")
+    p.add_argument("--filter", default=None, metavar="NAME[:OPT=VALUE...]",
+                   help="filter and its options (sdr-di filters lists them): ekf, ukf, ckf, "
+                   "ff-aukf, rae-aukf, ml-q-ukf, sage-husa-ukf, q-scaling-ekf, q-scaling-ukf, "
+                   "ml-r-ckf, a plugin name, or an import path package.module:Name")
     p.add_argument("--duration", type=float, default=None, metavar="S", help="run length [s]")
     p.add_argument("--out", type=Path, default=None,
                    help="output directory of the error CSV (default: signals/out)")
@@ -518,8 +533,8 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     import json
     import math
 
-    from .errors import FilterError, ImuDataError, ScenarioError
-    from .filters import FILTER_NAMES
+    from .errors import ImuDataError, ScenarioError
+    from .filters import parse_filter_spec
     from .ins.imu import ImuErrorModel
     from .integration.assumptions import apply_to_lc, resolve_assumptions
     from .integration.loose import (
@@ -538,10 +553,14 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     filter_imu = None
     if assumed is not None:
         st, filter_imu = apply_to_lc(st, assumed)
-    name = (args.filter or st.filter).strip().lower()
-    if name not in FILTER_NAMES:
-        raise FilterError(f"unknown filter {name!r}; valid names: {', '.join(FILTER_NAMES)}")
+    spec = parse_filter_spec(args.filter or st.filter)  # typed options; FilterError: exit 2
+    name = spec.name
     kw = {"filter": name}
+    if spec.options:
+        kw["filter_options"] = {**st.filter_options, **spec.options}
+    # a plugin's interface, before the output folder is made
+    _probe_filter(name, {**st.options_by_filter.get(name, {}),
+                         **kw.get("filter_options", st.filter_options)}, 1.0)
     for opt, key in ((args.q_scale, "q_scale"), (args.r_scale, "r_scale")):
         if opt is not None:
             if not opt > 0:
@@ -587,8 +606,9 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     out = ensure_output_dir(out)  # created only now that every input is checked
     model = filter_imu or model  # the filter's IMU spec: assumed, else the truth's
     res = run_loose(truth, imu, model, st, seed=seed, duration_s=args.duration)
-    csv = res.write_csv(out / f"{sc.name}_lc_{name}.csv")
-    summary = out / f"{sc.name}_lc_{name}_summary.json"
+    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", name)  # an import path's ':' out of file names
+    csv = res.write_csv(out / f"{sc.name}_lc_{stem}.csv")
+    summary = out / f"{sc.name}_lc_{stem}_summary.json"
     with atomic_open(summary, "w") as fh:
         json.dump(lc_summary(sc, st, model, assumed, res, seed=seed), fh, indent=2)
         fh.write("\n")
@@ -607,6 +627,31 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_filters(sub) -> None:
+    p = sub.add_parser(
+        "filters", help="list the integration filters with their options",
+        description="Every filter name (built-in, registered and installed plugins) with "
+        "the paper equations behind it and its options (type, default); an entry is "
+        "NAME[:OPT=VALUE...] wherever a filter is named (--filter, study specs).")
+    p.set_defaults(func=_cmd_filters)
+
+
+def _cmd_filters(args: argparse.Namespace) -> int:
+    from .filters import filter_table
+
+    for row in filter_table():
+        core = row["core"] + (f" + {row['rule']}" if row["rule"] else "")
+        print(f"{row['name']:14s} {core:28s} {row['equations']}")
+        for o in row["options"]:
+            print(f"    {o['name']:16s} {o['type']:22s} default {o['default']!r:14s} "
+                  f"({o['target']})")
+        if row["open"]:
+            print("    (takes further options)")
+    print("entry: NAME[:OPT=VALUE...]; an import path package.module:Name is a plugin "
+          "(docs/filters.md)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``sdr-di`` argument parser."""
     from . import __version__
@@ -621,6 +666,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run(sub)
     _add_acquire(sub)
     _add_lc(sub)
+    _add_filters(sub)
     from .studies.commands import add_parsers as add_experiment_parsers
 
     add_experiment_parsers(sub)

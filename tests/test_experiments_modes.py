@@ -44,7 +44,7 @@ def test_variant_labels_keep_deep_names_and_tag_the_other_couplings():
 
 @pytest.mark.parametrize("spec, match", [
     ("kalman", "unknown filter"), ("ff-aukf:window", "not key=value"),
-    ("ff-aukf:d=0.9", "not allowed"), ("ekf@tight", "not allowed"),
+    ("ff-aukf:adapt_q=maybe", "true/false"), ("ekf@tight", "not allowed"),
 ])
 def test_bad_filter_entries_are_one_line_errors(spec, match):
     with pytest.raises(ExperimentError, match=match):

@@ -12,10 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ExperimentError
+from ..errors import ExperimentError, SdrDiError
 from ..filters import FILTER_NAMES
+from ..filters import parse_filter_spec as _parse
+from ..filters.plugins import is_import_path, plugin_names
+from ..filters.spec import split_filter_spec
 
-__all__ = ["QUANTITIES", "STATS", "filter_list", "filter_names_in", "parse_filter_spec",
+__all__ = ["QUANTITIES", "STATS", "canonical_entry", "filter_list", "filter_names_in",
+           "parse_filter_spec", "split_figure_key",
            "rmse_bar_plot"]
 
 #: (figure stem, axis label) of the error norms every filter comparison reports.
@@ -25,68 +29,88 @@ QUANTITIES = (("att_deg", "attitude [deg]"), ("vel_mps", "velocity [m/s]"),
 STATS = ("rmse", "max")
 
 
-def filter_list(exp: str, text: str) -> list[str]:
-    """Filter names of a ``filters`` parameter (``all`` or a comma list).
+def canonical_entry(entry: str) -> str:
+    """A filter entry (``ff-aukf:q_states=nominal``, ``ekf@tight``) in lower case, except an
+    import path (``pkg.mod:MyEKF``) and its options, whose case is kept."""
+    text = str(entry).strip()
+    spec, at, mode = text.partition("@")
+    try:
+        name, pairs = split_filter_spec(spec)
+    except SdrDiError:  # malformed: left to parse_filter_spec's message
+        return text.lower()
+    if not is_import_path(name):
+        return text.lower()
+    return ":".join([name] + [f"{k}={v}" for k, v in pairs]) + (
+        f"@{mode.strip().lower()}" if at else "")
 
-    An entry may carry filter options after colons (``ff-aukf:q_states=nominal``,
-    :func:`parse_filter_spec`); the entries are returned as given (lower case).
+
+def filter_list(exp: str, text: str) -> list[str]:
+    """Filter entries of a ``filters`` parameter (``all`` or a comma list).
+
+    An entry may carry filter options after colons (``ff-aukf:q_states=nominal``) or be a
+    plugin (``pkg.mod:MyEKF``), :func:`parse_filter_spec`; the entries are returned as
+    given (:func:`canonical_entry`).
     """
     if str(text).strip().lower() == "all":
         return list(FILTER_NAMES)
-    names = [n.strip().lower() for n in str(text).split(",") if n.strip()]
-    bad = [n for n in names if n.partition(":")[0] not in FILTER_NAMES]
-    if bad or not names:
-        raise ExperimentError(f"{exp}: filters={text!r}: unknown filter(s) "
-                              f"{', '.join(bad) or '(none given)'}; valid: all or "
-                              f"{', '.join(FILTER_NAMES)}")
+    names = [canonical_entry(n) for n in str(text).split(",") if n.strip()]
+    if not names:
+        raise ExperimentError(f"{exp}: filters={text!r}: unknown filter(s) (none given); "
+                              f"valid: all or {', '.join(FILTER_NAMES)}")
     for n in names:
         parse_filter_spec(exp, n)
     return names
 
 
-def _option_value(text: str):
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
-
-
 def parse_filter_spec(exp: str, spec: str) -> tuple[str, dict]:
     """``"ff-aukf:q_states=nominal:window=25"`` -> ``("ff-aukf", {"q_states": "nominal",
-    "window": 25})``: the filter name and its options (numbers read as int or float).
+    "window": 25})``: the filter name and its options, typed by
+    :func:`sdr_di.filters.parse_filter_spec` (the one parser of filter entries).
 
     Raises
     ------
     ExperimentError
-        Unknown filter, an option without ``=``, or a ``.``/``@``/``,`` in the spec (these
-        separate figure names, modes and list entries).
+        Unknown filter, a plugin that fails to import, a bad option or value, or a ``@``/``,``
+        in the spec (these separate modes and list entries).
     """
-    if any(c in str(spec) for c in ".@,"):
-        raise ExperimentError(f"{exp}: filter {spec!r}: '.', '@' and ',' are not allowed in "
-                              "a filter entry (they separate figure names, modes, entries)")
-    name, *opts = str(spec).strip().lower().split(":")
-    if name not in FILTER_NAMES:
-        raise ExperimentError(f"{exp}: filter {spec!r}: unknown filter {name!r}; valid: "
-                              f"{', '.join(FILTER_NAMES)}")
-    options = {}
-    for o in opts:
-        key, eq, val = o.partition("=")
-        if not eq or not key or not val:
-            raise ExperimentError(f"{exp}: filter {spec!r}: option {o!r} is not key=value")
-        options[key] = _option_value(val)
-    return name, options
+    if any(c in str(spec) for c in "@,"):
+        raise ExperimentError(f"{exp}: filter {spec!r}: '@' and ',' are not allowed in "
+                              "a filter entry (they separate modes and entries)")
+    try:
+        fs = _parse(canonical_entry(spec))
+    except SdrDiError as exc:
+        raise ExperimentError(f"{exp}: {exc}") from None
+    return fs.name, dict(fs.options)
+
+
+def split_figure_key(key: str) -> tuple[str, str]:
+    """``"ff-aukf:d=0.9@tight.seg1.updating"`` -> ``("ff-aukf:d=0.9@tight", "seg1.updating")``.
+
+    The label ends at the first ``.`` after its last ``:`` (an import path's dots come before
+    it) that is not followed by a digit (a number's decimal point); figure names start with a
+    letter."""
+    key = str(key)
+    i = key.rfind(":") + 1
+    while True:
+        j = key.find(".", i)
+        if j < 0:
+            return key, ""
+        if j + 1 < len(key) and not key[j + 1].isdigit():
+            return key[:j], key[j + 1:]
+        i = j + 1
 
 
 def filter_names_in(stats: dict) -> list[str]:
     """Variant labels that prefix figure keys (``"ff-aukf.pos_m_rmse"``,
-    ``"ekf@tight.pos_m_rmse"``, ``"ff-aukf:q_states=nominal.pos_m_rmse"``), in order."""
+    ``"ekf@tight.pos_m_rmse"``, ``"ff-aukf:q_states=nominal.pos_m_rmse"``,
+    ``"pkg.mod:MyEKF.pos_m_rmse"``), in order (:func:`split_figure_key`)."""
     seen = []
     for key in stats:
-        name, dot, _ = key.partition(".")
-        base = name.partition("@")[0].partition(":")[0]
-        if dot and base in FILTER_NAMES and name not in seen:
+        name, dot = split_figure_key(key)[0], "." in key
+        base = name.partition("@")[0]
+        known = base.partition(":")[0] in FILTER_NAMES or base in plugin_names() or (
+            is_import_path(base) and "." in base.partition(":")[0])
+        if dot and known and name not in seen:
             seen.append(name)
     return seen
 

@@ -35,6 +35,7 @@ from ._deep import Inputs, record_run, run_deep_variant, segment_metrics
 from .filter_figures import (
     QUANTITIES,
     STATS,
+    canonical_entry,
     filter_list,
     filter_names_in,
     parse_filter_spec,
@@ -92,7 +93,7 @@ def mode_list(exp: str, text: str, allowed: Sequence[str] = MODES) -> list[str]:
 
 def split_entry(exp: str, entry: str, mode: str = "deep") -> tuple[str, str]:
     """``"ekf@tight"`` -> ``("ekf", "tight")``; an entry without ``@`` takes ``mode``."""
-    spec, at, m = str(entry).strip().lower().partition("@")
+    spec, at, m = canonical_entry(entry).partition("@")
     if at:
         mode_list(exp, m)
         return spec, m
@@ -109,7 +110,7 @@ def variant_list(exp: str, filters: str, modes: str = "deep") -> list[Variant]:
     mode (``ekf@tight``: how a study compares couplings paired on the same files) runs once,
     in that mode, with the first mode's variants."""
     out = []
-    entries = [e.strip().lower() for e in str(filters).split(",") if e.strip()]
+    entries = [canonical_entry(e) for e in str(filters).split(",") if e.strip()]
     own = [e for e in entries if "@" in e]
     crossed = ",".join(e for e in entries if "@" not in e) if len(own) < len(entries) else ""
     for k, mode in enumerate(mode_list(exp, modes)):

@@ -12,7 +12,9 @@ Build a filter by name::
     kf.x, kf.P, kf.y, kf.S, kf.K, kf.residual, kf.log_likelihood, kf.rule.adaptation_time_s
 
 Names (:data:`FILTER_NAMES`): ``ekf``, ``ukf``, ``ckf``, ``ff-aukf``, ``rae-aukf``,
-``ml-q-ukf``, ``sage-husa-ukf``, ``q-scaling-ekf``, ``q-scaling-ukf``, ``ml-r-ckf``.
+``ml-q-ukf``, ``sage-husa-ukf``, ``q-scaling-ekf``, ``q-scaling-ukf``, ``ml-r-ckf``; and
+plugins: ``register_filter(name, factory)``, installed packages' entry points, import paths
+``package.module:Name`` (docs/filters.md).
 
 Modules
 -------
@@ -23,7 +25,9 @@ Modules
 ``sigma_points``  scaled unscented and cubature point sets
 ``sigma_filter``  :class:`SigmaPointFilter` and its :class:`UKF` / :class:`CKF`
 ``adaptive``      one module per paper rule (see :mod:`sdr_di.filters.adaptive`)
-``registry``      :func:`make_filter`
+``registry``      :func:`make_filter`, :func:`filter_table`
+``spec``          :func:`parse_filter_spec`: ``NAME[:opt=value...]`` with typed options
+``plugins``       :func:`register_filter`, entry points ``sdr_di.filters``, import paths
 ``state``         17-state layout indices and measurement blocks
 ``errors``        :class:`FilterError`, :class:`CovarianceError`
 """
@@ -49,7 +53,9 @@ from .models import (
                        ProcessModel,
                        numerical_jacobian,
 )
-from .registry import FILTER_NAMES, filter_options, make_filter
+from .plugins import register_filter, unregister_filter
+from .registry import FILTER_NAMES, filter_options, filter_record, filter_table, make_filter
+from .spec import FilterSpec, parse_filter_spec
 from .sigma_filter import CKF, UKF, SigmaPointFilter
 from .sigma_points import CubaturePoints, MerweScaledSigmaPoints, SigmaPoints
 
@@ -57,6 +63,7 @@ __all__ = [
                        "CKF",
                        "EKF",
                        "FILTER_NAMES",
+                       "FilterSpec",
                        "UKF",
                        "AdaptiveRule",
                        "CovarianceError",
@@ -80,6 +87,11 @@ __all__ = [
                        "SigmaPointFilter",
                        "SigmaPoints",
                        "filter_options",
+                       "filter_record",
+                       "filter_table",
                        "make_filter",
                        "numerical_jacobian",
+                       "parse_filter_spec",
+                       "register_filter",
+                       "unregister_filter",
 ]

@@ -18,11 +18,20 @@ name               core    adaptive rule
 Options are routed by name: ``dt``, ``psd_fallback`` (all cores), ``alpha``, ``beta``,
 ``kappa`` (UKF cores) go to the core filter, the others to the rule's constructor (see each
 rule); an unknown option raises :class:`~.errors.FilterError` listing the accepted ones.
+
+Any other name is a plugin (:mod:`.plugins`): one added by :func:`~.plugins.register_filter`
+or an installed package's entry point, or an import path ``package.module:Name``; its factory
+receives the same inputs and options and must return an object with the filter interface.
+Entries with options as text (``ff-aukf:q_states=nominal``) are parsed by
+:func:`~.spec.parse_filter_spec`; :func:`filter_table` lists every name with its options.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
+
+import numpy as np
 
 from ..errors import FilterError
 from .adaptive import (
@@ -38,7 +47,7 @@ from .ekf import EKF
 from .models import MeasurementModel, ProcessModel
 from .sigma_filter import CKF, UKF
 
-__all__ = ["FILTER_NAMES", "filter_options", "make_filter"]
+__all__ = ["FILTER_NAMES", "filter_options", "filter_record", "filter_table", "make_filter"]
 
 _REGISTRY = {
     "ekf": (EKF, None),
@@ -51,6 +60,21 @@ _REGISTRY = {
     "q-scaling-ekf": (EKF, ProcessNoiseScaling),
     "q-scaling-ukf": (UKF, ProcessNoiseScaling),
     "ml-r-ckf": (CKF, MLMeasurementNoiseCKF),
+}
+
+#: Paper and equations behind each built-in name (the adaptive rules' module docstrings;
+#: the cores' in ekf.py and sigma_filter.py).
+_EQUATIONS = {
+    "ekf": "EKF: x^- = f(x), P^- = F P F^T + Q; correction paper 004 eq 22-25",
+    "ukf": "UKF, scaled unscented points: paper 004 eq 13-25",
+    "ckf": "CKF, cubature points: paper 003 eq 17-28",
+    "ff-aukf": "forgetting-factor AUKF: paper 004 eq 26-39, Table 2",
+    "rae-aukf": "Sage-window RAE/IAE AUKF: paper 004 baseline (section III.B)",
+    "ml-q-ukf": "maximum-likelihood Q: paper 000 eq 47/49, sec. 3.3",
+    "sage-husa-ukf": "Sage-Husa noise statistics: paper 001 eq 30-33",
+    "q-scaling-ekf": "covariance-matching Q scaling: paper 002 eq 16-22",
+    "q-scaling-ukf": "covariance-matching Q scaling: paper 002 eq 16-22",
+    "ml-r-ckf": "maximum-likelihood R by SQP: paper 003 eq 35-38",
 }
 
 #: Valid registry names, in table order.
@@ -90,7 +114,8 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
     Parameters
     ----------
     name : str
-        One of :data:`FILTER_NAMES` (case-insensitive).
+        One of :data:`FILTER_NAMES` (case-insensitive), a plugin name or an import path
+        ``package.module:Name`` (:mod:`.plugins`).
     process_model, measurement_model, x0, P0, Q0, R0
         As :class:`~sdr_di.filters.base.KalmanFilterBase` (``R0`` may be ``None`` when ``R``
         is given to every update).
@@ -107,8 +132,11 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
     Raises
     ------
     FilterError
-        Unknown name (the message lists the valid names), unknown option, invalid input.
+        Unknown name (the message lists the valid names), unknown option, invalid input, a
+        plugin that fails to import or lacks the interface.
     """
+    if isinstance(name, str) and name.strip().lower() not in _REGISTRY:
+        return _make_plugin(name, process_model, measurement_model, x0, P0, Q0, R0, options)
     core_cls, rule_cls = _lookup(name)
     key = name.strip().lower()
     core_names = _CORE_OPTIONS[core_cls]
@@ -123,3 +151,96 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
     if rule_cls is not None:
         filt.attach_rule(rule_cls(**rule_opts))
     return filt
+
+
+def _make_plugin(name: str, process_model, measurement_model, x0, P0, Q0, R0,
+                 options: dict) -> KalmanFilterBase:
+    """A plugin filter (:mod:`.plugins`): its factory with the inputs and the options; ``dt``
+    only where the factory takes it. The result's ``name`` is set to ``name``."""
+    from .plugins import check_interface, resolve_plugin
+    from .spec import _factory_params
+
+    factory = resolve_plugin(name)
+    if factory is None:
+        _lookup(name)  # raises: unknown filter
+    label = name.strip() if ":" in name else name.strip().lower()
+    params, var_kw = _factory_params(factory)
+    takes = {p.name for p in params}
+    if "dt" in options and not var_kw and "dt" not in takes:
+        options = {k: v for k, v in options.items() if k != "dt"}
+    unknown = sorted(set(options) - takes - {"dt"}) if not var_kw else []
+    if unknown:
+        raise FilterError(f"filter {label!r}: unknown option(s) {', '.join(unknown)}; "
+                          f"accepted: {', '.join(sorted(takes)) or '(none)'}")
+    try:
+        filt = factory(process_model, measurement_model, x0, P0, Q0, R0, **options)
+    except FilterError:
+        raise
+    except Exception as exc:
+        raise FilterError(f"filter {label!r}: the factory failed ({type(exc).__name__}: "
+                          f"{exc})") from None
+    check_interface(label, filt, np.asarray(x0).size)
+    try:
+        filt.name = label
+    except AttributeError:
+        pass
+    return filt
+
+
+def filter_table() -> list[dict]:
+    """Every filter name (built-in, then plugins) with its core, rule, the paper equations
+    and its options (``name``, ``type``, ``default``, ``target``); ``sdr-di filters``."""
+    from .plugins import plugin_names
+    from .spec import filter_option_info
+
+    rows = []
+    for name in FILTER_NAMES + plugin_names():
+        entry = _REGISTRY.get(name)
+        try:
+            infos, open_ended = filter_option_info(name)
+        except FilterError as exc:  # a broken installed plugin: listed with its error
+            rows.append({"name": name, "core": "plugin", "rule": "", "equations": str(exc),
+                         "options": [], "open": False})
+            continue
+        rows.append({
+            "name": name,
+            "core": entry[0].__name__ if entry else "plugin",
+            "rule": entry[1].__name__ if entry and entry[1] else "",
+            "equations": _EQUATIONS.get(name, "(plugin)"),
+            "options": [dataclasses.asdict(i) for i in infos],
+            "open": open_ended,
+        })
+    return rows
+
+
+def filter_record(filt, name: str, options: dict) -> dict:
+    """Summary entry of a built filter: what it actually uses, read from the object (not from
+    the settings that asked for it), so that a plugin's own ``Q`` or ``P0`` is recorded.
+
+    Returns
+    -------
+    dict
+        ``spec`` (``name:key=value...``), ``name``, ``class`` (``module:QualName``),
+        ``options``, ``rule`` (class name or None), ``Q0_diag``, ``P0_diag`` and ``R0_diag``
+        (None where the filter is given ``R`` at each update) as built.
+    """
+    def _diag(a):
+        if a is None:
+            return None
+        d = np.diag(np.atleast_2d(np.asarray(a, float)))
+        return [float(v) if np.isfinite(v) else None for v in d]
+
+    def _plain(v):
+        return v if v is None or isinstance(v, (bool, int, float, str)) else repr(v)
+
+    from .spec import FilterSpec
+
+    opts = {k: _plain(v) for k, v in options.items()}
+    rule = getattr(filt, "rule", None)
+    cls = type(filt)
+    return {"spec": FilterSpec(name, dict(options)).text, "name": name,
+            "class": f"{cls.__module__}:{cls.__qualname__}", "options": opts,
+            "rule": None if rule is None else type(rule).__name__,
+            "Q0_diag": _diag(getattr(filt, "Q", None)),
+            "P0_diag": _diag(getattr(filt, "P", None)),
+            "R0_diag": _diag(getattr(filt, "R", None))}

@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ImuDataError, ScenarioError
-from ..filters import make_filter
+from ..filters import filter_record, make_filter
 from ..frames import radii_of_curvature
 from ..ins.error_model import InsErrorModel, NavState, process_noise, rotvec_to_dcm
 from ..ins.imu import ImuErrorModel
@@ -227,6 +227,9 @@ class LcResult:
     adaptation_time_s : float
         Time spent in the filter's adaptive rule (``filter.rule.adaptation_time_s``) [s];
         NaN for a filter without a rule.
+    filter_used : dict or None
+        The built filter's record (:func:`~sdr_di.filters.filter_record`), the summary's
+        ``assumptions.filter``.
     """
 
     t: np.ndarray
@@ -240,6 +243,7 @@ class LcResult:
     filter_name: str
     elapsed_s: float = 0.0
     adaptation_time_s: float = math.nan
+    filter_used: dict | None = None
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of attitude [deg], velocity [m/s], position [m] (``t0 <= t <= t1``)."""
@@ -256,7 +260,8 @@ class LcResult:
         data = np.column_stack([self.t, self.att_err, self.vel_err, self.pos_err, self.nis,
                                 self.r_diag, self.r_true])
         with atomic_open(path, "w") as fh:
-            fh.write(f"# sdr-di lc errors, filter {self.filter_name}; attitude deg, "
+            label = (self.filter_used or {}).get("spec", self.filter_name)
+            fh.write(f"# sdr-di lc errors, filter {label}; attitude deg, "
                      "velocity m/s, position m (E, N, U), R variances\n")
             fh.write(",".join(cols) + "\n")
             np.savetxt(fh, data, delimiter=",", fmt="%.10g")
@@ -359,6 +364,7 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     options = {**s.options_by_filter.get(s.filter.strip().lower(), {}), **s.filter_options}
     kf = make_filter(s.filter, process, meas, np.zeros(17), np.diag(p0), Q0, R0, dt=dt_f,
                      **options)
+    used = filter_record(kf, s.filter, options)
 
     # ---- INS
     C0 = rotvec_to_dcm(-att0) @ truth.C_b_n[0]
@@ -405,7 +411,7 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
                     q_diag=np.array(QD).reshape(-1, 17), nis=np.array(NIS),
                     filter_name=kf.name, elapsed_s=time.perf_counter() - t_start,
                     adaptation_time_s=(kf.rule.adaptation_time_s if kf.rule is not None
-                                       else math.nan))
+                                       else math.nan), filter_used=used)
 
 
 def run_loose_scenario(sc: Scenario, settings: LcSettings,
@@ -451,6 +457,7 @@ def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, as
                                "vel_mps": settings.p0_sigma_vel_mps,
                                "pos_m": settings.p0_sigma_pos_m},
         "given": None if assumed is None else assumed.record(),
+        "filter": res.filter_used,
     }
     return {"filter": res.filter_name,
             "metrics": {k: _f(v) for k, v in res.metrics().items()},

@@ -110,6 +110,7 @@ import numpy as np
 from .._deprecated import forwarding_getattr
 from ..deep.vector_tracking import SampleClock, VectorTracking
 from ..errors import ImuDataError
+from ..filters import filter_record
 from ..integration.assumptions import FixedNoiseSource
 from ..integration.gnss_epochs import GnssEpochRecorder
 from ..integration.loop import IntegrationLoop
@@ -157,6 +158,8 @@ class IntegrationResult:
         over the filter epochs since the previous row (about 1 when ``R`` is consistent)
     handover_s : time of the hand-over [s since file start]
     filter_name : str;  adaptation_s : float (time in the adaptive rule, if any)
+    filter_used : dict, the built filter's record (:func:`~sdr_di.filters.filter_record`:
+        spec, class, options, Q0/P0 diagonals), the summary's ``assumptions.filter``
     profile : dict (seconds per stage: scalar, read, nco, correlate, prefilter, filter, ins)
     nav_change : (n,) int, navigation data taken up since the previous row: 0 none, bit 1
         an ephemeris, bit 2 the ionosphere model
@@ -187,6 +190,7 @@ class IntegrationResult:
     nav_change: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, int))
     navigation: dict = dataclasses.field(default_factory=dict)
     mode: str = "deep"
+    filter_used: dict | None = None
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
@@ -427,6 +431,8 @@ class IntegratedReceiver:
         clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
         clk_d = float(sol.clock_drift_mps)
         kf, process, meas = make_integration_filter(cfg, T, sol, llh_fix, att_sig)
+        # the summary's record of what the filter uses, read from the built filter
+        self.filter_used = filter_record(kf, cfg.filter, cfg.filter_options)
 
         prof = {"scalar": t_scalar, "read": 0.0, "nco": 0.0, "correlate": 0.0,
                 "prefilter": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
@@ -472,7 +478,8 @@ class IntegratedReceiver:
             prns=prns, used=col["used"], cn0_dbhz=col["cn0"],
             nis=col["nis"], handover_s=k_grid0 / fs, filter_name=kf.name,
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
-            nav_change=col["nav"], navigation=navigation, mode=self.config.mode)
+            nav_change=col["nav"], navigation=navigation, mode=self.config.mode,
+            filter_used=getattr(self, "filter_used", None))
 
     # ------------------------------------------------------------------------------------
     def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, rx, engine, hand,
@@ -502,6 +509,8 @@ class IntegratedReceiver:
         loose = cfg.mode == "loose"
         model = LooseMeasurementModel() if loose else RangeRateMeasurementModel()
         kf, process, meas = make_integration_filter(cfg, T, sol, llh_fix, att_sig, model)
+        # the summary's record of what the filter uses, read from the built filter
+        self.filter_used = filter_record(kf, cfg.filter, cfg.filter_options)
         others = sorted(set(int(p) for p in rx.channels) - set(hand["prns"]))
         prns = tuple(hand["prns"]) + tuple(others)
         prof = {"scalar": 0.0, "measure": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}

@@ -108,8 +108,9 @@ def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
         res.nav_change if res.nav_change.size == res.t.size else np.zeros(res.t.size)]) \
         if res.t.size else np.zeros(
         (0, len(DEEP_COLUMNS)))
+    label = (res.filter_used or {}).get("spec", res.filter_name)  # name:options as run
     with atomic_open(path, "w") as fh:
-        fh.write(f"# sdr-di {res.mode} solution, filter {res.filter_name}, hand-over at "
+        fh.write(f"# sdr-di {res.mode} solution, filter {label}, hand-over at "
                  f"{res.handover_s:.3f} s, channels {' '.join(f'C{p:02d}' for p in res.prns)}\n")
         fh.write(",".join(DEEP_COLUMNS) + "\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.12g")
@@ -229,7 +230,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         "navigation": res.navigation,
         "warnings": notes,
         "truth": sidecar_truth(getattr(source, "meta", None)),
-        "assumptions": deep_beliefs(cfg),
+        "assumptions": {**deep_beliefs(cfg), "filter": res.filter_used},
     }
     with atomic_open(files["summary"], "w") as fh:
         json.dump(summary, fh, indent=2)

@@ -60,7 +60,7 @@ import tomllib
 from pathlib import Path
 
 from ..errors import SdrDiError, StudyError
-from ..experiments.filter_figures import parse_filter_spec
+from ..experiments.filter_figures import canonical_entry, parse_filter_spec
 from ..experiments.registry import get_experiment, parse_params
 from ..experiments.variants import MODES, split_entry
 
@@ -241,7 +241,7 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
     filters = st.get("filters")
     _need(isinstance(filters, list) and filters and all(isinstance(f, str) for f in filters),
           where, "[study] filters must be a non-empty list of filter entries")
-    filters = [f.strip().lower() for f in filters]
+    filters = [canonical_entry(f) for f in filters]
     _need(len(set(filters)) == len(filters), where, "[study] filters has duplicates")
     for f in filters:
         try:
@@ -249,7 +249,7 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
                               split_entry(f"{where}: [study] filters", f)[0])
         except SdrDiError as exc:
             raise StudyError(str(exc)) from None
-    baseline = str(st.get("baseline", filters[0])).strip().lower()
+    baseline = canonical_entry(st.get("baseline", filters[0]))
     _need(baseline in filters, where, f"[study] baseline {baseline!r} is not in filters")
     runs = st.get("runs", 8)
     _need(isinstance(runs, int) and not isinstance(runs, bool) and runs >= 1, where,
@@ -315,8 +315,8 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
         _need(isinstance(cl, dict), cw, "must be a table")
         bad = set(cl) - _CLAIM_KEYS
         _need(not bad, cw, f"unknown key(s) {', '.join(sorted(bad))}")
-        f = str(cl.get("filter", "")).strip().lower()
-        ag = str(cl.get("against", baseline)).strip().lower()
+        f = canonical_entry(cl.get("filter", ""))
+        ag = canonical_entry(cl.get("against", baseline))
         _need(f in filters and ag in filters and f != ag, cw,
               f"filter {f!r} and against {ag!r} must be two of the study's filters")
         qs = cl.get("quantities", ["pos", "vel", "att"])
