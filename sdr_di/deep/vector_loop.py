@@ -120,6 +120,7 @@ from ..integration.loop import IntegrationLoop
 from ..integration.loop_process import LoopChild, LoopProcess, start_loop_behind
 from ..integration.loose_fixes import LooseFixSource
 from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
+from ..integration.consistency import consistency_summary
 from ..integration.metrics import summarize
 from ..integration.tight_ranges import TightRangeSource
 from ..oscillator import CLOCK_PRESETS, OscillatorSpec
@@ -328,6 +329,12 @@ class DeepResult:
         an ephemeris, bit 2 the ionosphere model
     navigation : dict, the navigation data in force over the run (summary ``navigation``
         entry, docs/deep.md)
+    sd : (n, 9) formal 1-sigma of the corrected solution, ENU: position [m], velocity
+        [m/s], attitude [deg] (:func:`~sdr_di.integration.consistency.formal_sd`)
+    nees : (n, 3) NEES per degree of freedom of position, velocity, attitude (NaN without
+        a reference)
+    updates : dict, per filter update ``t`` [s], ``nis`` (k, 2) per block, ``dof`` (k,)
+        (:attr:`~sdr_di.integration.loop.IntegrationLoop.updates`)
     """
 
     t: np.ndarray
@@ -353,10 +360,20 @@ class DeepResult:
     nav_change: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, int))
     navigation: dict = dataclasses.field(default_factory=dict)
     mode: str = "deep"
+    sd: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 9)))
+    nees: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    updates: dict = dataclasses.field(default_factory=dict)
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
         return summarize(self.t, self.att_err, self.vel_err, self.pos_err, t0, t1)
+
+    def consistency(self, t0: float | None = None, t1: float | None = None) -> dict:
+        """NIS per block and NEES per quantity over ``t0 <= t <= t1``, the window of
+        :meth:`metrics` (:func:`~sdr_di.integration.consistency.consistency_summary`)."""
+        up = self.updates or {"t": np.zeros(0), "nis": np.zeros((0, 2)), "dof": np.zeros(0)}
+        return consistency_summary(self.mode, up["t"], up["nis"], up["dof"], self.t,
+                                   self.nees, t0, t1)
 
 
 def check_imu_span(source: IfSource, imu, stop: int) -> float:
@@ -673,7 +690,8 @@ class DeepReceiver:
             prns=prns, used=col["used"], cn0_dbhz=col["cn0"],
             nis=col["nis"], handover_s=k_grid0 / fs, filter_name=kf.name,
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
-            nav_change=col["nav"], navigation=navigation, mode=self.config.mode)
+            nav_change=col["nav"], navigation=navigation, mode=self.config.mode,
+            sd=col["sd"], nees=col["nees"], updates=col["updates"])
 
     # ------------------------------------------------------------------------------------
     def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, rx, engine, hand,
