@@ -48,6 +48,7 @@ import numpy as np
 
 from ..errors import ImuDataError
 from ..integration.assumptions import deep_beliefs, sidecar_truth
+from ..integration.consistency import SD_COLUMNS
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
@@ -62,9 +63,7 @@ DEEP_COLUMNS = (
     "t_s", "bdt_week", "bdt_sow", "lat_deg", "lon_deg", "h_m", "v_e", "v_n", "v_u",
     "pitch_deg", "roll_deg", "yaw_deg", "clock_bias_m", "clock_drift_mps", "n_used",
     "att_err_e_deg", "att_err_n_deg", "att_err_u_deg", "vel_err_e", "vel_err_n", "vel_err_u",
-    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m", "nav_change",
-    "pos_sd_e_m", "pos_sd_n_m", "pos_sd_u_m", "vel_sd_e", "vel_sd_n", "vel_sd_u",
-    "att_sd_e_deg", "att_sd_n_deg", "att_sd_u_deg",
+    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m", "nav_change", *SD_COLUMNS,
 )
 
 
