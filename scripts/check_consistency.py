@@ -35,11 +35,10 @@ import time
 import numpy as np
 
 from sdr_di.deep import DeepConfig, DeepReceiver
-from sdr_di.integration.consistency import NIS_BLOCKS, flat
+from sdr_di.integration.consistency import CONSISTENCY_KEYS, NIS_BLOCKS, flat
 
 #: Figure columns of the table (a mode has two of the NIS ones).
-FIGURES = ("nis_code", "nis_range", "nis_rate", "nis_vel", "nis_pos", "nees_pos",
-           "nees_vel", "nees_att")
+FIGURES = CONSISTENCY_KEYS
 
 
 def run_grid(args: argparse.Namespace) -> list[dict]:

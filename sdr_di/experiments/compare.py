@@ -25,6 +25,7 @@ from . import plotting
 from ._deep import (
     base_scenario,
     check_number,
+    consistency_figures,
     generated_inputs,
     parse_assume,
     segment_metrics,
@@ -114,6 +115,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     fig["t_eval_s"] = t_eval
     for name, res in series.items():
         fig.update(segment_metrics(res, t_eval, None, f"{name}."))
+        fig.update(consistency_figures(res, t_eval, None, f"{name}."))
     if params["plots"] and series:
         note = plotting.matplotlib_missing()
         if note is None:

@@ -40,12 +40,16 @@ from scipy.stats import chi2
 
 from ..frames import radii_of_curvature
 
-__all__ = ["BAND_RULE", "NIS_BLOCKS", "SD_COLUMNS", "flat", "block_nis", "chi2_band", "consistency_summary",
+__all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "flat", "block_nis", "chi2_band", "consistency_summary",
            "effective_count", "enu_blocks", "formal_sd", "nees_per_dof"]
 
 #: NIS block names of each mode, in the order of ``z`` (two equal halves).
 NIS_BLOCKS = {"deep": ("code", "rate"), "tight": ("range", "rate"), "loose": ("vel", "pos"),
               "lc": ("vel", "pos")}
+
+#: Every NIS block and NEES key of any mode (study ``runs.csv`` / ``cells.csv`` columns).
+CONSISTENCY_KEYS = ("nis_code", "nis_range", "nis_rate", "nis_vel", "nis_pos", "nees_pos",
+                    "nees_vel", "nees_att")
 
 #: Formal 1-sigma columns of every integrated mode's solution CSV (:func:`formal_sd`).
 SD_COLUMNS = ("pos_sd_e_m", "pos_sd_n_m", "pos_sd_u_m", "vel_sd_e", "vel_sd_n", "vel_sd_u",
