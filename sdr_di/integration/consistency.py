@@ -57,7 +57,7 @@ SD_COLUMNS = ("pos_sd_e_m", "pos_sd_n_m", "pos_sd_u_m", "vel_sd_e", "vel_sd_n", 
 
 #: How the ``band`` of a consistency entry treats time-correlated samples.
 BAND_RULE = ("95 % chi-square band of the mean of N_eff * dof samples, divided by "
-             "N_eff * dof; N_eff = N / (1 + 2 sum_k rho_k), rho_k the statistic's lag-k "
+             "N_eff * dof (dof: 3 for NEES, the block's median size for NIS); N_eff = N / (1 + 2 sum_k rho_k), rho_k the statistic's lag-k "
              "sample autocorrelation summed over the initial positive lags (k <= N/4); "
              "N_eff <= N")
 
