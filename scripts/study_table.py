@@ -11,8 +11,8 @@ filter other than the baseline its RMSE ratio to the baseline (geometric mean ov
 seeds, with the corrected interval of ``comparisons.csv``) and its wins out of the pairs;
 then a consistency table (mean NIS per measurement block and NEES per quantity of each cell
 and filter, expected value 1; ``--no-consistency`` leaves it out, and it is left out for a
-study written before these columns existed); then each claim's verdict per cell. Nothing is computed here that the study did not write:
-the table is a view of its outputs.
+study written before these columns existed); then each claim's verdict per cell. Nothing
+is computed here that the study did not write: the table is a view of its outputs.
 """
 
 from __future__ import annotations

@@ -40,8 +40,9 @@ from scipy.stats import chi2
 
 from ..frames import radii_of_curvature
 
-__all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "flat", "block_nis", "chi2_band", "consistency_summary",
-           "effective_count", "enu_blocks", "formal_sd", "nees_per_dof"]
+__all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "block_nis",
+           "chi2_band", "consistency_summary", "effective_count", "enu_blocks", "flat",
+           "formal_sd", "nees_per_dof"]
 
 #: NIS block names of each mode, in the order of ``z`` (two equal halves).
 NIS_BLOCKS = {"deep": ("code", "rate"), "tight": ("range", "rate"), "loose": ("vel", "pos"),
@@ -57,9 +58,9 @@ SD_COLUMNS = ("pos_sd_e_m", "pos_sd_n_m", "pos_sd_u_m", "vel_sd_e", "vel_sd_n", 
 
 #: How the ``band`` of a consistency entry treats time-correlated samples.
 BAND_RULE = ("95 % chi-square band of the mean of N_eff * dof samples, divided by "
-             "N_eff * dof (dof: 3 for NEES, the block's median size for NIS); N_eff = N / (1 + 2 sum_k rho_k), rho_k the statistic's lag-k "
-             "sample autocorrelation summed over the initial positive lags (k <= N/4); "
-             "N_eff <= N")
+             "N_eff * dof (dof: 3 for NEES, the block's median size for NIS); "
+             "N_eff = N / (1 + 2 sum_k rho_k), rho_k the statistic's lag-k sample "
+             "autocorrelation summed over the initial positive lags (k <= N/4); N_eff <= N")
 
 
 def block_nis(y: np.ndarray, S: np.ndarray, n_blocks: int = 2) -> np.ndarray:
