@@ -5,18 +5,21 @@ Usage::
 
     python scripts/check_consistency.py [--modes deep tight loose] [--cn0 40 30]
                                         [--filters ekf ukf] [--seeds 0 1] [--fs 2.5e6]
-                                        [--duration 24] [--t0 S] [--csv FILE]
+                                        [--duration 30] [--t-step 15] [--t0 17] [--csv FILE]
 
-For every seed and C/N0 the default scenario (``signals/default.toml``, every satellite at
-``--cn0`` dB-Hz; the seed draws the IMU errors and the signal noise; truth IMU and
-oscillator equal to the assumed ones) is generated once at ``--fs`` for ``--duration`` s
+For every seed and C/N0 the default scenario (``signals/default.toml``; the seed draws the
+IMU errors and the signal noise; truth IMU and oscillator equal to the assumed ones) is
+generated once at ``--fs`` for ``--duration`` s
 (:class:`~sdr_di.experiments._deep.generated_inputs`, the experiments' generator and file
 cache), and every mode x filter runs on those files with ``DeepConfig(mode=..., filter=...)``
-(the run of ``sdr-di run``). The figures are the run's
-:meth:`~sdr_di.deep.vector_loop.DeepResult.consistency` (the summary JSON's
+(the run of ``sdr-di run``). As in the weak-signal experiment, every satellite is at 40
+dB-Hz until ``--t-step`` s (the start-up needs a strong signal: at 30 dB-Hz the default
+scenario never hands over) and at ``--cn0`` from then to the end (an attenuation window of
+the scenario schema, :func:`~sdr_di.experiments._deep.with_outages`). The figures are the
+run's :meth:`~sdr_di.deep.vector_loop.DeepResult.consistency` (the summary JSON's
 ``consistency`` entry): mean NIS per degree of freedom of each measurement block and NEES
-per degree of freedom of position, velocity and attitude, from ``--t0`` seconds of the file
-(default: the whole run after the hand-over, the summary's window) to its end.
+per degree of freedom of position, velocity and attitude, from ``--t0`` s of the file
+(default: 2 s after the step) to its end.
 
 Printed: one row per mode x C/N0 x filter with the mean over the seeds that ran and the
 seed count (``n``); a run that fails (no hand-over at a low C/N0, a diverged filter) is
@@ -43,14 +46,18 @@ FIGURES = CONSISTENCY_KEYS
 
 def run_grid(args: argparse.Namespace) -> list[dict]:
     """One record per seed x C/N0 x mode x filter: the consistency figures or an error."""
-    from sdr_di.experiments._deep import generated_inputs
+    from sdr_di.experiments._deep import generated_inputs, with_outages
     from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
 
     recs = []
     for cn0 in args.cn0:
         for seed in args.seeds:
             sc = load_scenario(DEFAULT_SCENARIO).with_overrides(
-                seed=seed, duration_s=args.duration, sampling_rate_hz=args.fs, cn0_dbhz=cn0)
+                seed=seed, duration_s=args.duration, sampling_rate_hz=args.fs, cn0_dbhz=40.0)
+            if cn0 < 40.0:
+                sc = with_outages(sc, [{"prn": "all", "start_s": args.t_step,
+                                        "end_s": args.duration + 1.0,
+                                        "attenuation_db": 40.0 - cn0}])
             with generated_inputs(sc) as inp:
                 for mode in args.modes:
                     for f in args.filters:
@@ -77,9 +84,9 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
 
 def table(recs: list[dict], args: argparse.Namespace) -> str:
     """Markdown table: mean over the seeds per mode x C/N0 x filter (module notes)."""
-    lines = [f"{args.duration:g} s at {args.fs / 1e6:g} MHz, default scenario, window "
-             f"{'hand-over' if args.t0 is None else f'{args.t0:g} s'} to the end; mean over "
-             "the seeds that ran (n); expected value 1.", "",
+    lines = [f"{args.duration:g} s at {args.fs / 1e6:g} MHz, default scenario, 40 dB-Hz "
+             f"then the level from {args.t_step:g} s; window {args.t0:g} s to the end; mean "
+             "over the seeds that ran (n); expected value 1.", "",
              "| mode | C/N0 [dB-Hz] | filter | n | failed | NIS block 1 | NIS block 2 | "
              "NEES pos | NEES vel | NEES att |", "|---|---|---|---|---|---|---|---|---|---|"]
     for mode in args.modes:
@@ -104,15 +111,22 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--modes", nargs="+", default=["deep", "tight", "loose"],
                    choices=["deep", "tight", "loose"])
-    p.add_argument("--cn0", nargs="+", type=float, default=[40.0, 30.0])
+    p.add_argument("--cn0", nargs="+", type=float, default=[40.0, 30.0],
+                   help="C/N0 after the step [dB-Hz], each <= 40")
     p.add_argument("--filters", nargs="+", default=["ekf", "ukf"])
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
     p.add_argument("--fs", type=float, default=2.5e6)
-    p.add_argument("--duration", type=float, default=24.0)
+    p.add_argument("--duration", type=float, default=30.0)
+    p.add_argument("--t-step", type=float, default=15.0,
+                   help="time of the C/N0 step [s of file] (after the hand-over, ~12.2 s)")
     p.add_argument("--t0", type=float, default=None,
-                   help="start of the window [s of file] (default: the hand-over)")
+                   help="start of the window [s of file] (default: the step + 2 s)")
     p.add_argument("--csv", default=None, help="also write one row per run here")
     args = p.parse_args(argv)
+    if any(c > 40.0 for c in args.cn0):
+        p.error("--cn0: every level must be <= 40 dB-Hz (the start-up level)")
+    if args.t0 is None:
+        args.t0 = args.t_step + 2.0
     recs = run_grid(args)
     print(table(recs, args))
     if args.csv:
