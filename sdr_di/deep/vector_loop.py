@@ -115,12 +115,12 @@ from ..ins.error_model import ClockModel, InsErrorModel, process_noise
 from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..integration.assumptions import FixedNoiseSource
+from ..integration.consistency import consistency_summary
 from ..integration.gnss_epochs import GnssEpochRecorder
 from ..integration.loop import IntegrationLoop
 from ..integration.loop_process import LoopChild, LoopProcess, start_loop_behind
 from ..integration.loose_fixes import LooseFixSource
 from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
-from ..integration.consistency import consistency_summary
 from ..integration.metrics import summarize
 from ..integration.tight_ranges import TightRangeSource
 from ..oscillator import CLOCK_PRESETS, OscillatorSpec

@@ -285,7 +285,8 @@ class IntegrationLoop:
 
     def filter_step(self, iv: Interval, m: Measurements) -> None:
         """Process model over the interval, predict, and update with ``m`` when it has a
-        measurement ``z`` (paper 004 eq 13-25); accumulates the NIS per measurement."""
+        measurement ``z`` (paper 004 eq 13-25); accumulates the NIS per measurement and
+        keeps the NIS per degree of freedom of each half of ``z`` (:attr:`updates`)."""
         self.predict_filter(iv)
         ta = time.perf_counter()
         kf = self.kf
