@@ -9,8 +9,10 @@ Reads ``DIR/cells.csv`` and ``DIR/comparisons.csv`` (``sdr-di study``) and print
 quantity, one table: a row per cell, each filter's mean RMSE over the seeds, and for every
 filter other than the baseline its RMSE ratio to the baseline (geometric mean over the
 seeds, with the corrected interval of ``comparisons.csv``) and its wins out of the pairs;
-then each claim's verdict per cell. Nothing is computed here that the study did not write:
-the table is a view of its outputs.
+then a consistency table (mean NIS per measurement block and NEES per quantity of each cell
+and filter, expected value 1; ``--no-consistency`` leaves it out, and it is left out for a
+study written before these columns existed); then each claim's verdict per cell. Nothing
+is computed here that the study did not write: the table is a view of its outputs.
 """
 
 from __future__ import annotations
@@ -23,6 +25,11 @@ from pathlib import Path
 
 UNITS = {"pos": ("pos_rmse_m", "m"), "vel": ("vel_rmse_mps", "m/s"),
          "att": ("att_rmse_deg", "deg")}
+
+
+#: NIS / NEES columns of cells.csv (sdr_di.integration.consistency.CONSISTENCY_KEYS).
+CONSISTENCY = ("nis_code", "nis_range", "nis_rate", "nis_vel", "nis_pos", "nees_pos",
+               "nees_vel", "nees_att")
 
 
 def _read(path: Path) -> list[dict]:
@@ -46,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("study_dir", type=Path)
     p.add_argument("--quantities", nargs="+", default=["pos", "vel", "att"],
                    choices=sorted(UNITS))
+    p.add_argument("--no-consistency", action="store_true",
+                   help="leave out the NIS / NEES table")
     args = p.parse_args(argv)
     cells = _read(args.study_dir / "cells.csv")
     comps = _read(args.study_dir / "comparisons.csv")
@@ -77,6 +86,20 @@ def main(argv: list[str] | None = None) -> int:
                 failed = int(_f(r.get("n_failed", "0")) or 0)
                 out.append(m + (f", {failed} failed" if failed else ""))
             print(f"| {c} | " + " | ".join(out) + " |")
+        print()
+    keys = [k for k in CONSISTENCY if cells and k in cells[0]
+            and any(math.isfinite(_f(r[k])) for r in cells)]
+    if keys and not args.no_consistency:
+        print("**consistency**: mean over the seeds of NIS per degree of freedom per "
+              "measurement block and NEES per degree of freedom (expected 1; bands in each "
+              "run's summary JSON)\n")
+        print("| cell | filter | " + " | ".join(keys) + " |")
+        print("|---" * (len(keys) + 2) + "|")
+        for c in names:
+            for f in filters:
+                r = by.get((c, f))
+                if r is not None:
+                    print(f"| {c} | {f} | " + " | ".join(_g(_f(r[k])) for k in keys) + " |")
         print()
     claims = meta.get("claims") or []
     if claims:

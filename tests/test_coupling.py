@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from sdr_di.cli import main
+from sdr_di.integration.consistency import SD_COLUMNS
 from sdr_di.integration.run_integrated import DEEP_COLUMNS
 
 BLOCK = (16.0, 26.0)          # 4 of 7 satellites blocked [s]
@@ -70,6 +71,16 @@ def test_loose_and_tight_end_to_end(runs, mode):
     # BDT column: receiver time minus the clock bias / c (clock columns finite)
     assert np.all(np.isfinite(rows[:, COL["clock_bias_m"]]))
     assert np.all(np.isfinite(rows[:, COL["clock_drift_mps"]]))
+    # formal 1-sigma of the corrected solution (ENU) and the consistency entry (issue 25)
+    sd = rows[:, [COL[c] for c in SD_COLUMNS]]
+    assert np.all(np.isfinite(sd)) and np.all(sd > 0)
+    c = summ["consistency"]
+    blocks = {"loose": ("vel", "pos"), "tight": ("range", "rate")}[mode]
+    assert set(c) == {"band_rule", *(f"nis_{b}" for b in blocks), "nees_pos", "nees_vel",
+                      "nees_att"}
+    for k, e in c.items():
+        if k != "band_rule":
+            assert e["expected"] == 1.0 and e["value"] > 0 and e["band"][0] < 1 < e["band"][1]
 
 
 @pytest.mark.slow

@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from sdr_di.deep.run_deep import DEEP_COLUMNS
 from sdr_di.errors import NoEphemerisError
 from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.receiver.navdata import BROADCAST, RINEX, NavDataInForce
@@ -370,7 +371,7 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
         t_eph.append(h[-1]["t_s"])
     assert t_iono < min(t_eph) and max(t_eph) < 36.0            # subframe 3 ends at +34 s
     rows = np.loadtxt(out / "default_deep.csv", delimiter=",", skiprows=2)
-    t, flag = rows[:, 0], rows[:, -1].astype(int)
+    t, flag = rows[:, 0], rows[:, DEEP_COLUMNS.index("nav_change")].astype(int)
     assert np.any(flag & 2) and np.any(flag & 1)
     assert t[np.flatnonzero(flag & 2)[0]] == pytest.approx(t_iono, abs=0.21)
     pe = rows[:, 21:24]

@@ -51,7 +51,7 @@ def test_lc_prints_table_and_writes_csv(tmp_path, capsys):
     assert summary["assumptions"]["imu"]["accel_bias_mg"] == 4.0  # truth = belief here
     assert summary["assumptions"]["given"] is None
     data = np.loadtxt(csv, delimiter=",", skiprows=2)
-    assert data.shape == (20, 23)
+    assert data.shape == (20, 32)              # 23 + the formal 1-sigma columns
     r_true = data[:, 17:23]
     win = (data[:, 0] >= 5) & (data[:, 0] <= 10)
     assert np.allclose(r_true[win], 16 * r_true[~win][0])

@@ -313,6 +313,14 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
     assert "injected" in bad[0]["error"]
     assert sum(r["status"] == "ok" for r in runs) == 7
     assert cells[("imu-noise-10x", "ff-aukf")]["n_failed"] == "1"
+    # consistency beside accuracy (issue 25): deep NIS blocks and NEES in both tables, NaN
+    # for the failed run and for the other modes' blocks
+    ok = [r for r in runs if r["status"] == "ok"]
+    for k in ("nis_code", "nis_rate", "nees_pos", "nees_vel", "nees_att"):
+        assert all(float(r[k]) > 0 for r in ok), k
+        assert math.isnan(float(bad[0][k]))
+        assert float(cells[("baseline", "ekf")][k]) > 0, k
+    assert all(math.isnan(float(r["nis_pos"])) for r in runs)
     assert math.isfinite(float(cells[("baseline", "ff-aukf")]["d_pos_ci_low"]))
     # both cells of a seed ran on one IF file
     assert len(set(shared)) == 2

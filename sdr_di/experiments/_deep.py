@@ -400,6 +400,15 @@ def record_run(fig: dict, name: str, dr: DeepRun) -> Any:
     return res
 
 
+def consistency_figures(res: Any, t0: float | None, t1: float | None, prefix: str) -> dict:
+    """``{prefix}nis_<block>`` and ``{prefix}nees_<q>`` of a result over ``t0 <= t <= t1``:
+    the means of its :meth:`~sdr_di.deep.vector_loop.DeepResult.consistency` entry (NaN
+    without samples)."""
+    from ..integration.consistency import flat
+
+    return {f"{prefix}{k}": v for k, v in flat(res.consistency(t0, t1)).items()}
+
+
 def segment_metrics(res: Any, t0: float | None, t1: float | None, prefix: str) -> dict:
     """``{prefix}{q}_{rmse,max}`` of a result's error norms over ``t0 <= t < t1``."""
     from ..integration.metrics import rmse_max

@@ -10,7 +10,9 @@ latest hand-over of the run plus ``settle_s`` to the end, so their figures pair.
 
 Figures (per variant ``f``): ``f.completed``, ``f.error`` (when it failed), ``f.handover_s``,
 ``f.acq_after_handover``, ``f.{att_deg,vel_mps,pos_m}_{rmse,max}`` over the window (NaN when
-the variant failed); ``t_eval_s`` (window start), ``sampling_rate_hz``. Files:
+the variant failed), ``f.nis_<block>`` and ``f.nees_{pos,vel,att}`` over the window (the
+run's consistency, :func:`~._deep.consistency_figures`; absent when the variant failed);
+``t_eval_s`` (window start), ``sampling_rate_hz``. Files:
 ``errors_<f>.csv`` and ``error_norms.png``.
 """
 
@@ -25,6 +27,7 @@ from . import plotting
 from ._deep import (
     base_scenario,
     check_number,
+    consistency_figures,
     generated_inputs,
     parse_assume,
     segment_metrics,
@@ -114,6 +117,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     fig["t_eval_s"] = t_eval
     for name, res in series.items():
         fig.update(segment_metrics(res, t_eval, None, f"{name}."))
+        fig.update(consistency_figures(res, t_eval, None, f"{name}."))
     if params["plots"] and series:
         note = plotting.matplotlib_missing()
         if note is None:

@@ -40,6 +40,7 @@ import numpy as np
 
 from ..constants import C_LIGHT
 from ..ins.error_model import NavState
+from .consistency import block_nis, enu_blocks, formal_sd, nees_per_dof
 from .metrics import nav_errors
 
 __all__ = ["BackgroundLoop", "IntegrationLoop", "Interval", "MeasurementSource",
@@ -47,7 +48,7 @@ __all__ = ["BackgroundLoop", "IntegrationLoop", "Interval", "MeasurementSource",
 
 #: Columns of :attr:`IntegrationLoop.rows` (one entry per solution row).
 ROW_KEYS = ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve", "pe", "used", "cn0",
-            "nis", "nav")
+            "nis", "nav", "sd", "nees")
 
 
 @dataclasses.dataclass
@@ -216,6 +217,9 @@ class IntegrationLoop:
         self.n_intervals = 0
         self.rows: dict = {k: [] for k in ROW_KEYS}
         self._nis = [0.0, 0]
+        #: per update: time [s], NIS per degree of freedom of the two halves of ``z``
+        #: (:func:`~sdr_di.integration.consistency.block_nis`) and the half's size
+        self.updates: dict = {"t": [], "nis": [], "dof": []}
         self._next_progress = 0.0
         self.stop_requested = False      # set from another thread: end after this interval
 
@@ -281,7 +285,8 @@ class IntegrationLoop:
 
     def filter_step(self, iv: Interval, m: Measurements) -> None:
         """Process model over the interval, predict, and update with ``m`` when it has a
-        measurement ``z`` (paper 004 eq 13-25); accumulates the NIS per measurement."""
+        measurement ``z`` (paper 004 eq 13-25); accumulates the NIS per measurement and
+        keeps the NIS per degree of freedom of each half of ``z`` (:attr:`updates`)."""
         self.predict_filter(iv)
         ta = time.perf_counter()
         kf = self.kf
@@ -290,6 +295,9 @@ class IntegrationLoop:
             kf.update(m.z, m.R)
             self._nis[0] += kf.nis / m.z.size
             self._nis[1] += 1
+            self.updates["t"].append(iv.k1 / self.fs)
+            self.updates["nis"].append(block_nis(kf.y, kf.S, 2))
+            self.updates["dof"].append(m.z.size // 2)
         self.profile["filter"] += time.perf_counter() - ta
 
     def feed_back(self, iv: Interval, source: MeasurementSource) -> np.ndarray:
@@ -309,7 +317,9 @@ class IntegrationLoop:
     def write_row(self, iv: Interval, m: Measurements, source: MeasurementSource) -> None:
         """Solution row at ``k1`` every ``output_every`` intervals: time, BDT (receiver time
         minus clock bias / c), INS position/velocity/attitude after the feedback, clock,
-        the source's channel columns, mean NIS since the last row, errors vs the truth."""
+        the source's channel columns, mean NIS since the last row, errors vs the truth,
+        the formal 1-sigma of the corrected solution in ENU (``sd``) and its NEES per
+        degree of freedom of position, velocity, attitude (``nees``)."""
         ta = time.perf_counter()
         self.n_intervals += 1
         if self.n_intervals % self.output_every == 0:
@@ -327,12 +337,19 @@ class IntegrationLoop:
                 rows[k].append(v)
             rows["nis"].append(self._nis[0] / self._nis[1] if self._nis[1] else math.nan)
             self._nis = [0.0, 0]
+            P = self.kf.P                  # of the corrected solution (x fed back)
+            rows["sd"].append(formal_sd(P, ins.llh))
             if self.truth is not None:
                 tr = self.truth
                 ae, ve, pe = nav_errors(ins.llh, ins.v_n, ins.C_b_n, tr.llh[iv.i1],
                                         tr.v_n[iv.i1], tr.C_b_n[iv.i1])
+                P_att, P_vel, P_pos = enu_blocks(P, ins.llh)
+                rows["nees"].append(np.array([nees_per_dof(pe, P_pos),
+                                              nees_per_dof(ve, P_vel),
+                                              nees_per_dof(np.radians(ae), P_att)]))
             else:
                 ae = ve = pe = np.full(3, math.nan)
+                rows["nees"].append(np.full(3, math.nan))
             rows["ae"].append(ae)
             rows["ve"].append(ve)
             rows["pe"].append(pe)
@@ -343,7 +360,8 @@ class IntegrationLoop:
 
     def columns(self, n_ch: int) -> dict:
         """The rows as arrays: ``(n,)`` or ``(n, 3)`` floats, ``n`` and ``nav`` ints,
-        ``used`` ``(n, n_ch)`` bool, ``cn0`` ``(n, n_ch)``."""
+        ``used`` ``(n, n_ch)`` bool, ``cn0`` ``(n, n_ch)``, ``sd`` ``(n, 9)``, ``nees``
+        ``(n, 3)``; ``updates``: :attr:`updates` as arrays (``nis`` ``(k, 2)``)."""
         rows = self.rows
 
         def arr(key, width=None):
@@ -356,6 +374,12 @@ class IntegrationLoop:
         out["nav"] = np.asarray(rows["nav"], int)
         out["used"] = np.asarray(rows["used"], bool).reshape(-1, n_ch)
         out["cn0"] = arr("cn0", n_ch)
+        out["sd"] = arr("sd", 9)
+        out["nees"] = arr("nees", 3)
+        up = self.updates
+        out["updates"] = {"t": np.asarray(up["t"], float),
+                          "nis": np.asarray(up["nis"], float).reshape(-1, 2),
+                          "dof": np.asarray(up["dof"], int)}
         return out
 
 

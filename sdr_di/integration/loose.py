@@ -62,6 +62,8 @@ from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..scenario.schema import Scenario, parse_scenario
 from .measurements import LooseMeasurementModel, loose_measurement
+from .consistency import (SD_COLUMNS, block_nis, consistency_summary, enu_blocks, formal_sd,
+                          nees_per_dof)
 from .metrics import nav_errors, summarize
 from .noise import GnssNoise, NoiseWindow
 
@@ -222,6 +224,10 @@ class LcResult:
     q_diag : (n, 17) the filter's Q used in each predict
     nis : (n,) normalized innovation squared
     filter_name : str
+    sd : (n, 9) formal 1-sigma after the feedback, ENU: position [m], velocity [m/s],
+        attitude [deg] (:func:`~sdr_di.integration.consistency.formal_sd`)
+    nees : (n, 3) NEES per degree of freedom of position, velocity, attitude
+    nis_blocks : (n, 2) NIS per degree of freedom of the velocity and position blocks
     elapsed_s : float
         Wall time of the run [s].
     adaptation_time_s : float
@@ -244,10 +250,19 @@ class LcResult:
     elapsed_s: float = 0.0
     adaptation_time_s: float = math.nan
     filter_used: dict | None = None
+    sd: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 9)))
+    nees: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    nis_blocks: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of attitude [deg], velocity [m/s], position [m] (``t0 <= t <= t1``)."""
         return summarize(self.t, self.att_err, self.vel_err, self.pos_err, t0, t1)
+
+    def consistency(self, t0: float | None = None, t1: float | None = None) -> dict:
+        """NIS per block (``nis_vel``, ``nis_pos``) and NEES per quantity over the window of
+        :meth:`metrics` (:func:`~sdr_di.integration.consistency.consistency_summary`)."""
+        return consistency_summary("lc", self.t, self.nis_blocks, np.full(self.t.size, 3),
+                                   self.t, self.nees, t0, t1)
 
     def write_csv(self, path: str | Path) -> Path:
         """Write the error time series (atomic: ``.part`` then rename)."""
@@ -256,13 +271,16 @@ class LcResult:
         path = Path(path)
         cols = (["t", "att_e_deg", "att_n_deg", "att_u_deg", "vel_e", "vel_n", "vel_u",
                  "pos_e_m", "pos_n_m", "pos_u_m", "nis"]
-                + [f"r{i}" for i in range(6)] + [f"r_true{i}" for i in range(6)])
+                + [f"r{i}" for i in range(6)] + [f"r_true{i}" for i in range(6)]
+                + list(SD_COLUMNS))
+        sd = self.sd if self.sd.shape[0] == self.t.size else np.full((self.t.size, 9),
+                                                                     math.nan)
         data = np.column_stack([self.t, self.att_err, self.vel_err, self.pos_err, self.nis,
-                                self.r_diag, self.r_true])
+                                self.r_diag, self.r_true, sd])
         with atomic_open(path, "w") as fh:
             label = (self.filter_used or {}).get("spec", self.filter_name)
             fh.write(f"# sdr-di lc errors, filter {label}; attitude deg, "
-                     "velocity m/s, position m (E, N, U), R variances\n")
+                     "velocity m/s, position m (E, N, U), R variances, formal 1-sigma\n")
             fh.write(",".join(cols) + "\n")
             np.savetxt(fh, data, delimiter=",", fmt="%.10g")
         return path
@@ -373,6 +391,7 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     rng = np.random.default_rng(np.random.SeedSequence([seed, 0x4C43]))
 
     rows_t, A, V, P, RD, RT, QD, NIS = [], [], [], [], [], [], [], []
+    SD, NEES, NISB = [], [], []
     k = 0
     n = len(imu.t)
     while k + n_per < n and imu.t[k + n_per] <= t_end + 1e-9:
@@ -405,13 +424,20 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
         RT.append(s.noise.true_diag(tk))
         QD.append(np.diagonal(kf.Q_used).copy())
         NIS.append(kf.nis)
+        NISB.append(block_nis(kf.y, kf.S, 2))
+        SD.append(formal_sd(kf.P, ins.llh))
+        P_att, P_vel, P_pos = enu_blocks(kf.P, ins.llh)
+        NEES.append([nees_per_dof(p, P_pos), nees_per_dof(v, P_vel),
+                     nees_per_dof(np.radians(a), P_att)])
     return LcResult(t=np.array(rows_t), att_err=np.array(A).reshape(-1, 3),
                     vel_err=np.array(V).reshape(-1, 3), pos_err=np.array(P).reshape(-1, 3),
                     r_diag=np.array(RD).reshape(-1, 6), r_true=np.array(RT).reshape(-1, 6),
                     q_diag=np.array(QD).reshape(-1, 17), nis=np.array(NIS),
                     filter_name=kf.name, elapsed_s=time.perf_counter() - t_start,
                     adaptation_time_s=(kf.rule.adaptation_time_s if kf.rule is not None
-                                       else math.nan), filter_used=used)
+                                       else math.nan), filter_used=used,
+                    sd=np.array(SD).reshape(-1, 9), nees=np.array(NEES).reshape(-1, 3),
+                    nis_blocks=np.array(NISB).reshape(-1, 2))
 
 
 def run_loose_scenario(sc: Scenario, settings: LcSettings,
@@ -461,4 +487,6 @@ def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, as
     }
     return {"filter": res.filter_name,
             "metrics": {k: _f(v) for k, v in res.metrics().items()},
+            "consistency": {k: {kk: _f(vv) for kk, vv in v.items()} if isinstance(v, dict)
+                            else v for k, v in res.consistency().items()},
             "truth": truth, "assumptions": beliefs}

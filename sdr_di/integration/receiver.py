@@ -112,6 +112,7 @@ from ..deep.vector_tracking import SampleClock, VectorTracking
 from ..errors import ImuDataError
 from ..filters import filter_record
 from ..integration.assumptions import FixedNoiseSource
+from ..integration.consistency import consistency_summary
 from ..integration.gnss_epochs import GnssEpochRecorder
 from ..integration.loop import IntegrationLoop
 from ..integration.loop_process import LoopChild, LoopProcess, start_loop_behind
@@ -165,6 +166,12 @@ class IntegrationResult:
         an ephemeris, bit 2 the ionosphere model
     navigation : dict, the navigation data in force over the run (summary ``navigation``
         entry, docs/deep.md)
+    sd : (n, 9) formal 1-sigma of the corrected solution, ENU: position [m], velocity
+        [m/s], attitude [deg] (:func:`~sdr_di.integration.consistency.formal_sd`)
+    nees : (n, 3) NEES per degree of freedom of position, velocity, attitude (NaN without
+        a reference)
+    updates : dict, per filter update ``t`` [s], ``nis`` (k, 2) per block, ``dof`` (k,)
+        (:attr:`~sdr_di.integration.loop.IntegrationLoop.updates`)
     """
 
     t: np.ndarray
@@ -191,10 +198,20 @@ class IntegrationResult:
     navigation: dict = dataclasses.field(default_factory=dict)
     mode: str = "deep"
     filter_used: dict | None = None
+    sd: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 9)))
+    nees: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    updates: dict = dataclasses.field(default_factory=dict)
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
         return summarize(self.t, self.att_err, self.vel_err, self.pos_err, t0, t1)
+
+    def consistency(self, t0: float | None = None, t1: float | None = None) -> dict:
+        """NIS per block and NEES per quantity over ``t0 <= t <= t1``, the window of
+        :meth:`metrics` (:func:`~sdr_di.integration.consistency.consistency_summary`)."""
+        up = self.updates or {"t": np.zeros(0), "nis": np.zeros((0, 2)), "dof": np.zeros(0)}
+        return consistency_summary(self.mode, up["t"], up["nis"], up["dof"], self.t,
+                                   self.nees, t0, t1)
 
 
 def check_imu_span(source: IfSource, imu, stop: int) -> float:
@@ -479,7 +496,8 @@ class IntegratedReceiver:
             nis=col["nis"], handover_s=k_grid0 / fs, filter_name=kf.name,
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
             nav_change=col["nav"], navigation=navigation, mode=self.config.mode,
-            filter_used=getattr(self, "filter_used", None))
+            filter_used=getattr(self, "filter_used", None),
+            sd=col["sd"], nees=col["nees"], updates=col["updates"])
 
     # ------------------------------------------------------------------------------------
     def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, rx, engine, hand,

@@ -19,7 +19,9 @@ names and renamed when complete:
                            the clock columns hold the filter's clock states (loose: the
                            latest WLS fix's clock, docs/coupling.md)
 ``STEM_MODE_summary.json`` mode, filter, hand-over time, channels, error metrics vs the
-                           reference,
+                           reference, ``consistency`` (NIS per measurement block and NEES
+                           per quantity over the metrics' window, expected value 1, with
+                           a band: :mod:`~sdr_di.integration.consistency`),
                            time shares of the loop stages, ``navigation`` (per satellite
                            the ephemeris source and toe over time, the ionosphere and
                            troposphere models and their sources), ``warnings``,
@@ -46,6 +48,7 @@ import numpy as np
 
 from ..errors import ImuDataError
 from ..integration.assumptions import deep_beliefs, sidecar_truth
+from ..integration.consistency import SD_COLUMNS
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
@@ -60,7 +63,7 @@ DEEP_COLUMNS = (
     "t_s", "bdt_week", "bdt_sow", "lat_deg", "lon_deg", "h_m", "v_e", "v_n", "v_u",
     "pitch_deg", "roll_deg", "yaw_deg", "clock_bias_m", "clock_drift_mps", "n_used",
     "att_err_e_deg", "att_err_n_deg", "att_err_u_deg", "vel_err_e", "vel_err_n", "vel_err_u",
-    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m", "nav_change",
+    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m", "nav_change", *SD_COLUMNS,
 )
 
 
@@ -105,7 +108,8 @@ def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
         res.t, np.full(res.t.size, res.week), res.sow, np.degrees(res.llh[:, :2]),
         res.llh[:, 2], res.v_n, np.degrees(res.att), res.clock_bias_m, res.clock_drift_mps,
         res.n_used, res.att_err, res.vel_err, res.pos_err,
-        res.nav_change if res.nav_change.size == res.t.size else np.zeros(res.t.size)]) \
+        res.nav_change if res.nav_change.size == res.t.size else np.zeros(res.t.size),
+        res.sd if res.sd.shape[0] == res.t.size else np.full((res.t.size, 9), np.nan)]) \
         if res.t.size else np.zeros(
         (0, len(DEEP_COLUMNS)))
     label = (res.filter_used or {}).get("spec", res.filter_name)  # name:options as run
@@ -123,6 +127,12 @@ def _finite(v):
     if isinstance(v, float) and not math.isfinite(v):
         return None
     return v
+
+
+def _finite_tree(d: dict) -> dict:
+    """``d`` with non-finite floats as None, one level of nesting deep."""
+    return {k: {kk: _finite(vv) for kk, vv in v.items()} if isinstance(v, dict)
+            else _finite(v) for k, v in d.items()}
 
 
 def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig | None = None,
@@ -224,6 +234,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         "channels_always_used": bool(res.used.all()) if res.used.size else False,
         "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],
         "metrics": {k: _finite(v) for k, v in metrics.items()},
+        "consistency": _finite_tree(res.consistency()),
         "adaptation_s": res.adaptation_s,
         "profile": {k: _finite(v) for k, v in res.profile.items()},
         "wall_s": wall,

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import StudyError
+from ..integration.consistency import CONSISTENCY_KEYS
 from ..io.atomic import ensure_output_dir
 from ..experiments._deep import FILE_CACHE
 from .campaign import _client, _quiet_on_sigint, run_seed
@@ -298,6 +299,10 @@ def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
                     row[f"{q}_rmse_{unit.replace('/', 'p')}"] = v
                 row["handover_s"] = figs.get(f"{lab}.handover_s", math.nan)
                 row["elapsed_s"] = rec.get("elapsed_s", math.nan)
+                for k in CONSISTENCY_KEYS:       # NIS per block, NEES per quantity
+                    v = figs.get(f"{lab}.{k}", math.nan)
+                    row[k] = float(v) if isinstance(v, (int, float)) and \
+                        row["status"] == "ok" else math.nan
                 rows.append(row)
     for row in rows:                     # a diverged quantity makes the whole run a loss
         if row["status"] != "ok":
@@ -381,6 +386,11 @@ def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> Stu
                                             cl.max_sign_p, cl.interval_excludes_zero,
                                             spec.interval)
                 row[f"claim{j}"] = verdict
+            for k in CONSISTENCY_KEYS:           # mean over the cell's ok runs
+                x = np.array([r[k] for r in rows if r["cell"] == cell.name
+                              and r["filter"] == f], float)
+                row[k] = float(np.mean(x[np.isfinite(x)])) if np.isfinite(x).any() \
+                    else math.nan
             cell_rows.append(row)
     write_table(out, "runs", rows)
     write_table(out, "comparisons", [
