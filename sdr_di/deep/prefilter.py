@@ -27,7 +27,7 @@ drift and the clock frequency noise the NCO commands cannot predict), plus small
 ``q_tau``, ``q_phi`` per epoch.
 
 Noise model: what the output variances mean
-------------------------------------------
+-------------------------------------------
 The filter above is a *design*: ``s_f`` (4 Hz^2/s) and ``q_phi`` set its bandwidth so that
 it follows what the INS-driven NCOs miss, and its covariance ``P`` is the error covariance
 only if the tracking errors really were a random walk of that PSD. They are not: with the
@@ -58,8 +58,7 @@ against the simulated truth): stated / true variance 0.99-1.08 (code) and 0.93
 Interaction with the vector loop (:mod:`sdr_di.deep.vector_loop`):
 
 * **outputs** at the integration-filter rate: ``dtau``, ``df`` and their variances (``C``),
-  turned
-  into the measurements of paper 004 eq 8-9, ``drho = (c / f_code) dtau`` and
+  turned into the measurements of paper 004 eq 8-9, ``drho = (c / f_code) dtau`` and
   ``drho_dot = (c / f_carr) df`` (``df`` in Hz is ``delta_omega / 2 pi``), with ``R_k`` from
   the covariances (eq 34);
 * **corrections**: after the integration filter's feedback the NCO commands of the next

@@ -31,8 +31,9 @@ time (D1 10 ms, D2 2 ms), ``d`` its early/late offset (0.5 chip)::
 (:func:`~sdr_di.receiver.loops.dll_code_noise_chips`, :func:`~sdr_di.receiver.loops.
 pll_doppler_noise_hz`; ``B_DLL`` 1 Hz, ``B_PLL`` 15 Hz). The PVT's weight model (1 m and
 0.05 m/s at 45 dB-Hz, scaled by 1/sin(el) and C/N0) it replaced was 8.5 (pseudorange,
-0.12 m) and 4 (rate, 0.012 m/s) times the thermal sigma at 45 dB-Hz and zenith; the simulation has no multipath and its
-range models match the generator's, so thermal noise is the measurement error. It is not
+0.12 m) and 4 (rate, 0.012 m/s) times the thermal sigma at 45 dB-Hz and zenith; the
+simulation has no multipath and its range models match the generator's, so thermal noise is
+the measurement error. It is not
 white: the DLL error is correlated over ``1 / (4 B_DLL)`` = 0.25 s (lag-1 correlation
 about 0.45 at 5 Hz); ``R`` states its variance (NIS), and the filter sees it as white.
 
