@@ -103,10 +103,13 @@ def test_epoch_rows_are_contiguous_whole_code_periods():
 
 
 # ---- pre-filter ------------------------------------------------------------------------------
-def _reference_prefilter(x, P, E, Pr, L, T, d, beta, r_tau, r_phi, q_tau, q_phi, s_f):
-    """Plain matrix-form transcription of the pre-filter (prefilter.py module notes)."""
+def _reference_prefilter(x, P, E, Pr, L, T, d, beta, r_tau, r_phi, q_tau, q_phi, s_f,
+                         C=None, q_phi_m=0.0, s_f_m=0.0):
+    """Plain matrix-form transcription of the pre-filter (prefilter.py module notes); with
+    ``C``, also its error covariance under the noise model (Joseph form), returned third."""
     x = x.copy()
     P = P.copy()
+    C = np.zeros((3, 3)) if C is None else C.copy()
     for j in range(len(Pr)):
         H = np.array([[1.0, 0.0, beta * T[j] / 2], [0.0, 1.0, math.pi * T[j]]])
         z = np.array([(1 - d) * (abs(E[j]) - abs(L[j])) / (abs(E[j]) + abs(L[j])),
@@ -118,11 +121,14 @@ def _reference_prefilter(x, P, E, Pr, L, T, d, beta, r_tau, r_phi, q_tau, q_phi,
         x = x + K @ y
         P = P - K @ H @ P
         P = 0.5 * (P + P.T)
+        A = np.eye(3) - K @ H
+        C = A @ C @ A.T + K @ np.diag([r_tau[j], r_phi[j]]) @ K.T
         x[1] -= math.pi * math.floor(x[1] / math.pi + 0.5)
         F = np.array([[1, 0, beta * T[j]], [0, 1, 2 * math.pi * T[j]], [0, 0, 1.0]])
         x = F @ x
         P = F @ P @ F.T + np.diag([q_tau, q_phi, s_f * T[j]])
-    return x, P
+        C = F @ C @ F.T + np.diag([0.0, q_phi_m * T[j], s_f_m * T[j]])
+    return x, P, C
 
 
 def test_prefilter_kernel_equals_matrix_reference():
@@ -133,13 +139,15 @@ def test_prefilter_kernel_equals_matrix_reference():
     r_tau, r_phi = rng.uniform(0.01, 0.05, m), rng.uniform(0.05, 0.2, m)
     x0 = np.array([0.05, 0.3, 2.0])
     P0 = np.diag([0.04, 0.5, 9.0])
-    x, P = x0.copy(), P0.copy()
+    C0 = np.diag([0.03, 0.4, 7.0]) + 0.001
+    x, P, C = x0.copy(), P0.copy(), C0.copy()
     prefilter_epochs(x, P, E, Pr, L, T, 0.5, CHIP_RATE_B3I / F_B3I, r_tau, r_phi, 1e-8, 1e-4,
-                     4.0)
-    xr, Pr_ = _reference_prefilter(x0, P0, E, Pr, L, T, 0.5, CHIP_RATE_B3I / F_B3I, r_tau,
-                                   r_phi, 1e-8, 1e-4, 4.0)
+                     4.0, C, 0.0, 0.02, 0.3)
+    xr, Pr_, Cr = _reference_prefilter(x0, P0, E, Pr, L, T, 0.5, CHIP_RATE_B3I / F_B3I,
+                                       r_tau, r_phi, 1e-8, 1e-4, 4.0, C0, 0.02, 0.3)
     assert np.allclose(x, xr, rtol=1e-10, atol=1e-12)
     assert np.allclose(P, Pr_, rtol=1e-10, atol=1e-14)
+    assert np.allclose(C, Cr, rtol=1e-10, atol=1e-14)
 
 
 def _synthetic_epl(rng, k, T, d, tau0, phi0, f_err, amp):

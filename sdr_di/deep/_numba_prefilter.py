@@ -19,7 +19,7 @@ def wrap_half_pi(a: float) -> float:
 
 @numba.njit(cache=True)
 def prefilter_epochs(x, P, early, prompt, late, t_epoch, spacing, beta, r_tau, r_phi,
-                     q_tau, q_phi, s_f):
+                     q_tau, q_phi, s_f, C, q_tau_m, q_phi_m, s_f_m):
     """Run the 3-state pre-filter over consecutive epochs of one channel, in place.
 
     Parameters
@@ -43,6 +43,13 @@ def prefilter_epochs(x, P, early, prompt, late, t_epoch, spacing, beta, r_tau, r
         Process noise per epoch [chips^2], [rad^2].
     s_f : float
         Frequency random-walk PSD [Hz^2/s].
+    C : float64 (3, 3)
+        Error covariance of ``x`` under the noise model (updated in place): the Joseph form
+        with the filter's gain ``K``, ``C <- (I - K H) C (I - K H)^T + K R K^T``, then
+        ``C <- F C F^T + diag(q_tau_m, q_phi_m T, s_f_m T)``.
+    q_tau_m, q_phi_m, s_f_m : float
+        The noise model's process noise: code per epoch [chips^2], phase random-walk PSD
+        [rad^2/s] and frequency random-walk PSD [Hz^2/s].
 
     Returns
     -------
@@ -51,6 +58,10 @@ def prefilter_epochs(x, P, early, prompt, late, t_epoch, spacing, beta, r_tau, r
     """
     m = prompt.shape[0]
     nis = 0.0
+    A = np.empty((3, 3))
+    Kt = np.empty((3, 2))
+    AC = np.empty((3, 3))
+    CN = np.empty((3, 3))
     for j in range(m):
         T = t_epoch[j]
         ea = abs(early[j])
@@ -105,6 +116,29 @@ def prefilter_epochs(x, P, early, prompt, late, t_epoch, spacing, beta, r_tau, r
                 v = 0.5 * (P[r, c] + P[c, r])
                 P[r, c] = v
                 P[c, r] = v
+        # error covariance under the noise model, Joseph form with this gain:
+        # A = I - K H (H rows [1, 0, h02], [0, 1, h12]), C <- A C A^T + K R K^T
+        for r in range(3):
+            kr0 = K00 if r == 0 else (K10 if r == 1 else K20)
+            kr1 = K01 if r == 0 else (K11 if r == 1 else K21)
+            A[r, 0] = (1.0 if r == 0 else 0.0) - kr0
+            A[r, 1] = (1.0 if r == 1 else 0.0) - kr1
+            A[r, 2] = (1.0 if r == 2 else 0.0) - kr0 * h02 - kr1 * h12
+            Kt[r, 0] = kr0
+            Kt[r, 1] = kr1
+        for r in range(3):
+            for c in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += A[r, k] * C[k, c]
+                AC[r, c] = acc
+        for r in range(3):
+            for c in range(r, 3):
+                acc = Kt[r, 0] * r_tau[j] * Kt[c, 0] + Kt[r, 1] * r_phi[j] * Kt[c, 1]
+                for k in range(3):
+                    acc += AC[r, k] * A[c, k]
+                CN[r, c] = acc
+                CN[c, r] = acc
         x[1] = wrap_half_pi(x[1])
         # propagate to the next epoch start: F = [[1, 0, beta T], [0, 1, 2 pi T], [0, 0, 1]]
         f02 = beta * T
@@ -128,6 +162,20 @@ def prefilter_epochs(x, P, early, prompt, late, t_epoch, spacing, beta, r_tau, r
         P[1, 2] = n12
         P[2, 1] = n12
         P[2, 2] = p22 + s_f * T
+        c00, c01, c02 = CN[0, 0], CN[0, 1], CN[0, 2]
+        c11, c12, c22 = CN[1, 1], CN[1, 2], CN[2, 2]
+        m01 = c01 + f12 * c02 + f02 * c12 + f02 * f12 * c22
+        m02 = c02 + f02 * c22
+        m12 = c12 + f12 * c22
+        C[0, 0] = c00 + 2.0 * f02 * c02 + f02 * f02 * c22 + q_tau_m
+        C[0, 1] = m01
+        C[1, 0] = m01
+        C[0, 2] = m02
+        C[2, 0] = m02
+        C[1, 1] = c11 + 2.0 * f12 * c12 + f12 * f12 * c22 + q_phi_m * T
+        C[1, 2] = m12
+        C[2, 1] = m12
+        C[2, 2] = c22 + s_f_m * T
     return nis
 
 
@@ -137,4 +185,5 @@ def _warm() -> None:  # pragma: no cover - compile on import of the bank when ca
     z = np.ones(1, np.complex128)
     t = np.full(1, 1e-3)
     r = np.ones(1)
-    prefilter_epochs(x, P, z, z, z, t, 0.5, 0.008, r, r, 0.0, 0.0, 1.0)
+    prefilter_epochs(x, P, z, z, z, t, 0.5, 0.008, r, r, 0.0, 0.0, 1.0, np.eye(3), 0.0, 0.0,
+                     1.0)

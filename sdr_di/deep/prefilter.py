@@ -26,10 +26,39 @@ Dynamics from one epoch start to the next: ``dtau += beta T df`` (carrier-aided 
 drift and the clock frequency noise the NCO commands cannot predict), plus small
 ``q_tau``, ``q_phi`` per epoch.
 
+Noise model: what the output variances mean
+-------------------------------------------
+The filter above is a *design*: ``s_f`` (4 Hz^2/s) and ``q_phi`` set its bandwidth so that
+it follows what the INS-driven NCOs miss, and its covariance ``P`` is the error covariance
+only if the tracking errors really were a random walk of that PSD. They are not: with the
+NCOs commanded from the INS and clock every interval, and the filter's corrections moved
+into the state (:meth:`PreFilterBank.shift`), what is left per channel is the line-of-sight
+velocity error the accelerometer noise adds, ``s_f_model = VRW^2 / lambda^2`` (about 1e-5
+Hz^2/s for the default MEMS IMU; :func:`model_process_noise`). ``P[2, 2]`` then overstated
+the frequency error variance 4.5-6.3 times (45-30 dB-Hz, ``scripts/check_prefilter.py``),
+which is the 5.5 times too large rate ``R`` the deep filters' innovations showed.
+
+So the outputs state the error covariance ``C`` of the *same* estimates under the noise
+model (the covariance analysis of a suboptimal filter: the filter's own gain ``K``, the
+model's noise)::
+
+    C <- (I - K H) C (I - K H)^T + K R K^T                 (update, Joseph form)
+    C <- F C F^T + diag(0, q_phi_model T, s_f_model T)     (propagation)
+
+with ``R = diag(r_tau, r_phi)`` and ``H``, ``F`` above. ``C`` starts equal to ``P`` (the
+priors of :meth:`PreFilterBank.reset` are real priors), is not touched by ``shift``
+(the NCOs and the state move together, the error does not) nor by ``decorrelate`` (which
+only resets the design code variance, to keep the code gain high). The oscillator's noise is
+not in the model: it is common to every channel and is the integration filter's clock
+process noise, which a diagonal ``R`` could not carry. Checked by Monte Carlo
+(``scripts/check_prefilter.py``, 200 channels x 200 intervals of 20 ms blocks, errors
+against the simulated truth): stated / true variance 0.99-1.08 (code) and 0.93
+(frequency) at 45, 40, 35 and 30 dB-Hz, where ``P`` gave 1.00-1.35 and 6.3-4.5.
+
 Interaction with the vector loop (:mod:`sdr_di.integration.receiver`):
 
-* **outputs** at the integration-filter rate: ``dtau``, ``df`` and their variances, turned
-  into the measurements of paper 004 eq 8-9, ``drho = (c / f_code) dtau`` and
+* **outputs** at the integration-filter rate: ``dtau``, ``df`` and their variances (``C``),
+  turned into the measurements of paper 004 eq 8-9, ``drho = (c / f_code) dtau`` and
   ``drho_dot = (c / f_carr) df`` (``df`` in Hz is ``delta_omega / 2 pi``), with ``R_k`` from
   the covariances (eq 34);
 * **corrections**: after the integration filter's feedback the NCO commands of the next
@@ -58,10 +87,27 @@ import math
 import numpy as np
 from scipy.special import gammaincc
 
-from ..constants import CHIP_RATE_B3I, F_B3I
+from ..constants import C_LIGHT, CHIP_RATE_B3I, F_B3I
+from ..ins.imu import ImuErrorModel
 from ._numba_prefilter import prefilter_epochs
 
-__all__ = ["PreFilterBank", "discriminator_variances"]
+__all__ = ["PreFilterBank", "discriminator_variances", "model_process_noise"]
+
+
+def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I
+                        ) -> tuple[float, float]:
+    """``(s_f_model [Hz^2/s], q_phi_model [rad^2/s])``: the per-channel tracking-error
+    dynamics the INS-driven NCO commands cannot predict (module notes, *Noise model*).
+
+    ``s_f_model = VRW^2 / lambda^2``: the assumed accelerometer's velocity random walk
+    [m/s/sqrt(s)] on the line of sight, in Hz. ``q_phi_model = 0``. The oscillator's noise is
+    common to every channel and is the integration filter's clock states' process noise,
+    not a per-channel error (a diagonal ``R`` could not carry it). ``imu=None``: a perfect
+    IMU.
+    """
+    lam = C_LIGHT / float(carrier_hz)
+    s_f = 0.0 if imu is None else (imu.accel_random_walk_si / lam) ** 2
+    return s_f, 0.0
 
 
 def discriminator_variances(cn0_hz: float, t_epoch: np.ndarray, spacing: float
@@ -85,22 +131,28 @@ class PreFilterBank:
     carrier_hz : float
         Carrier frequency [Hz] (for ``beta``).
     s_f : float
-        Frequency random-walk PSD [Hz^2/s]. Default 4 (0.2 Hz, i.e. 5 cm/s, of unpredicted
-        drift in 10 ms).
+        Design frequency random-walk PSD [Hz^2/s] (sets the gain, module notes). Default 4
+        (0.2 Hz, i.e. 5 cm/s, of unpredicted drift in 10 ms).
     sigma_tau0, sigma_f0 : float
         Prior standard deviations of the code [chips] and frequency [Hz] errors set at every
         interval start when the state is reset (decorrelation). Defaults 0.2 chip, 5 Hz.
     reset_code, reset_frequency : bool
         Which variances :meth:`decorrelate` resets (module notes). Defaults True, False.
     q_tau, q_phi : float
-        Process noise per epoch [chips^2], [rad^2].
+        Design process noise per epoch [chips^2], [rad^2].
+    s_f_model, q_phi_model : float or None
+        The noise model's frequency random-walk PSD [Hz^2/s] and phase random-walk PSD
+        [rad^2/s] behind the stated variances (module notes, *Noise model*); None: those of
+        the default MEMS IMU (:func:`model_process_noise`).
 
     Attributes
     ----------
     x : ndarray (n, 3)
         States ``[dtau, dphi, df]``.
     P : ndarray (n, 3, 3)
-        Covariances.
+        Design covariances (they set the gains).
+    C : ndarray (n, 3, 3)
+        Error covariances under the noise model (the stated output variances).
     nis : ndarray (n,)
         Normalized innovation squared of the last interval, per measurement (two per
         block).
@@ -112,7 +164,8 @@ class PreFilterBank:
     def __init__(self, n: int, spacing: float = 0.5, carrier_hz: float = F_B3I, *,
                  s_f: float = 4.0, sigma_tau0: float = 0.2, sigma_f0: float = 5.0,
                  q_tau: float = 1e-8, q_phi: float = 1e-4, reset_code: bool = True,
-                 reset_frequency: bool = False):
+                 reset_frequency: bool = False, s_f_model: float | None = None,
+                 q_phi_model: float | None = None):
         self.n = int(n)
         self.spacing = float(spacing)
         self.beta = CHIP_RATE_B3I / float(carrier_hz)
@@ -123,8 +176,12 @@ class PreFilterBank:
         self.q_phi = float(q_phi)
         self.reset_code = bool(reset_code)
         self.reset_frequency = bool(reset_frequency)
+        s_m, q_m = model_process_noise(ImuErrorModel(), carrier_hz)
+        self.s_f_model = s_m if s_f_model is None else float(s_f_model)
+        self.q_phi_model = q_m if q_phi_model is None else float(q_phi_model)
         self.x = np.zeros((self.n, 3))
         self.P = np.zeros((self.n, 3, 3))
+        self.C = np.zeros((self.n, 3, 3))
         self.nis = np.full(self.n, math.nan)
         self.nis_p = np.full(self.n, math.nan)
         for i in range(self.n):
@@ -138,6 +195,7 @@ class PreFilterBank:
         sf = self.sigma_f0 if sigma_f is None else float(sigma_f)
         self.x[i] = (dtau, dphi, df)
         self.P[i] = np.diag([st * st, float(sigma_phi) ** 2, sf * sf])
+        self.C[i] = self.P[i]
 
     def shift(self, i: int, d_tau_chips: float, d_f_hz: float) -> None:
         """The channel's NCOs moved by ``d_tau`` chips and ``d_f`` Hz: keep the state the
@@ -179,16 +237,20 @@ class PreFilterBank:
         r_tau, r_phi = discriminator_variances(cn0_hz, t, self.spacing)
         xi = self.x[i].copy()
         Pi = self.P[i].copy()
+        Ci = self.C[i].copy()
         nis = prefilter_epochs(xi, Pi, np.ascontiguousarray(early, np.complex128),
                                np.ascontiguousarray(prompt, np.complex128),
                                np.ascontiguousarray(late, np.complex128), t, self.spacing,
-                               self.beta, r_tau, r_phi, self.q_tau, self.q_phi, self.s_f)
+                               self.beta, r_tau, r_phi, self.q_tau, self.q_phi, self.s_f,
+                               Ci, 0.0, self.q_phi_model, self.s_f_model)
         self.x[i] = xi
         self.P[i] = Pi
+        self.C[i] = Ci
         self.nis[i] = nis / (2.0 * t.size)
         self.nis_p[i] = float(gammaincc(t.size, 0.5 * nis))  # chi-square sf, 2 per block
 
     def outputs(self, i: int) -> tuple[float, float, float, float]:
-        """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])`` of channel ``i``."""
-        return (float(self.x[i, 0]), float(self.x[i, 2]), float(self.P[i, 0, 0]),
-                float(self.P[i, 2, 2]))
+        """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])`` of channel ``i``: the
+        estimates and their error variances under the noise model (``C``, module notes)."""
+        return (float(self.x[i, 0]), float(self.x[i, 2]), float(self.C[i, 0, 0]),
+                float(self.C[i, 2, 2]))

@@ -49,7 +49,7 @@ from ._numba_epoch_rows import epoch_rows
 from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
-from .prefilter import PreFilterBank
+from .prefilter import PreFilterBank, model_process_noise
 
 __all__ = ["SampleClock", "VectorTracking"]
 
@@ -174,8 +174,10 @@ class VectorTracking:
         self.iono = navdata.klobuchar
         self.ephs = [c.eph for c in chans]
         self.nav_log = _NavLog(navdata, chans, self.iono, *handover)
+        s_f_model, q_phi_model = model_process_noise(cfg.imu, source.carrier_hz)
         self.pre = PreFilterBank(self.n_channels, spacing_chips, source.carrier_hz,
-                                 **cfg.prefilter)
+                                 **{"s_f_model": s_f_model, "q_phi_model": q_phi_model,
+                                    **cfg.prefilter})
         self.bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
                                           for c in chans]))
         self.chan_idx = np.arange(self.n_channels, dtype=np.int64)

@@ -534,7 +534,8 @@ class IntegratedReceiver:
         prof = {"scalar": 0.0, "measure": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
         imu_epoch = (clock.week, clock.sow(0) + off)     # BDT of IMU t = 0 (module notes)
         src_cls = LooseFixSource if loose else TightRangeSource
-        src = src_cls(recorder, prns, imu.t, imu_epoch, fs, prof)
+        src = src_cls(recorder, prns, imu.t, imu_epoch, fs, prof, tracking_config=rx.config,
+                      interval_s=1.0 / cfg.gnss_rate_hz)
         n1 = round(fs * 1e-3)            # deep's margin, so that the windows are the same
         loop = IntegrationLoop(
             imu=imu, t_if=t_if, i_start=i_h, k_start=k_grid0, n_per=n_per, fs=fs, stop=stop,

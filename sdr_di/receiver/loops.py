@@ -50,6 +50,7 @@ __all__ = [
     "CarrierLoop",
     "CodeLoop",
     "costas_atan",
+    "dll_code_noise_chips",
     "dll_nelp",
     "fll_atan",
     "fll_natural_frequency",
@@ -301,3 +302,44 @@ def pll_doppler_noise_hz(cn0_dbhz: float, coherent_s: float, pll_bw_hz: float) -
         raise ValueError(f"unstable loop: B T = {pll_bw_hz * t:g}")
     p = solve_discrete_lyapunov(a, np.outer(b, b) * var_cycles)
     return float(math.sqrt(p[2, 2]))
+
+
+def dll_code_noise_chips(cn0_dbhz: float, coherent_s: float, dll_bw_hz: float,
+                         spacing_chips: float = 0.5) -> float:
+    """Standard deviation [chips] of the code tracking error of the carrier-aided
+    first-order DLL (:class:`CodeLoop`, order 1) from thermal noise alone.
+
+    The normalized early-minus-late envelope (:func:`dll_nelp`, early/late at +-d chips)
+    has, per update of coherent time ``T``, the white noise
+
+        sigma_d^2 = d / (2 T C/N0) (1 + 1 / (T C/N0))             [chips^2]
+
+    (near linear for ``T C/N0`` above a few); the loop corrects ``w0 T`` of each output
+    (``w0 = 4 B_L``), so the error ``tau' = (1 - w0 T) tau - w0 T n`` has the steady-state
+    variance
+
+        sigma_tau^2 = w0 T sigma_d^2 / (2 - w0 T)  ~  2 B_L T sigma_d^2 = B_L d / C/N0
+
+    Parameters
+    ----------
+    cn0_dbhz : float
+        Carrier-to-noise density ratio [dB-Hz].
+    coherent_s : float
+        Coherent integration time = update interval ``T`` [s].
+    dll_bw_hz : float
+        DLL noise bandwidth [Hz] (> 0, ``4 B_L T < 2``).
+    spacing_chips : float
+        Early/late offset ``d`` [chips].
+
+    Returns
+    -------
+    float
+        [chips] (multiply by ``c / f_code`` for the pseudorange noise [m]). The error is
+        correlated over about ``1 / (4 B_L)`` [s].
+    """
+    k = 4.0 * float(dll_bw_hz) * float(coherent_s)
+    if not (0.0 < k < 2.0 and math.isfinite(cn0_dbhz)):
+        raise ValueError("dll_code_noise_chips needs 0 < 4 B_L T < 2 and a finite C/N0")
+    snr = float(coherent_s) * 10.0 ** (cn0_dbhz / 10.0)
+    var_d = spacing_chips / (2.0 * snr) * (1.0 + 1.0 / snr)
+    return math.sqrt(k * var_d / (2.0 - k))
