@@ -108,7 +108,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import ImuDataError, SdrDiError
+from ..errors import ImuDataError, RunFailed, SdrDiError
 from ..filters import make_filter
 from ..frames import ecef_to_llh, radii_of_curvature
 from ..ins.error_model import ClockModel, InsErrorModel, process_noise
@@ -142,6 +142,8 @@ __all__ = ["MODES", "DeepConfig", "DeepReceiver", "DeepResult", "HandoverError",
 MODES = ("deep", "loose", "tight")
 #: Interval of the scalar start-up's output epochs (the hand-over rule runs on them) [s].
 _EPOCH_S = 0.1
+#: D1 navigation message bit rate [bit/s] (MEO/IGSO satellites; GEOs' D2 is 10 times faster).
+D1_BIT_RATE_HZ = 50.0
 
 
 
@@ -153,8 +155,22 @@ def clock_model(clock: str | OscillatorSpec) -> ClockModel:
     return ClockModel.from_oscillator(CLOCK_PRESETS[clock] if isinstance(clock, str) else clock)
 
 
-class HandoverError(SdrDiError):
-    """The scalar start-up never reached a state the vector loop can take over."""
+class HandoverError(RunFailed):
+    """The scalar start-up never reached a state the vector loop can take over (a run
+    without a fix: exit status 1)."""
+
+
+def handover_span_s(config: DeepConfig) -> tuple[float, float]:
+    """Seconds of file the scalar start-up needs before a hand-over: (usual, longest).
+
+    Usual: two D1 subframes: the first preamble can come a whole subframe into the file and
+    the frame (hence the time of week the fix needs) is confirmed at the next one. Longest:
+    plus ``handover_wait_s`` when a tracked channel lacks navigation data at the first fix.
+    """
+    from ..signal.words import SUBFRAME_BITS
+
+    usual = 2.0 * SUBFRAME_BITS / D1_BIT_RATE_HZ
+    return usual, usual + config.handover_wait_s
 
 
 @dataclasses.dataclass
@@ -590,11 +606,17 @@ class DeepReceiver:
         t_scalar = time.perf_counter() - t0
         if "sample" not in hand:
             found = [c.prn for c in rx.channels.values() if c.n_acquisitions > 0]
+            usual, longest = handover_span_s(cfg)
+            span = stop / fs                       # the start-up runs from sample 0
+            short = (f"; the {span:.1f} s processed are too short for the hand-over, which "
+                     f"needs about {usual:.0f} s of file (two D1 subframes: the time of week), "
+                     f"up to {longest:.0f} s" if span < longest else "")
             raise HandoverError(
-                f"{source.path}: no hand-over to the vector loop: " +
+                f"{source.path}: no hand-over to the {'vector' if cfg.mode == 'deep' else cfg.mode}"
+                " loop: " +
                 ("no satellite found" if not found else
                  f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
-                 "ephemeris and a valid fix"))
+                 "ephemeris and a valid fix") + short)
         if cfg.mode != "deep":
             return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
         return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
