@@ -119,15 +119,28 @@ def _add_file_options(p) -> None:
     p.add_argument("--start-week", type=int, default=None, help="foreign file: BDT week hint")
     p.add_argument("--start-sow", type=float, default=None,
                    help="foreign file: BDT seconds of week of sample 0 (hint)")
+    p.add_argument("--ignore-sidecar", action="store_true",
+                   help="read the file with --fs/--if/--format alone, even where a sidecar "
+                   "(X.json) beside it says otherwise (without this, options that contradict "
+                   "the sidecar are an error)")
+    p.add_argument("--no-format-check", action="store_true",
+                   help="read the file even where its bytes do not look like the declared "
+                   "sample format")
 
 
 def _open_source(args: argparse.Namespace):
     """The IF source of ``args.if_file`` from its sidecar, tag or the file options."""
+    from .receiver.ifreader import FormatCheckError
     from .receiver.run_scalar import open_source
 
-    return open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
-                       sample_format=args.sample_format, spectrum_inverted=args.inverted,
-                       start_week=args.start_week, start_sow=args.start_sow, rfch=args.rfch)
+    try:
+        return open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
+                           sample_format=args.sample_format, spectrum_inverted=args.inverted,
+                           start_week=args.start_week, start_sow=args.start_sow,
+                           rfch=args.rfch, ignore_sidecar=args.ignore_sidecar,
+                           check_format=not args.no_format_check)
+    except FormatCheckError as exc:  # the CLI's switch, not the Python argument
+        raise UsageError(f"{exc.finding} (--no-format-check reads it anyway)") from None
 
 
 def _add_acquire(sub) -> None:

@@ -42,3 +42,47 @@ def test_failed_deep_run_leaves_no_folder_and_says_what_length_it_needs(short_se
     m = re.search(r"needs about (\d+) s", err[0])
     assert m and int(m.group(1)) == 12, err[0]      # two D1 subframes of 6 s
     assert not (tmp_path / "a").exists()
+
+
+# -- item 1: flags against the sidecar --------------------------------------------------------
+
+def test_flags_that_contradict_the_sidecar_are_exit_2_naming_both(short_set, tmp_path, capsys):
+    out = tmp_path / "o"
+    rc, err = _run(capsys, ["run", str(short_set / "s.bin"), "--fs", "2.5e6", "--if", "0",
+                            "--format", "real_int8", "--no-progress", "--out", str(out)])
+    assert rc == 2 and len(err) == 1 and err[0].startswith("sdr-di: error: "), err
+    assert "--format real_int8" in err[0] and "the sidecar iq_int8" in err[0], err[0]
+    assert "--ignore-sidecar" in err[0] and not out.exists()
+    rc, err = _run(capsys, ["acquire", str(short_set / "s.bin"), "--fs", "5e6", "--format",
+                            "iq_int8", "--out", str(out)])
+    assert rc == 2 and "--fs 5e+06 Hz, the sidecar 2.5e+06 Hz" in err[0], err
+
+
+def test_ignore_sidecar_lets_contradicting_flags_through(short_set, tmp_path, capsys):
+    rc, err = _run(capsys, ["acquire", str(short_set / "s.bin"), "--fs", "2.5e6", "--if", "0",
+                            "--format", "real_int8", "--ignore-sidecar", "--noncoherent", "10",
+                            "--out", str(tmp_path / "a")])
+    assert rc == 0, err
+    assert (tmp_path / "a" / "s_acquisition.csv").is_file()
+
+
+def test_truncated_file_with_flags_is_caught_by_its_sidecar(short_set, tmp_path, capsys):
+    d = tmp_path / "t"
+    d.mkdir()
+    shutil.copy(short_set / "s.json", d / "s.json")
+    (d / "s.bin").write_bytes((short_set / "s.bin").read_bytes()[:100_000])
+    rc, err = _run(capsys, ["run", str(d / "s.bin"), "--fs", "2.5e6", "--format", "iq_int8",
+                            "--no-progress", "--out", str(tmp_path / "o")])
+    assert rc == 2 and "100000 bytes, the sidecar records" in err[0], err
+
+
+def test_format_check_message_names_the_cli_switch(short_set, tmp_path, capsys):
+    f = tmp_path / "foreign.bin"
+    shutil.copy(short_set / "s.bin", f)
+    argv = ["acquire", str(f), "--fs", "2.5e6", "--format", "iq_int16", "--noncoherent", "10",
+            "--out", str(tmp_path / "a")]
+    rc, err = _run(capsys, argv)
+    assert rc == 2 and len(err) == 1, err
+    assert err[0].endswith("(--no-format-check reads it anyway)") and "check_format" not in \
+        err[0], err[0]
+    assert main([*argv, "--no-format-check"]) == 0
