@@ -75,8 +75,17 @@ def _add_generate(sub) -> None:
     p.set_defaults(func=_cmd_generate)
 
 
+#: ``generate``'s flags by the scenario override they set (messages name the flag).
+_GENERATE_FLAGS = {"duration_s": "--duration", "seed": "--seed", "sampling_rate_hz": "--fs",
+                   "if_hz": "--if", "sample_format": "--format", "kind": "--format",
+                   "quantization_bits": "--bits", "cn0_dbhz": "--cn0",
+                   "ephemeris": "--ephemeris", "prns": "--prn"}
+
+
 def _cmd_generate(args: argparse.Namespace) -> int:
+    from .errors import ScenarioError, UnknownPrnError
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT, load_scenario
+    from .scenario.schema import with_flag_names
     from .sim.generate import generate_files
 
     sc = load_scenario(args.scenario or DEFAULT_SCENARIO)
@@ -87,12 +96,17 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         fmt = get_format(args.sample_format)
         kind = "complex" if fmt.is_complex else "real"
         args.sample_format = fmt.name
-    sc = sc.with_overrides(
+    over = dict(
         duration_s=args.duration, seed=args.seed, sampling_rate_hz=args.fs,
         if_hz=args.if_hz, sample_format=args.sample_format, kind=kind,
         quantization_bits=args.bits, cn0_dbhz=args.cn0, ephemeris=args.ephemeris,
         prns=args.prn,
     )
+    try:
+        sc = sc.with_overrides(**over)
+    except (ScenarioError, UnknownPrnError) as exc:  # the flag typed, not the scenario key
+        raise with_flag_names(exc, sc, {k: f for k, f in _GENERATE_FLAGS.items()
+                                        if over[k] is not None}) from None
     out = args.out or (REPO_ROOT / "signals" / "out")
     files = generate_files(sc, out, name=args.name, progress=not args.no_progress)
     for label, path in files.items():

@@ -86,3 +86,21 @@ def test_format_check_message_names_the_cli_switch(short_set, tmp_path, capsys):
     assert err[0].endswith("(--no-format-check reads it anyway)") and "check_format" not in \
         err[0], err[0]
     assert main([*argv, "--no-format-check"]) == 0
+
+
+# -- item 2: messages name what the user typed -------------------------------------------------
+
+@pytest.mark.parametrize("flags,expected", [
+    (["--fs", "4.5e6", "--if", "20e6", "--format", "real_int16"], "--if: must be <= 2.25e+06"),
+    (["--cn0", "-500"], "--cn0: must be >= 0, got -500"),
+    (["--bits", "20"], "--bits: must be in [1, 16], got 20"),
+    (["--duration", "-5"], "--duration: must be > 0, got -5"),
+    (["--prn", "C99"], "--prn: unknown BDS PRN"),
+    (["--format", "real_int16"], "--format: real samples need an IF > 0: give --if"),
+])
+def test_generate_flag_errors_name_the_flag(tmp_path, capsys, flags, expected):
+    rc, err = _run(capsys, ["generate", "--no-progress", "--duration", "0.02", *flags,
+                            "--out", str(tmp_path / "o")])
+    assert rc == 2 and len(err) == 1, err
+    assert err[0].startswith(f"sdr-di: error: {expected}"), err[0]
+    assert "default.toml: [" not in err[0] and not (tmp_path / "o").exists()
