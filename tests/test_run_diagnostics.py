@@ -104,3 +104,14 @@ def test_generate_flag_errors_name_the_flag(tmp_path, capsys, flags, expected):
     assert rc == 2 and len(err) == 1, err
     assert err[0].startswith(f"sdr-di: error: {expected}"), err[0]
     assert "default.toml: [" not in err[0] and not (tmp_path / "o").exists()
+
+
+def test_warnings_are_one_line(short_set, tmp_path, capsys):
+    f = tmp_path / "odd.bin"
+    f.write_bytes((short_set / "s.bin").read_bytes()[:200_001])    # a partial sample at the end
+    rc, err = _run(capsys, ["acquire", str(f), "--fs", "2.5e6", "--format", "iq_int8",
+                            "--noncoherent", "10", "--out", str(tmp_path / "a")])
+    assert rc == 0, err
+    assert err == [f"sdr-di: warning: IF file {f}: size 200001 bytes is not a whole number of "
+                   "iq_int8 samples (2 bytes each); ignoring the 1 trailing byte(s) of a "
+                   "partial sample"], err
