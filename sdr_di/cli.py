@@ -193,7 +193,12 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
 
     from .constants import parse_prn
     from .io.atomic import check_output_dir, output_dir_removed_on_failure
-    from .receiver.acquisition import check_search
+    from .receiver.acquisition import (
+        LIKELY_CAUSES,
+        AcquisitionWarning,
+        check_search,
+        implausible_detections,
+    )
     from .receiver.run_acquire import run_acquisition
 
     check_search(args.coherent_ms, args.noncoherent, args.doppler_range, args.pfa)
@@ -227,6 +232,12 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
         print(f"C{r.prn:02d}  {'yes' if r.detected else 'no':8s}  {r.doppler_hz:12.1f}  "
               f"{r.code_phase_chips:18.3f}  {cn0}  {r.peak_metric:6.1f}  {r.threshold:9.1f}"
               f"  {'; '.join(r.notes)}")
+    problem, _ = implausible_detections(rep.results)
+    if problem is not None:
+        import warnings
+
+        warnings.warn(f"{source.path}: {problem}: not satellites; likely causes, most likely "
+                      f"first: {LIKELY_CAUSES}", AcquisitionWarning, stacklevel=1)
     n_det = sum(r.detected for r in rep.results)
     print(f"{n_det} of {len(rep.results)} PRNs detected"
           + ("" if len(rows) == len(rep.results) else " (every PRN in the CSV)"))

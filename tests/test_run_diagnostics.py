@@ -115,3 +115,50 @@ def test_warnings_are_one_line(short_set, tmp_path, capsys):
     assert err == [f"sdr-di: warning: IF file {f}: size 200001 bytes is not a whole number of "
                    "iq_int8 samples (2 bytes each); ignoring the 1 trailing byte(s) of a "
                    "partial sample"], err
+
+
+# -- item 1: detections real signals cannot give; a run without a fix -------------------------
+
+def _res(prn: int, doppler_hz: float, detected: bool = True):
+    from sdr_di.receiver.acquisition import AcquisitionResult
+
+    return AcquisitionResult(prn=prn, detected=detected, code_phase_chips=0.0,
+                             code_phase_samples=0.0, doppler_hz=doppler_hz,
+                             doppler_coarse_hz=doppler_hz, cn0_dbhz=40.0, peak_metric=100.0,
+                             threshold=60.0, pfa=1e-3, noise_power=1.0, doppler_refined=True)
+
+
+def test_implausible_detections_patterns():
+    from sdr_di.receiver.acquisition import MAX_IN_VIEW, implausible_detections
+
+    real = [_res(8, -77.7), _res(10, -1032.0), _res(13, 141.9), _res(27, 71.8),
+            _res(28, -1697.6), _res(30, 1858.7), _res(32, 2532.4)]
+    assert implausible_detections(real) == (None, [])
+    # GEOs share a Doppler near zero: plausible
+    assert implausible_detections([*real, _res(1, 0.2), _res(2, -0.1), _res(3, 0.3),
+                                   _res(4, 5.0)])[0] is None
+    problem, prns = implausible_detections([*real, _res(14, 0.0), _res(15, -0.0),
+                                            _res(17, 0.4)])
+    assert "3 PRNs that are not GEOs detected at 0 Hz" in problem and prns == []
+    problem, prns = implausible_detections(
+        [_res(p, 1000.0 + 97.0 * p) for p in range(6, 6 + MAX_IN_VIEW + 1)])
+    assert f"{MAX_IN_VIEW + 1} PRNs detected" in problem and prns == []
+    problem, prns = implausible_detections([*real, _res(14, 512.0), _res(15, 515.0),
+                                            _res(17, 518.0), _res(19, 509.0),
+                                            _res(20, 515.0, detected=False)])
+    assert "4 PRNs that are not GEOs detected within 10 Hz" in problem
+    assert prns == [14, 15, 17, 19]
+    assert implausible_detections([*real, _res(14, 512.0), _res(15, 515.0),
+                                   _res(17, 520.0)])[0] is None        # three: can happen
+
+
+def test_wrong_format_run_stops_with_a_diagnosis(short_set, tmp_path, capsys):
+    """The issue's case: an iq_int8 file read as real_int8 (its sidecar ignored). Before:
+    exit 0 after tracking the whole file, channels at exactly 0 Hz, 0 epochs with a fix."""
+    out = tmp_path / "o"
+    rc, err = _run(capsys, ["run", str(short_set / "s.bin"), "--fs", "2.5e6", "--if", "0",
+                            "--format", "real_int8", "--ignore-sidecar", "--no-progress",
+                            "--out", str(out)])
+    assert rc == 1 and len(err) == 1 and err[0].startswith("sdr-di: error: "), err
+    assert "at 0 Hz Doppler" in err[0] and "the sample format (--format)" in err[0], err[0]
+    assert not out.exists()
