@@ -162,3 +162,17 @@ def test_wrong_format_run_stops_with_a_diagnosis(short_set, tmp_path, capsys):
     assert rc == 1 and len(err) == 1 and err[0].startswith("sdr-di: error: "), err
     assert "at 0 Hz Doppler" in err[0] and "the sample format (--format)" in err[0], err[0]
     assert not out.exists()
+
+
+def test_study_cell_with_an_unknown_scenario_key_is_refused_before_any_run(tmp_path, capsys):
+    spec = tmp_path / "typo.toml"
+    spec.write_text('[study]\nname = "t"\nfilters = ["ekf", "ff-aukf"]\nruns = 1\n'
+                    '[base]\nduration_s = 4.0\n[[cells]]\nname = "baseline"\n'
+                    '[[cells]]\nname = "imu-typo"\n'
+                    'truth = { "imu.accel_random_walk_mps_sqrthz" = 0.5 }\n')
+    out = tmp_path / "st"
+    rc, err = _run(capsys, ["study", str(spec), "--out", str(out)])
+    assert rc == 2 and len(err) == 1, err
+    assert err[0].startswith(f"sdr-di: error: study {spec}: cell 'imu-typo': truth [imu]: "
+                             "unknown key(s) 'accel_random_walk_mps_sqrthz'"), err[0]
+    assert not out.exists()           # no run of the good cell either
