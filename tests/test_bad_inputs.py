@@ -523,10 +523,15 @@ def test_ctrl_c_during_a_campaign_is_one_line_without_dask_noise(tmp_path):
     import sys
 
     out = tmp_path / "c"
+    # the worker killed mid-run cannot remove its run's temporary folder (sdr-di-run-*) or
+    # Dask's scratch space: they go under tmp_path, not into the system's temp folder
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
     proc = subprocess.Popen(
         [sys.executable, "-m", "sdr_di.cli", "campaign", EXP, "--runs", "40", "--workers", "1",
          "--duration", "5", "--out", str(out), "--no-report"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env={**os.environ, "TMPDIR": str(tmp)})
     first = proc.stdout.readline()  # the first finished run: workers are busy now
     assert first.strip().startswith("run"), (first, proc.stderr.read() if not first else "")
     os.killpg(proc.pid, signal.SIGINT)
