@@ -87,6 +87,10 @@ def _after(main, argv: list[str], d: Path, status: int = 2) -> str:
 
 
 def _before(tree: Path, argv: list[str], d: Path) -> str:
+    return _before_run(tree, argv, d).replace(f"{tree}/", "./")
+
+
+def _before_run(tree: Path, argv: list[str], d: Path) -> str:
     before = _snapshot(d)
     env = {**os.environ, "PYTHONPATH": str(tree)}
     res = subprocess.run([sys.executable, "-m", "sdr_di.cli", *argv], cwd=tree, env=env,

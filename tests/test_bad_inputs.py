@@ -315,6 +315,12 @@ CASES: list[tuple] = [
     ("generate-real-format-no-if", [*GD, "--format", "real_int16", "--out", "{d}/o"]),
     # -- issue 28: runs that end without a fix: exit 1, one line, no folder left -------------
     ("run-no-satellite", ["run", "{d}/set/s.bin", "--prn", "C40", "--no-progress"], 1),
+    ("run-wrong-format-implausible", ["run", "{d}/set/s.bin", "--fs", "2.5e6", "--if", "0",
+                                      "--format", "real_int8", "--ignore-sidecar",
+                                      "--no-progress"], 1),
+    ("run-deep-too-short-for-handover", ["run", "{d}/set/s.bin", "--mode", "deep",
+                                         "--no-progress"], 1),
+    ("study-cell-unknown-truth-key", ["study", "{d}/study_typo.toml", "--out", "{d}/st"]),
 ]
 
 #: Exit status of a case: 2 (bad input) unless its third element says otherwise (1: a run
@@ -387,6 +393,10 @@ def make_workdir(d: Path, generated: Path) -> None:
             '"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/')
         + 'motion = "circle"\n')
     (d / "emptydir").mkdir()
+    (d / "study_typo.toml").write_text(
+        '[study]\nname = "t"\nfilters = ["ekf", "ff-aukf"]\nruns = 1\n[[cells]]\n'
+        'name = "baseline"\n[[cells]]\nname = "imu-typo"\n'
+        'truth = { "imu.accel_random_walk_mps_sqrthz" = 0.5 }\n')
     for name, text in (("assume_grade", '[imu]\ngrade = "consumer"\n'),
                        ("assume_neg_h", '[oscillator]\npreset = "tcxo"\nh0 = -2e-19\n'),
                        ("assume_key", "[initial_errors]\nheading_deg = 20\n"),

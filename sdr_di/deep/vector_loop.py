@@ -608,12 +608,15 @@ class DeepReceiver:
             found = [c.prn for c in rx.channels.values() if c.n_acquisitions > 0]
             usual, longest = handover_span_s(cfg)
             span = stop / fs                       # the start-up runs from sample 0
+            need = (f"needs about {usual:.0f} s of file (two D1 subframes: the time of week), "
+                    f"up to {longest:.0f} s when a channel lacks navigation data")
             short = (f"; the {span:.1f} s processed are too short for the hand-over, which "
-                     f"needs about {usual:.0f} s of file (two D1 subframes: the time of week), "
-                     f"up to {longest:.0f} s" if span < longest else "")
+                     f"{need}" if span < usual else
+                     f"; the {span:.1f} s processed may be too short: the hand-over {need}"
+                     if span < longest else "")
+            loop = "vector" if cfg.mode == "deep" else cfg.mode
             raise HandoverError(
-                f"{source.path}: no hand-over to the {'vector' if cfg.mode == 'deep' else cfg.mode}"
-                " loop: " +
+                f"{source.path}: no hand-over to the {loop} loop: " +
                 ("no satellite found" if not found else
                  f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
                  "ephemeris and a valid fix") + short)
