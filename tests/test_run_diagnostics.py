@@ -64,6 +64,9 @@ def test_ignore_sidecar_lets_contradicting_flags_through(short_set, tmp_path, ca
                             "--out", str(tmp_path / "a")])
     assert rc == 0, err
     assert (tmp_path / "a" / "s_acquisition.csv").is_file()
+    # what it finds is no satellites: one warning line says so (item 1, acquire)
+    assert len(err) == 1 and err[0].startswith("sdr-di: warning: ") and \
+        "at 0 Hz Doppler" in err[0] and "the sample format (--format)" in err[0], err
 
 
 def test_truncated_file_with_flags_is_caught_by_its_sidecar(short_set, tmp_path, capsys):
