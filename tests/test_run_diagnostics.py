@@ -179,3 +179,16 @@ def test_study_cell_with_an_unknown_scenario_key_is_refused_before_any_run(tmp_p
     assert err[0].startswith(f"sdr-di: error: study {spec}: cell 'imu-typo': truth [imu]: "
                              "unknown key(s) 'accel_random_walk_mps_sqrthz'"), err[0]
     assert not out.exists()           # no run of the good cell either
+
+
+def test_scalar_run_without_a_fix_is_exit_1_with_the_likely_causes(short_set, tmp_path,
+                                                                   capsys):
+    """1 s of signal: satellites tracked, no navigation data, no fix. Before: exit 0."""
+    out = tmp_path / "o"
+    rc, err = _run(capsys, ["run", str(short_set / "s.bin"), "--no-progress", "--out",
+                            str(out)])
+    assert rc == 1 and len(err) == 1 and err[0].startswith("sdr-di: error: no fix in "), err
+    causes = ["the sample format", "the IF sign", "the sample rate", "the start time"]
+    at = [err[0].index(c) for c in causes]
+    assert at == sorted(at), err[0]                       # in that order
+    assert (out / "s_pvt.csv").is_file() and (out / "s_channels.csv").is_file()  # kept
