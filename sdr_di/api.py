@@ -107,13 +107,22 @@ class RunResult:
     details: Any = dataclasses.field(repr=False, default=None)
 
 
+#: Scenario override key -> the argument of :func:`generate` that sets it; an override's bad
+#: value is reported under this name (the CLI passes its flags instead, ``_names``).
+_GENERATE_ARGUMENTS = {"duration_s": "duration_s", "seed": "seed",
+                       "sampling_rate_hz": "sampling_rate_hz", "if_hz": "if_hz",
+                       "sample_format": "sample_format", "kind": "sample_format",
+                       "quantization_bits": "bits", "cn0_dbhz": "cn0_dbhz",
+                       "ephemeris": "ephemeris", "prns": "prns"}
+
+
 def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
              name: str | None = None, duration_s: float | None = None,
              seed: int | None = None, sampling_rate_hz: float | None = None,
              if_hz: float | None = None, sample_format: str | None = None,
              bits: int | None = None, cn0_dbhz: float | None = None,
              ephemeris: PathLike | None = None, prns: Sequence[str | int] | None = None,
-             progress: bool = False) -> GeneratedFiles:
+             progress: bool = False, _names: dict[str, str] | None = None) -> GeneratedFiles:
     """Generate B3I IF samples, 200 Hz IMU data, truth and a sidecar (``sdr-di generate``).
 
     Parameters
@@ -159,7 +168,9 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
     OutputError
         The files cannot be written (nothing is left under the final names).
     """
+    from .errors import ScenarioError, UnknownPrnError
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT, load_scenario
+    from .scenario.schema import with_flag_names
     from .sim.generate import generate_files
 
     sc = load_scenario(scenario or DEFAULT_SCENARIO)
@@ -170,10 +181,16 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
         fmt = get_format(sample_format)
         kind = "complex" if fmt.is_complex else "real"
         sample_format = fmt.name
-    sc = sc.with_overrides(
+    over = dict(
         duration_s=duration_s, seed=seed, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
         sample_format=sample_format, kind=kind, quantization_bits=bits, cn0_dbhz=cn0_dbhz,
         ephemeris=ephemeris, prns=None if prns is None else [str(p) for p in prns])
+    try:
+        sc = sc.with_overrides(**over)
+    except (ScenarioError, UnknownPrnError) as exc:  # name the argument given, not the key
+        names = _GENERATE_ARGUMENTS if _names is None else _names
+        raise with_flag_names(exc, sc, {k: names[k] for k, v in over.items()
+                                        if v is not None}) from None
     files = generate_files(sc, REPO_ROOT / "signals" / "out" if out is None else Path(out),
                            name=name, progress=progress)
     return GeneratedFiles(if_file=files["if"], imu=files["imu"], truth=files["truth"],

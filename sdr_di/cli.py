@@ -75,6 +75,13 @@ def _add_generate(sub) -> None:
     p.set_defaults(func=_cmd_generate)
 
 
+#: ``generate``'s flags by the scenario override they set (messages name the flag).
+_GENERATE_FLAGS = {"duration_s": "--duration", "seed": "--seed", "sampling_rate_hz": "--fs",
+                   "if_hz": "--if", "sample_format": "--format", "kind": "--format",
+                   "quantization_bits": "--bits", "cn0_dbhz": "--cn0",
+                   "ephemeris": "--ephemeris", "prns": "--prn"}
+
+
 def _cmd_generate(args: argparse.Namespace) -> int:
     from .api import generate
 
@@ -82,7 +89,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
                      duration_s=args.duration, seed=args.seed, sampling_rate_hz=args.fs,
                      if_hz=args.if_hz, sample_format=args.sample_format, bits=args.bits,
                      cn0_dbhz=args.cn0, ephemeris=args.ephemeris, prns=args.prn,
-                     progress=not args.no_progress)
+                     progress=not args.no_progress, _names=_GENERATE_FLAGS)
     for label, path in files.files.items():
         print(f"{label:9s} {path}")
     return 0
@@ -107,15 +114,28 @@ def _add_file_options(p) -> None:
     p.add_argument("--start-week", type=int, default=None, help="foreign file: BDT week hint")
     p.add_argument("--start-sow", type=float, default=None,
                    help="foreign file: BDT seconds of week of sample 0 (hint)")
+    p.add_argument("--ignore-sidecar", action="store_true",
+                   help="read the file with --fs/--if/--format alone, even where a sidecar "
+                   "(X.json) beside it says otherwise (without this, options that contradict "
+                   "the sidecar are an error)")
+    p.add_argument("--no-format-check", action="store_true",
+                   help="read the file even where its bytes do not look like the declared "
+                   "sample format")
 
 
 def _open_source(args: argparse.Namespace):
     """The IF source of ``args.if_file`` from its sidecar, tag or the file options."""
+    from .receiver.ifreader import FormatCheckError
     from .receiver.run_scalar import open_source
 
-    return open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
-                       sample_format=args.sample_format, spectrum_inverted=args.inverted,
-                       start_week=args.start_week, start_sow=args.start_sow, rfch=args.rfch)
+    try:
+        return open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
+                           sample_format=args.sample_format, spectrum_inverted=args.inverted,
+                           start_week=args.start_week, start_sow=args.start_sow,
+                           rfch=args.rfch, ignore_sidecar=args.ignore_sidecar,
+                           check_format=not args.no_format_check)
+    except FormatCheckError as exc:  # the CLI's switch, not the Python argument
+        raise UsageError(f"{exc.finding} (--no-format-check reads it anyway)") from None
 
 
 def _add_acquire(sub) -> None:
@@ -153,8 +173,13 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     import math
 
     from .constants import parse_prn
-    from .io.atomic import check_output_dir
-    from .receiver.acquisition import check_search
+    from .io.atomic import check_output_dir, output_dir_removed_on_failure
+    from .receiver.acquisition import (
+        LIKELY_CAUSES,
+        AcquisitionWarning,
+        check_search,
+        implausible_detections,
+    )
     from .receiver.run_acquire import run_acquisition
 
     check_search(args.coherent_ms, args.noncoherent, args.doppler_range, args.pfa)
@@ -164,9 +189,11 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     _check_file_options(args)
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_acq"))
-    rep = run_acquisition(source, out, prns=prns, coherent_ms=args.coherent_ms,
-                          noncoherent=args.noncoherent, doppler_center_hz=args.doppler_center,
-                          doppler_range_hz=args.doppler_range, pfa=args.pfa)
+    with output_dir_removed_on_failure(out):
+        rep = run_acquisition(source, out, prns=prns, coherent_ms=args.coherent_ms,
+                              noncoherent=args.noncoherent,
+                              doppler_center_hz=args.doppler_center,
+                              doppler_range_hz=args.doppler_range, pfa=args.pfa)
     lo, hi, step = rep.doppler_bins_hz
     short = "" if rep.noncoherent == rep.requested_noncoherent else \
         f" (the file holds {rep.file_s * 1e3:.1f} ms: {rep.requested_noncoherent} asked)"
@@ -186,6 +213,12 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
         print(f"C{r.prn:02d}  {'yes' if r.detected else 'no':8s}  {r.doppler_hz:12.1f}  "
               f"{r.code_phase_chips:18.3f}  {cn0}  {r.peak_metric:6.1f}  {r.threshold:9.1f}"
               f"  {'; '.join(r.notes)}")
+    problem, _ = implausible_detections(rep.results)
+    if problem is not None:
+        import warnings
+
+        warnings.warn(f"{source.path}: {problem}: not satellites; likely causes, most likely "
+                      f"first: {LIKELY_CAUSES}", AcquisitionWarning, stacklevel=1)
     n_det = sum(r.detected for r in rep.results)
     print(f"{n_det} of {len(rep.results)} PRNs detected"
           + ("" if len(rows) == len(rep.results) else " (every PRN in the CSV)"))
@@ -299,7 +332,8 @@ def _add_run(sub) -> None:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from .constants import parse_prn
-    from .io.atomic import check_output_dir
+    from .errors import RunFailed
+    from .io.atomic import check_output_dir, output_dir_removed_on_failure
     from .receiver.run_scalar import run_scalar
     from .receiver.scalar import ScalarReceiver
 
@@ -323,14 +357,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_run"))
     if args.mode != "scalar":
-        return _run_deep(args, source, out, prns)
+        with output_dir_removed_on_failure(out):
+            return _run_deep(args, source, out, prns)
     assist = not args.cold
     if scalar_search:
         assist = _visible_assistance(args, source)
     tracking = _tracking_config(args)
-    res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress,
-                     assist=assist, receiver=None if tracking is None
-                     else ScalarReceiver(config=tracking, log=False))
+    with output_dir_removed_on_failure(out):
+        res = run_scalar(source, out, prns=prns, rate_hz=args.rate,
+                         progress=not args.no_progress, assist=assist,
+                         receiver=None if tracking is None
+                         else ScalarReceiver(config=tracking, log=False))
     rt = res.processed_s / max(res.wall_s, 1e-9)
     print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
           f"{res.n_fixes}/{res.n_epochs} epochs with a fix")
@@ -339,7 +376,25 @@ def _cmd_run(args: argparse.Namespace) -> int:
               f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
+    if res.n_fixes == 0:
+        raise RunFailed(_no_fix_diagnosis(args, source, res))
     return 0
+
+
+def _no_fix_diagnosis(args: argparse.Namespace, source, res) -> str:
+    """One line for a run that ended without a single fix: what it got, and the likely
+    causes, most likely first (a wrong description of the file far more often than a
+    receiver problem)."""
+    n_trk = len(res.channels)
+    n_eph = sum(bool(r["ephemeris_decoded"]) for r in res.channels)
+    given = "given" if args.fs is not None or args.sample_format is not None else "read"
+    return (f"no fix in {res.n_epochs} epochs ({n_trk} channels acquired, {n_eph} with "
+            f"ephemeris; outputs kept in {res.files['pvt'].parent}); likely causes, most "
+            f"likely first: the sample format ({source.format.name} {given}: --format), the "
+            f"IF sign ({source.declared_if_hz:g} Hz: --if with the other sign, or "
+            f"--inverted), the sample rate ({source.sampling_rate_hz:g} Hz: --fs), the start "
+            "time (--start-week, --start-sow), a file too short for the navigation data "
+            f"({source.duration_s:.1f} s)")
 
 
 def _check_run_options(args: argparse.Namespace) -> None:
@@ -698,10 +753,16 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``sdr-di`` console script; returns the exit status.
 
     Bad input (any :class:`~sdr_di.errors.SdrDiError`, argument errors included): one line
-    ``sdr-di: error: ...`` on stderr, status 2. Ctrl-C anywhere (while modules are imported,
+    ``sdr-di: error: ...`` on stderr, status 2 (1 for an error with ``exit_status = 1``: a
+    run that ended without a result it can stand behind, :class:`~sdr_di.errors.RunFailed`).
+    Warnings: one line ``sdr-di: warning: ...`` each. Ctrl-C anywhere (while modules are imported,
     while files are written, during a campaign): ``sdr-di: interrupted``, status 130, no
     traceback; the commands' outputs are removed or left complete (``sdr_di.io.atomic``).
     """
+    import warnings
+
+    shown = warnings.showwarning
+    warnings.showwarning = _show_warning
     try:
         parser = build_parser()
         argv = attach_negative_values(list(sys.argv[1:] if argv is None else argv))
@@ -709,11 +770,19 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except SdrDiError as exc:
         print(f"sdr-di: error: {_one_line(str(exc))}", file=sys.stderr)
-        return 2
+        return getattr(exc, "exit_status", 2)
     except KeyboardInterrupt:
         _quiet_after_interrupt()
         print("sdr-di: interrupted", file=sys.stderr)
         return 130
+    finally:
+        warnings.showwarning = shown
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Every warning the CLI shows as one line ``sdr-di: warning: ...`` on stderr (no source
+    file, line number or quoted code: they point into sdr-di, not at what the user gave)."""
+    print(f"sdr-di: warning: {_one_line(str(message))}", file=file or sys.stderr)
 
 
 def _one_line(text: str) -> str:

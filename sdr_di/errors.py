@@ -109,3 +109,12 @@ class AcquisitionError(SdrDiError, ValueError):
 class StudyError(SdrDiError):
     """Bad study specification (unknown table or key, unknown filter, baseline or cell,
     a bad cell parameter) or an output folder that holds another study."""
+
+
+class RunFailed(SdrDiError):
+    """A run that went through but whose result cannot be right: no fix at all, or an
+    acquisition that real signals cannot produce. The CLI prints its one-line diagnosis and
+    exits with status 1 (:attr:`exit_status`), not 2: the inputs were readable, the result
+    is what failed."""
+
+    exit_status = 1

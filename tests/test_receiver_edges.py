@@ -311,7 +311,8 @@ def test_cold_start_with_ephemeris_time_hint_and_position(tmp_path, capsys):
     args = ["run", str(tmp_path / "default.bin"), "--fs", "2.5e6", "--format", "iq_int8",
             "--start-week", str(week), "--start-sow", str(sow), "--ephemeris", str(rnx),
             "--no-progress", "--out", str(tmp_path / "run")]
-    assert main([*args, "--approx-pos", "40,116,100"]) == 0
+    # 0.6 s is too short for a fix: exit 1 (docs/errors.md), the outputs are kept
+    assert main([*args, "--approx-pos", "40,116,100"]) == 1
     with open(tmp_path / "run" / "default_channels.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert {int(r["prn"]) for r in rows} == set(truth)

@@ -313,7 +313,9 @@ def test_run_writes_rinex_read_back_with_georinex(tmp_path, monkeypatch, capsys)
     assert main(["generate", "--no-progress", "--duration", "8", "--fs", "2.5e6", "--out",
                  str(g)]) == 0
     monkeypatch.setattr(run_scalar_mod, "PvtEngine", _RecordingEngine)
-    assert main(["run", str(g / "default.bin"), "--out", str(g / "run"), "--no-progress"]) == 0
+    # 8 s: pseudoranges, but too short for decoded ephemerides, hence no fix: exit 1
+    # (docs/errors.md); the observation and navigation files are written all the same
+    assert main(["run", str(g / "default.bin"), "--out", str(g / "run"), "--no-progress"]) == 1
     out = capsys.readouterr().out
     obs_path, nav_path = g / "run" / "default_obs.rnx", g / "run" / "default_nav.rnx"
     assert f"rinex_obs {obs_path}" in out and f"rinex_nav {nav_path}" in out

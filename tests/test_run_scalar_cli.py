@@ -142,10 +142,10 @@ def _prns_from(sidecar: Path) -> list[int]:
     return [s["prn"] for s in json.loads(sidecar.read_text())["satellites"]]
 
 
-def _expect(capsys, args, pattern, out_dir: Path):
+def _expect(capsys, args, pattern, out_dir: Path, status: int = 2):
     rc = main(["run", *args, "--out", str(out_dir), "--no-progress"])
     err = capsys.readouterr().err.strip().splitlines()
-    assert rc == 2 and len(err) == 1 and err[0].startswith("sdr-di: error: "), err
+    assert rc == status and len(err) == 1 and err[0].startswith("sdr-di: error: "), err
     assert re.search(pattern, err[0]), err[0]
     assert not out_dir.exists() or not any(out_dir.iterdir())
 
@@ -174,5 +174,7 @@ def test_no_satellite_found(tmp_path, capsys):
     g = tmp_path / "g"
     assert main(["generate", "--no-progress", "--duration", "0.3", "--fs", "2.5e6", "--cn0",
                  "0", "--out", str(g)]) == 0
+    # a run without a fix: exit 1 (docs/errors.md), and no empty output folder left
     _expect(capsys, [str(g / "default.bin"), "--prn", "C10,C27"], "no satellite found",
-            tmp_path / "out")
+            tmp_path / "out", status=1)
+    assert not (tmp_path / "out").exists()

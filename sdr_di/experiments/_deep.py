@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ExperimentError
+from ..errors import ExperimentError, ScenarioError
 from ..receiver.scalar import ScalarReceiver
 from ..scenario import DEFAULT_SCENARIO, Scenario, load_scenario, parse_scenario
 from .filter_figures import QUANTITIES
@@ -94,6 +94,30 @@ def base_scenario(params: dict, seed: int, duration_s: float) -> Scenario:
                            sampling_rate_hz=params.get("sampling_rate_hz"),
                            cn0_dbhz=params.get("cn0_dbhz"))
     return with_truth(sc, params.get("truth") or {})
+
+
+def check_truth(params: dict) -> None:
+    """Apply the truth keys of ``params["truth"]`` to the scenario its runs start from, now:
+    a study spec's cell with a key or value the scenario schema rejects is refused when the
+    spec is read, not by each of its runs (:func:`with_truth`).
+
+    Raises
+    ------
+    ScenarioError
+        Naming the truth key's table and key, with the scenario file in brackets.
+    ExperimentError
+        A key that is neither ``outage`` nor ``table.key``.
+    """
+    truth = params.get("truth")
+    if not isinstance(truth, dict) or not truth:
+        return
+    path = Path(str(params["scenario"])) if params.get("scenario") else DEFAULT_SCENARIO
+    sc = load_scenario(path)
+    try:
+        with_truth(sc, truth)
+    except ScenarioError as exc:     # the key is the cell's, not the scenario file's
+        raise ScenarioError(f"truth {str(exc).removeprefix(f'{sc.source}: ')} (scenario "
+                            f"{path})") from None
 
 
 def with_truth(sc: Scenario, truth: dict) -> Scenario:

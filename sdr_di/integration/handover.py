@@ -17,18 +17,36 @@ from __future__ import annotations
 from ..deep.bit_power import BitPower
 from ..deep.navdecode import ChannelNavDecoder
 from ..deep.vector_tracking import SampleClock, _Chan
-from ..errors import SdrDiError
+from ..errors import RunFailed
 from ..receiver.navdata import NavDataInForce
 from ..receiver.scalar import ScalarReceiver
 from ..signal.navmsg import klobuchar_of_subframe
 from .config import IntegrationConfig
 
-__all__ = ["HandoverError", "handover_channels", "handover_decoder",
+__all__ = ["D1_BIT_RATE_HZ", "HandoverError", "handover_channels", "handover_decoder", "handover_span_s",
            "offer_subframe_klobuchar"]
 
 
-class HandoverError(SdrDiError):
-    """The scalar start-up never reached a state the vector loop can take over."""
+#: D1 navigation message bit rate [bit/s] (MEO/IGSO satellites; GEOs' D2 is 10 times faster).
+D1_BIT_RATE_HZ = 50.0
+
+
+class HandoverError(RunFailed):
+    """The scalar start-up never reached a state the vector loop can take over (a run
+    without a fix: exit status 1)."""
+
+
+def handover_span_s(config: IntegrationConfig) -> tuple[float, float]:
+    """Seconds of file the scalar start-up needs before a hand-over: (usual, longest).
+
+    Usual: two D1 subframes: the first preamble can come a whole subframe into the file and
+    the frame (hence the time of week the fix needs) is confirmed at the next one. Longest:
+    plus ``handover_wait_s`` when a tracked channel lacks navigation data at the first fix.
+    """
+    from ..signal.words import SUBFRAME_BITS
+
+    usual = 2.0 * SUBFRAME_BITS / D1_BIT_RATE_HZ
+    return usual, usual + config.handover_wait_s
 
 
 def handover_channels(cfg: IntegrationConfig, rx: ScalarReceiver, navdata: NavDataInForce,

@@ -130,7 +130,8 @@ from ..receiver.tracking import ChannelState
 from .alignment import align_ins
 from .config import MODES, SCALAR_EPOCH_S, IntegrationConfig
 from .filter_setup import check_filter, make_integration_filter
-from .handover import HandoverError, handover_channels, offer_subframe_klobuchar
+from .handover import (HandoverError, handover_channels, handover_span_s,
+                       offer_subframe_klobuchar)
 
 __all__ = ["MODES", "HandoverError", "IntegratedReceiver", "IntegrationConfig",
            "IntegrationResult", "check_imu_span"]
@@ -408,11 +409,20 @@ class IntegratedReceiver:
         t_scalar = time.perf_counter() - t0
         if "sample" not in hand:
             found = [c.prn for c in rx.channels.values() if c.n_acquisitions > 0]
+            usual, longest = handover_span_s(cfg)
+            span = stop / fs                       # the start-up runs from sample 0
+            need = (f"needs about {usual:.0f} s of file (two D1 subframes: the time of week), "
+                    f"up to {longest:.0f} s when a channel lacks navigation data")
+            short = (f"; the {span:.1f} s processed are too short for the hand-over, which "
+                     f"{need}" if span < usual else
+                     f"; the {span:.1f} s processed may be too short: the hand-over {need}"
+                     if span < longest else "")
+            loop = "vector" if cfg.mode == "deep" else cfg.mode
             raise HandoverError(
-                f"{source.path}: no hand-over to the vector loop: " +
+                f"{source.path}: no hand-over to the {loop} loop: " +
                 ("no satellite found" if not found else
                  f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
-                 "ephemeris and a valid fix"))
+                 "ephemeris and a valid fix") + short)
         if cfg.mode != "deep":
             return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
         return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,

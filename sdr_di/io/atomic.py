@@ -74,6 +74,33 @@ def check_output_dir(path: str | Path) -> Path:
 
 
 @contextlib.contextmanager
+def output_dir_removed_on_failure(path: str | Path) -> Iterator[Path]:
+    """Remove ``path`` again if the block fails and leaves it empty.
+
+    For a command that creates its output folder (:func:`ensure_output_dir`) once its inputs
+    are checked, and may still fail or be interrupted before it writes anything there (a run
+    with no hand-over, Ctrl-C during the start-up): the folders this call did not find on
+    entry, ``path`` and any parents created for it, are removed on any exception (Ctrl-C
+    included) as long as they are empty. A folder that holds something is kept.
+    """
+    path = Path(path)
+    new: list[Path] = []           # deepest first
+    probe = path
+    while not probe.exists() and probe.parent != probe:
+        new.append(probe)
+        probe = probe.parent
+    try:
+        yield path
+    except BaseException:
+        for d in new:
+            try:
+                d.rmdir()          # only an empty folder
+            except OSError:
+                break
+        raise
+
+
+@contextlib.contextmanager
 def atomic_open(final: str | Path, mode: str = "wb") -> Iterator[BinaryIO]:
     """Open ``final.part`` for writing; rename to ``final`` on success, delete on failure.
 

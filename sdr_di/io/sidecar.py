@@ -258,3 +258,65 @@ def read_sidecar(path: str | Path) -> dict[str, Any]:
         raise SidecarError(f"sidecar {path}: start.sow must be BDT seconds of week in "
                            f"[0, 604800), got {sow!r:.60}")
     return meta
+
+
+def flag_conflicts(meta: dict[str, Any], *, sampling_rate_hz: float | None = None,
+                   if_hz: float | None = None, sample_format: str | None = None,
+                   spectrum_inverted: bool = False, start_week: int | None = None,
+                   start_sow: float | None = None) -> list[str]:
+    """What the command-line description of an IF file says against its sidecar.
+
+    Parameters
+    ----------
+    meta : dict
+        The sidecar (:func:`read_sidecar`).
+    sampling_rate_hz, if_hz : float, optional
+        ``--fs``, ``--if`` [Hz]; None: not given.
+    sample_format : str, optional
+        ``--format`` (a name or alias of :mod:`sdr_di.io.sample_formats`).
+    spectrum_inverted : bool
+        ``--inverted`` (True only when given).
+    start_week, start_sow : optional
+        ``--start-week``, ``--start-sow`` [BDT week, s].
+
+    Returns
+    -------
+    list of str
+        One phrase per contradiction, naming the flag, its value and the sidecar's (empty
+        when the flags agree with the sidecar or are not given).
+
+    Raises
+    ------
+    SampleFormatError
+        ``sample_format`` is not a known format.
+    """
+    from ..errors import SampleFormatError
+    from .sample_formats import get_format
+
+    out = []
+
+    def differ(a: float, b: float) -> bool:
+        return abs(float(a) - float(b)) > 1e-6 * max(1.0, abs(float(b)))
+
+    if sampling_rate_hz is not None and differ(sampling_rate_hz, meta["sampling_rate_hz"]):
+        out.append(f"--fs {sampling_rate_hz:g} Hz, the sidecar {meta['sampling_rate_hz']:g} Hz")
+    if if_hz is not None and differ(if_hz, meta["if_hz"]):
+        out.append(f"--if {if_hz:g} Hz, the sidecar {meta['if_hz']:g} Hz")
+    if sample_format is not None:
+        given = get_format(sample_format).name
+        try:
+            recorded = get_format(meta["sample_format"]).name
+        except SampleFormatError:
+            recorded = meta["sample_format"]
+        if given != recorded:
+            out.append(f"--format {sample_format}, the sidecar {meta['sample_format']}")
+    if spectrum_inverted and not meta.get("spectrum_inverted", False):
+        out.append("--inverted, the sidecar a non-inverted spectrum")
+    start = meta.get("start") or {}
+    if start_week is not None and start.get("week") is not None and \
+            start_week != start["week"]:
+        out.append(f"--start-week {start_week}, the sidecar {start['week']}")
+    if start_sow is not None and start.get("sow") is not None and \
+            differ(start_sow, start["sow"]):
+        out.append(f"--start-sow {start_sow:g} s, the sidecar {start['sow']:g} s")
+    return out

@@ -110,8 +110,8 @@ import numpy as np
 import scipy.fft
 from scipy import special
 
-from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I
-from ..errors import AcquisitionError
+from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I, is_geo
+from ..errors import AcquisitionError, RunFailed
 from ._numba_acquire import accumulate_power
 from ._numba_correlate_bits import correlate_epl_bits
 from .correlator import (
@@ -125,14 +125,30 @@ from .correlator import (
 )
 from .narrowband import remove_dc_and_lines
 
-__all__ = ["AcquisitionResult", "acquire", "acquire_source", "acquisition_upsampling",
-           "check_search", "default_doppler_step_hz", "detection_cn0_dbhz",
-           "detection_threshold", "doppler_offsets"]
+__all__ = ["AcquisitionResult", "AcquisitionWarning", "ImplausibleAcquisition",
+           "acquire", "acquire_source", "acquisition_upsampling", "check_search",
+           "default_doppler_step_hz", "detection_cn0_dbhz", "detection_threshold",
+           "doppler_offsets", "implausible_detections", "LIKELY_CAUSES"]
 
 #: Refined Dopplers closer than this are "the same Doppler" for the artefact note [Hz].
 _SHARED_DOPPLER_HZ = 10.0
 #: Whole code periods the Doppler refinement needs (squared-prompt FFT).
 _MIN_REFINE_EPOCHS = 4
+#: Most BDS satellites above the horizon at one place and time: every GEO (at most 10 PRNs),
+#: every IGSO (about 10) and about a third of the 27 MEOs, all from the Asia-Pacific at best
+#: (about 30); more detections than this are not satellites.
+MAX_IN_VIEW = 30
+#: A refined Doppler within this of 0 Hz is "at zero Doppler" [Hz]: a satellite that is not
+#: a GEO passes through zero Doppler only at its highest elevation, for seconds.
+_ZERO_DOPPLER_HZ = 1.0
+#: Non-GEO detections at zero Doppler that real signals do not give (module notes).
+_ZERO_DOPPLER_MIN = 3
+#: Non-GEO detections within ``_SHARED_DOPPLER_HZ`` of each other that real signals do not
+#: give (10 non-GEO satellites over +-3.6 kHz: 4 within 10 Hz has a probability near 1e-5).
+_SHARED_DOPPLER_MIN = 4
+#: The usual reasons of detections real signals cannot give, most likely first.
+LIKELY_CAUSES = ("the sample format (--format), the IF and its sign (--if, --inverted), the "
+                 "sample rate (--fs)")
 _REPLICA_CACHE: OrderedDict[tuple, np.ndarray] = OrderedDict()
 _REPLICA_CACHE_MAX = 256
 
@@ -537,6 +553,62 @@ def _note_shared_doppler(found: dict[int, AcquisitionResult], n_min: int,
                 note = (f"same Doppler as {len(prns) - 1} other PRNs: a line or artefact "
                         "more likely than satellites")
                 found[p].notes = (*found[p].notes, note)
+
+
+class AcquisitionWarning(UserWarning):
+    """Detections that real signals cannot give (:func:`implausible_detections`)."""
+
+
+class ImplausibleAcquisition(RunFailed):
+    """A run's acquisition gave detections that real signals cannot give: the samples are
+    read wrongly (the CLI's exit status 1)."""
+
+
+def implausible_detections(results: Iterable[AcquisitionResult]
+                           ) -> tuple[str | None, list[int]]:
+    """What in a set of detections real B3I signals cannot produce.
+
+    Three patterns, checked in this order (GEOs, whose Doppler stays within tens of Hz of
+    each other and of zero, are left out of the first two):
+
+    1. ``_ZERO_DOPPLER_MIN`` or more non-GEO PRNs detected at 0 Hz (within
+       ``_ZERO_DOPPLER_HZ``): energy at the IF itself, as a wrong sample format, IF or rate
+       gives (a 6 s iq_int8 file read as real_int8 gave 12 of them, all at exactly 0 Hz);
+    2. more than :data:`MAX_IN_VIEW` detections;
+    3. ``_SHARED_DOPPLER_MIN`` or more non-GEO PRNs within ``_SHARED_DOPPLER_HZ`` of one
+       Doppler away from zero: a line or a jammer that escaped the blanking.
+
+    Returns
+    -------
+    problem : str or None
+        One phrase naming the pattern and its PRNs; None when the detections are plausible.
+    prns : list of int
+        The PRNs of pattern 3 (an artefact on otherwise good samples: a receiver may refuse
+        just those); empty for patterns 1 and 2 (the whole file is read wrongly) and None.
+    """
+    det = [r for r in results if r.detected and math.isfinite(r.doppler_hz)]
+    moving = sorted((r for r in det if not is_geo(r.prn)), key=lambda r: r.doppler_hz)
+
+    def names(rs) -> str:
+        return ", ".join(f"C{r.prn:02d}" for r in sorted(rs, key=lambda r: r.prn))
+
+    zero = [r for r in moving if abs(r.doppler_hz) < _ZERO_DOPPLER_HZ]
+    if len(zero) >= _ZERO_DOPPLER_MIN:
+        return (f"{len(zero)} PRNs that are not GEOs detected at 0 Hz Doppler "
+                f"({names(zero)})"), []
+    if len(det) > MAX_IN_VIEW:
+        return (f"{len(det)} PRNs detected, more than the {MAX_IN_VIEW} BDS satellites that "
+                "can be in view at once"), []
+    best: list[AcquisitionResult] = []
+    for i, r in enumerate(moving):
+        group = [q for q in moving[i:] if q.doppler_hz - r.doppler_hz <= _SHARED_DOPPLER_HZ]
+        if len(group) > len(best):
+            best = group
+    if len(best) >= _SHARED_DOPPLER_MIN:
+        return (f"{len(best)} PRNs that are not GEOs detected within {_SHARED_DOPPLER_HZ:g} Hz "
+                f"of {best[0].doppler_hz:+.0f} Hz Doppler ({names(best)})"), \
+            sorted(r.prn for r in best)
+    return None, []
 
 
 def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: float, u: int,

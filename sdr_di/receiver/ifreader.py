@@ -95,7 +95,20 @@ from ..errors import SampleFormatError
 from ..io.sample_formats import SampleFormat, byte_layout, get_format
 from ..io.sidecar import check_member, member_path, read_sidecar
 
-__all__ = ["IfFileWarning", "IfSource", "check_format_statistics"]
+__all__ = ["FormatCheckError", "IfFileWarning", "IfSource", "check_format_statistics"]
+
+
+class FormatCheckError(SampleFormatError):
+    """The layout heuristic says the bytes are not in the declared format (module notes).
+
+    ``str()`` ends with how to read the file anyway (``hint``); :attr:`finding` is the
+    message without it, for a caller that names its own switch (the CLI's
+    ``--no-format-check``).
+    """
+
+    def __init__(self, finding: str, hint: str):
+        super().__init__(f"{finding} ({hint})")
+        self.finding = finding
 
 
 class IfFileWarning(UserWarning):
@@ -260,8 +273,8 @@ class IfSource:
         if check_format:
             problem = check_format_statistics(self.path, self.format, self._n)
             if problem:
-                raise SampleFormatError(f"IF file {self.path}: declared {self.format.name} but "
-                                        f"{problem} (pass check_format=False to read anyway)")
+                raise FormatCheckError(f"IF file {self.path}: declared {self.format.name} but "
+                                       f"{problem}", "pass check_format=False to read anyway")
 
     # -- construction from a sidecar ---------------------------------------------------------
     @classmethod

@@ -23,7 +23,7 @@ import math
 import time
 from pathlib import Path
 
-from ..errors import SdrDiError
+from ..errors import RunFailed
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..io.rinex_writer import RinexOutputs, rinex_names
 from ..io.solution_files import NmeaWriter, SolutionCsvWriter
@@ -33,28 +33,37 @@ from .pvt import PvtEngine
 from .scalar import ScalarReceiver
 
 
-class NoSatelliteError(SdrDiError):
-    """Acquisition found no satellite in the IF file."""
+class NoSatelliteError(RunFailed):
+    """Acquisition found no satellite in the IF file (a run without a fix: exit status 1)."""
 
 
 def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
                 if_hz: float | None = None, sample_format: str | None = None,
                 spectrum_inverted: bool = False, start_week: int | None = None,
-                start_sow: float | None = None, rfch: int | None = None) -> IfSource:
+                start_sow: float | None = None, rfch: int | None = None,
+                ignore_sidecar: bool = False, check_format: bool = True) -> IfSource:
     """Open an IF file: from its sidecar (``X.json`` beside ``X.bin``, or the JSON itself);
     else from a peer's tag (``X.bin.tag``, PocketSDR/SignalSim, :mod:`sdr_di.io.tag_sidecar`),
     the explicit options overriding the tag's values; else from the explicit options alone
-    (foreign files). Explicit options given, a JSON sidecar is not read.
+    (foreign files).
+
+    With a sidecar, explicit options must agree with it (``--fs``, ``--if``, ``--format``,
+    ``--inverted``, ``--start-week``, ``--start-sow``): a contradiction is an error naming
+    both values (:func:`~sdr_di.io.sidecar.flag_conflicts`), and agreeing options read the
+    file through its sidecar (its size check included). ``ignore_sidecar`` (``sdr-di run
+    --ignore-sidecar``) reads the file with the options alone, as if it had no sidecar.
+    ``check_format=False`` (``--no-format-check``) skips the layout heuristic.
 
     ``rfch`` picks the RF channel (1-based) of a multi-channel layout (PocketSDR ``RAW*``).
 
     Raises
     ------
     SampleFormatError
-        Missing sidecar, tag and options, bad options or tag, truncated or inconsistent
-        file.
+        Missing sidecar, tag and options, bad options or tag, options that contradict the
+        sidecar, truncated or inconsistent file.
     """
-    from ..errors import SampleFormatError
+    from ..errors import SampleFormatError, SidecarError
+    from ..io.sidecar import flag_conflicts, read_sidecar
     from ..io.tag_sidecar import read_tag, tag_path, tag_source
 
     path = Path(path)
@@ -63,17 +72,28 @@ def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
     explicit = sampling_rate_hz is not None or sample_format is not None
     sidecar = path if path.suffix == ".json" else path.with_suffix(".json")
     tag = tag_path(path)
-    if not explicit and sidecar.exists():
+    if not ignore_sidecar and sidecar.exists():
         if rfch not in (None, 1):
             raise SampleFormatError(f"{path}: --rfch {rfch}: an sdr-di file has one RF channel")
-        return IfSource.from_sidecar(sidecar)
+        conflicts = flag_conflicts(read_sidecar(sidecar), sampling_rate_hz=sampling_rate_hz,
+                                   if_hz=if_hz, sample_format=sample_format,
+                                   spectrum_inverted=spectrum_inverted,
+                                   start_week=start_week, start_sow=start_sow)
+        if conflicts:
+            raise SidecarError(f"{path}: the options contradict its sidecar {sidecar.name}: "
+                               f"{'; '.join(conflicts)} (--ignore-sidecar reads the file "
+                               "with the options alone)")
+        return IfSource.from_sidecar(sidecar, check_format=check_format)
+    if ignore_sidecar and path.suffix == ".json":
+        raise SampleFormatError(f"{path}: --ignore-sidecar needs the IF file, not its sidecar")
     if path.suffix != ".json" and tag.exists():
         ts = tag_source(read_tag(tag), rfch, sample_format=sample_format,
                         sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
                         spectrum_inverted=spectrum_inverted)
         return IfSource(path, ts.sampling_rate_hz, ts.if_hz, ts.sample_format,
                         spectrum_inverted=ts.spectrum_inverted, start_week=start_week,
-                        start_sow=start_sow, rf_channel=ts.rf_channel)
+                        start_sow=start_sow, rf_channel=ts.rf_channel,
+                        check_format=check_format)
     if not explicit:
         raise SampleFormatError(
             f"{path}: no sidecar {sidecar.name} and no tag {tag.name}; give --fs, --if and "
@@ -84,7 +104,7 @@ def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
         raise SampleFormatError(f"IF file {path} not found")
     return IfSource(path, sampling_rate_hz, if_hz or 0.0, sample_format,
                     spectrum_inverted=spectrum_inverted, start_week=start_week,
-                    start_sow=start_sow, rf_channel=rfch)
+                    start_sow=start_sow, rf_channel=rfch, check_format=check_format)
 
 
 @dataclasses.dataclass

@@ -85,10 +85,14 @@ from ..constants import CODE_LENGTH_B3I
 from ..orbits.ephemeris import Ephemeris
 from ._numba_correlate_bits import correlate_epl_bits
 from .acquisition import (
+    LIKELY_CAUSES,
     AcquisitionResult,
+    AcquisitionWarning,
+    ImplausibleAcquisition,
     acquire_source,
     acquisition_upsampling,
     default_doppler_step_hz,
+    implausible_detections,
 )
 from .channel import Channel
 from .correlator import (
@@ -309,6 +313,40 @@ class ScalarReceiver:
                                                                              fs))))
         return [res[p] for p in prns]
 
+    #: Refuse detections real signals cannot give (:meth:`_refuse_implausible`).
+    refuse_implausible = True
+
+    def _refuse_implausible(self, source: IfSource) -> None:
+        """Stop, or leave channels out, on detections real signals cannot give
+        (:func:`~sdr_di.receiver.acquisition.implausible_detections`).
+
+        Many PRNs at zero Doppler, or more than can be in view: the samples are read wrongly
+        and every channel would track noise, so the run stops here with the diagnosis
+        (:class:`~sdr_di.receiver.acquisition.ImplausibleAcquisition`) instead of tracking
+        for the whole file and ending without a fix. Many PRNs at one Doppler away from zero:
+        a line or jammer artefact on otherwise good samples; those channels are not started
+        (one :class:`~sdr_di.receiver.acquisition.AcquisitionWarning`), the others are.
+        """
+        if not self.refuse_implausible:
+            return
+        problem, prns = implausible_detections(self.acquisition_results)
+        if problem is None:
+            return
+        if not prns:
+            raise ImplausibleAcquisition(
+                f"{source.path}: the acquisition found what real signals cannot give: "
+                f"{problem}; the file is read wrongly: likely causes, most likely first: "
+                f"{LIKELY_CAUSES}")
+        import warnings
+
+        warnings.warn(f"{source.path}: acquisition: {problem}: a line or artefact, not "
+                      "satellites; those channels are not started", AcquisitionWarning,
+                      stacklevel=2)
+        for r in self.acquisition_results:
+            if r.prn in prns:
+                r.detected = False
+                r.notes = (*r.notes, "refused: one Doppler shared with other PRNs")
+
     def _assisted_windows(self, prns: list[int], assist: dict[int, float | None],
                           fs: float) -> dict:
         """One search of several PRNs at ``fs`` [Hz], each over its :meth:`_assisted_window`
@@ -430,6 +468,7 @@ class ScalarReceiver:
         if stop - start >= round(fs * 1e-3):  # a file shorter than its search: what it holds
             self.acquisition_results = self._initial_search(
                 source, start, prn_list, assist, listed=prns is not None or bool(assist))
+            self._refuse_implausible(source)
         for c, r in zip(chans, self.acquisition_results):
             if r.detected:
                 c.start(start, r.code_phase_chips, r.doppler_hz, r.cn0_dbhz,

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from ..constants import parse_prn
-from ..errors import ScenarioError
+from ..errors import ScenarioError, SdrDiError
 from ..oscillator import OscillatorSpec, oscillator_from_table
 from ..timebase import datetime_to_bdt, utc_to_bdt
 
@@ -165,18 +165,7 @@ class Scenario:
         ``prns``. A relative ``ephemeris`` path is taken relative to the working directory.
         """
         raw = json.loads(json.dumps(self.raw, default=str))
-        sec = {
-            "duration_s": ("scenario", "duration_s"),
-            "seed": ("scenario", "seed"),
-            "sampling_rate_hz": ("signal", "sampling_rate_hz"),
-            "if_hz": ("signal", "if_hz"),
-            "kind": ("signal", "kind"),
-            "sample_format": ("signal", "sample_format"),
-            "quantization_bits": ("signal", "quantization_bits"),
-            "cn0_dbhz": ("satellites", "cn0_dbhz"),
-            "ephemeris": ("satellites", "ephemeris"),
-            "prns": ("satellites", "prns"),
-        }
+        sec = OVERRIDE_KEYS
         for key, value in kw.items():
             if value is None:
                 continue
@@ -189,6 +178,55 @@ class Scenario:
         base = self.source.parent if self.source is not None else Path.cwd()
         return dataclasses.replace(parse_scenario(raw, source=self.source, base_dir=base),
                                    assume=self.assume)
+
+
+#: Keys of :meth:`Scenario.with_overrides`: ``{key: (table, name)}`` of the scenario file.
+OVERRIDE_KEYS: dict[str, tuple[str, str]] = {
+    "duration_s": ("scenario", "duration_s"),
+    "seed": ("scenario", "seed"),
+    "sampling_rate_hz": ("signal", "sampling_rate_hz"),
+    "if_hz": ("signal", "if_hz"),
+    "kind": ("signal", "kind"),
+    "sample_format": ("signal", "sample_format"),
+    "quantization_bits": ("signal", "quantization_bits"),
+    "cn0_dbhz": ("satellites", "cn0_dbhz"),
+    "ephemeris": ("satellites", "ephemeris"),
+    "prns": ("satellites", "prns"),
+}
+
+
+def with_flag_names(exc: SdrDiError, scenario: Scenario,
+                    flags: dict[str, str]) -> SdrDiError:
+    """``exc`` (from :meth:`Scenario.with_overrides`) naming the command-line flag that set
+    the value, not the scenario file's key.
+
+    Parameters
+    ----------
+    exc : ScenarioError or UnknownPrnError
+        The error, ``"<scenario file>: [table].key: ..."``.
+    scenario : Scenario
+        The scenario the overrides were applied to (its file is the message's prefix).
+    flags : dict
+        ``{override key: flag}`` of the overrides given (``{"if_hz": "--if"}``).
+
+    Returns
+    -------
+    SdrDiError
+        Of ``exc``'s class: ``"--if: must be <= 2.25e+06, got 2e+07"``; ``exc`` itself when
+        the key at fault was not set by a flag.
+    """
+    msg = str(exc)
+    prefix = f"{scenario.source}: " if scenario.source is not None else ""
+    if "for real sampling" in msg and "sample_format" in flags and "if_hz" not in flags:
+        return ScenarioError(f"{flags['sample_format']}: real samples need an IF > 0: give "
+                             f"--if (the scenario {scenario.source} has [signal].if_hz = "
+                             f"{scenario.raw.get('signal', {}).get('if_hz', 0)})")
+    for key, flag in flags.items():
+        table, name = OVERRIDE_KEYS[key]
+        token = f"[{table}].{name}"
+        if token in msg:
+            return type(exc)(msg.removeprefix(prefix).replace(token, flag, 1))
+    return exc
 
 
 def load_scenario(path: str | Path) -> Scenario:

@@ -225,6 +225,8 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
         experiment's own check), duplicate cell names, a claim naming an unknown filter,
         quantity or cell. The message names the spec and the key.
     """
+    from ._deep import check_truth
+
     where = f"study {source}" if source is not None else "study"
     _need(isinstance(raw.get("study"), dict), where, "missing [study] table")
     unknown = set(raw) - {"study", "base", "cells", "factorial", "claims"}
@@ -299,6 +301,7 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
             params = _resolve_scenario(params, source)
             try:
                 params = parse_params(exp, overrides=params)
+                check_truth(params)     # scenario keys checked now, not by each run
             except SdrDiError as exc:
                 raise StudyError(f"{where}: cell {full!r}: {exc}") from None
             m = str(params.get("modes", "deep"))
