@@ -225,7 +225,7 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
         experiment's own check), duplicate cell names, a claim naming an unknown filter,
         quantity or cell. The message names the spec and the key.
     """
-    from ._deep import check_truth
+    from ..experiments._deep import check_truth
 
     where = f"study {source}" if source is not None else "study"
     _need(isinstance(raw.get("study"), dict), where, "missing [study] table")
