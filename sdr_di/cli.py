@@ -313,16 +313,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .receiver.scalar import ScalarReceiver
 
     scalar_search = args.mode == "scalar" and args.approx_pos is not None
-    deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
-                                                       "filter_rate", "align", "duration",
+    # scalar mode takes --truth, --ephemeris, --no-assist and --duration as the others do
+    deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "filter_rate", "align",
                                                        "assume", "iono_wait")
-                 if getattr(args, n) is not None
-                 and not (n == "ephemeris" and scalar_search)] \
-        + (["--no-assist"] if args.no_assist else [])
+                 if getattr(args, n) is not None]
     if args.mode == "scalar" and deep_opts:
-        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep, loose or tight"
-                         + (" (scalar mode takes --ephemeris with --approx-pos)"
-                            if "--ephemeris" in deep_opts else ""))
+        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep, loose or tight")
     if args.gnss_rate is not None and args.mode not in ("loose", "tight"):
         raise UsageError("--gnss-rate: only with --mode loose or tight")
     if args.approx_pos is not None and (args.mode != "scalar" or args.ephemeris is None):
@@ -337,18 +333,43 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if scalar_search:
         assist = _visible_assistance(args, source)
     tracking = _tracking_config(args)
+    nav, truth_path = _scalar_companions(args, source)
     res = run_scalar(source, out, prns=prns, rate_hz=args.rate, progress=not args.no_progress,
                      assist=assist, receiver=None if tracking is None
-                     else ScalarReceiver(config=tracking, log=False))
+                     else ScalarReceiver(config=tracking, log=False), nav=nav,
+                     duration_s=args.duration)
     rt = res.processed_s / max(res.wall_s, 1e-9)
     print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
-          f"{res.n_fixes}/{res.n_epochs} epochs with a fix")
+          f"{res.n_fixes}/{res.n_epochs} epochs with a fix"
+          + (f", the first at {res.first_fix_s:.1f} s" if res.n_fixes else "")
+          + ("" if nav is None else "; assistance: the sidecar's navigation file"
+             if args.ephemeris is None else f"; assistance: {args.ephemeris}"))
     for row in res.channels:
         print(f"  C{row['prn']:02d} {row['state']:8s} C/N0 {row['cn0_dbhz']} dB-Hz  "
               f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
+    if truth_path is not None and res.n_fixes:
+        from .receiver.accuracy import solution_vs_truth
+
+        m = solution_vs_truth(res.files["pvt"], truth_path)
+        if m["n_fixes"]:
+            print(f"errors vs reference ({m['n_fixes']} fixes from {m['first_fix_s']:.1f} s): "
+                  f"velocity {m['vel_rmse_mps']:.4f} m/s (max {m['vel_max_mps']:.4f}), "
+                  f"position {m['pos_rmse_m']:.3f} m (max {m['pos_max_m']:.3f})")
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     return 0
+
+
+def _scalar_companions(args: argparse.Namespace, source):
+    """Scalar mode's assistance navigation data (``--ephemeris``, else the sidecar's
+    ``ephemeris_file``; None with ``--no-assist``) and reference file (``--truth``, else the
+    sidecar's ``truth_file``), as the integrated modes find them."""
+    from .deep.run_deep import companion_files
+    from .orbits.rinex_nav import load_nav
+
+    comp = companion_files(source, skip=("imu",) + (("truth",) if args.truth else ()))
+    nav_path = None if args.no_assist else (args.ephemeris or comp["ephemeris"])
+    return (None if nav_path is None else load_nav(nav_path)), (args.truth or comp["truth"])
 
 
 def _check_run_options(args: argparse.Namespace) -> None:
