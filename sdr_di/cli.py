@@ -298,7 +298,9 @@ def _add_run(sub) -> None:
     g.add_argument("--iono-wait", type=float, default=None, metavar="S",
                    help="seconds after the first fix the hand-over waits for ionosphere "
                    "coefficients (assistance file or decoded subframe 1) before it goes "
-                   "without them, with a warning (default 30; 0: do not wait)")
+                   "without them, with a warning (default 0: hand over at once and take the "
+                   "model up when subframe 1 is decoded, the rows before it flagged in the "
+                   "solution's iono column; 30: one D1 frame)")
     g.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
                    help="what the integration filter believes: IMU spec, oscillator, R, P0, "
                    "initial errors (docs/assumptions.md)")
@@ -508,6 +510,12 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
               f"{m['att_deg_rmse']:.4f} deg (max {m['att_deg_max']:.4f}), velocity "
               f"{m['vel_mps_rmse']:.4f} m/s (max {m['vel_mps_max']:.4f}), position "
               f"{m['pos_m_rmse']:.3f} m (max {m['pos_m_max']:.3f})")
+        mi = res.metrics_after_iono
+        if mi is not None and mi["n"]:
+            print(f"  after the ionosphere take-up at {res.iono_from_s:.1f} s ({mi['n']} "
+                  f"epochs; the rows before it have iono = 0): velocity "
+                  f"{mi['vel_mps_rmse']:.4f} m/s, position {mi['pos_m_rmse']:.3f} m "
+                  f"(max {mi['pos_m_max']:.3f})")
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     return 0

@@ -82,8 +82,8 @@ Decisions
   search. These thresholds were set on the ``weak-signal`` experiment (docs/experiments.md).
 * **Navigation data** in force is decided by :class:`~sdr_di.receiver.navdata.
   NavDataInForce` (decoded data as it arrives, RINEX assistance before it). The hand-over
-  waits up to ``iono_wait_s`` after the first fix for Klobuchar coefficients, then goes
-  ahead with a :class:`~sdr_di.receiver.navdata.NavDataWarning`. After it, every channel
+  waits up to ``iono_wait_s`` (default 0: not at all) after the first fix for Klobuchar
+  coefficients, then goes ahead with a :class:`~sdr_di.receiver.navdata.NavDataWarning`. After it, every channel
   keeps decoding its message (:mod:`~sdr_di.deep.navdecode`); a new ephemeris or
   ionosphere model is taken up at the end of the interval in which it was decoded
   (:func:`_take_up_model_change`: the state moves by the least-squares projection of the
@@ -226,7 +226,10 @@ class DeepConfig:
     iono_wait_s : float
         Seconds after the first fix the hand-over waits for ionosphere coefficients (from the
         assistance file or the signal) before it goes ahead without them, with a warning;
-        the loop switches the model on when they are decoded (module notes).
+        the loop switches the model on when they are decoded (module notes). Default 0: hand
+        over at once; the rows before the take-up are flagged (``iono`` column of the
+        solution file), so a file whose assistance has no ionosphere lines gives up to 30 s
+        more solution instead of none.
     """
 
     filter: str = "ff-aukf"
@@ -258,7 +261,7 @@ class DeepConfig:
     p0_att_deg: tuple = (0.05, 0.05, 0.1)
     chunk_ms: int = 200
     coherent_ms: int = 20
-    iono_wait_s: float = 30.0
+    iono_wait_s: float = 0.0
     mode: str = "deep"
     gnss_rate_hz: float = 5.0
 
@@ -463,7 +466,8 @@ class DeepReceiver:
             Reference: needed for ``align="truth"``; gives the error columns when on the
             IMU time grid.
         progress : callable, optional
-            ``progress(seconds_processed, n_channels, n_used)`` about once per second.
+            ``progress(seconds_processed, n_channels, n_used)`` about once per second
+            (``n_used`` None during the scalar start-up, before the hand-over).
         duration_s : float, optional
             Stop after this many seconds of the file.
         assist : dict, optional
@@ -538,6 +542,9 @@ class DeepReceiver:
                 hand["child"] = LoopChild.start()
             if "sample" in hand:
                 return after_handover(sample, obs, ephs)
+            if progress is not None and sample / fs >= next_progress[0]:
+                progress(sample / fs, len(obs), None)     # start-up: no filter yet
+                next_progress[0] = sample / fs + 1.0
             if not obs:            # nothing tracked at this epoch: no fix, keep going
                 return False
             take_up(sample, ephs)

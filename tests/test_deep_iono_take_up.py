@@ -1,0 +1,68 @@
+"""Deep on a file whose assistance has no ionosphere lines: the hand-over does not wait for
+subframe 1 (``DeepConfig.iono_wait_s`` = 0 by default) and the rows before the model is
+taken up are flagged (``iono`` column, ``docs/deep.md``)."""
+
+import gzip
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from sdr_di.cli import main
+from sdr_di.deep.run_deep import DEEP_COLUMNS, iono_in_force, iono_take_up_s
+from sdr_di.deep.vector_loop import DeepConfig
+from sdr_di.scenario import REPO_ROOT
+
+RINEX = REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
+
+
+def test_iono_flag_follows_the_history():
+    t = np.arange(10.0, 14.01, 0.2)
+    deep = SimpleNamespace(t=t, navigation={"ionosphere": {"history": [
+        {"t_s": 10.0, "model": "none", "source": None},
+        {"t_s": 12.4, "model": "klobuchar", "source": "broadcast"}]}})
+    on = iono_in_force(deep)
+    assert np.all(on[t < 12.39] == 0) and np.all(on[t > 12.39] == 1)
+    assert iono_take_up_s(deep) == pytest.approx(12.4)
+    loose = SimpleNamespace(t=t, navigation={"ionosphere": [{"t_s": 10.0,
+                                                               "model": "klobuchar"}]})
+    assert np.all(iono_in_force(loose) == 1) and iono_take_up_s(loose) is None
+    assert DeepConfig().iono_wait_s == 0.0
+
+
+@pytest.fixture(scope="module")
+def late_file(tmp_path_factory):
+    """Default scenario from 06:30:20 BDT (subframe 1 at +10..+16 s), 18 s at 2.5 MHz."""
+    out = tmp_path_factory.mktemp("late")
+    text = (REPO_ROOT / "signals" / "default.toml").read_text()
+    text = text.replace('start = "2020-06-25T06:30:00"', 'start = "2020-06-25T06:30:20"')
+    text = text.replace('"../ephemeris/', f'"{REPO_ROOT / "ephemeris"}/')
+    (out / "late.toml").write_text(text)
+    assert main(["generate", "--scenario", str(out / "late.toml"), "--duration", "18",
+                 "--fs", "2.5e6", "--out", str(out), "--no-progress"]) == 0
+    nav = out / "no_iono.rnx"
+    with gzip.open(RINEX, "rt") as fh:
+        nav.write_text("".join(ln for ln in fh if "IONOSPHERIC CORR" not in ln))
+    return out
+
+
+def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
+    out = late_file / "run"
+    rc = main(["run", str(late_file / "default.bin"), "--mode", "deep", "--filter", "ekf",
+               "--ephemeris", str(late_file / "no_iono.rnx"), "--out", str(out),
+               "--no-progress"])
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    assert cap.err.count("sdr-di: warning:") == 1 and "without ionosphere" in cap.err
+    rows = np.loadtxt(out / "default_deep.csv", delimiter=",", skiprows=2)
+    t, iono = rows[:, 0], rows[:, DEEP_COLUMNS.index("iono")]
+    summ = json.loads((out / "default_deep_summary.json").read_text())
+    nav_change = rows[:, -1].astype(int)
+    assert t[0] < 15.0                # before subframe 1 ends: no wait for the ionosphere
+    assert iono[0] == 0 and iono[-1] == 1           # taken up when subframe 1 is decoded
+    k = int(np.argmax(iono))
+    assert np.all(iono[:k] == 0) and np.all(iono[k:] == 1)
+    assert nav_change[k] & 2 and summ["iono_from_s"] == pytest.approx(t[k])
+    assert summ["metrics_after_iono"]["n"] == t.size - k
+    assert "after the ionosphere take-up" in cap.out
