@@ -304,6 +304,9 @@ def _add_run(sub) -> None:
     g.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
                    help="what the integration filter believes: IMU spec, oscillator, R, P0, "
                    "initial errors (docs/assumptions.md)")
+    p.add_argument("--plots", action="store_true",
+                   help="also write the run's plots (errors against the reference when there "
+                   "is one, C/N0, satellites used) as PNG; 'sdr-di report OUT' renders them")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
 
@@ -349,6 +352,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for row in res.channels:
         print(f"  C{row['prn']:02d} {row['state']:8s} C/N0 {row['cn0_dbhz']} dB-Hz  "
               f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
+    if args.plots:
+        _scalar_plots(res, source, truth_path)
     if truth_path is not None and res.n_fixes:
         from .receiver.accuracy import solution_vs_truth
 
@@ -360,6 +365,29 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     return 0
+
+
+def _scalar_plots(res, source, truth_path) -> None:
+    """``run --plots`` in scalar mode (:mod:`sdr_di.experiments.run_report`)."""
+    from .experiments.run_report import write_run_plots
+    from .receiver.accuracy import solution_errors
+
+    errors = None
+    if truth_path is not None and res.n_fixes:
+        errors = solution_errors(res.files["pvt"], truth_path)
+    sr = res.series
+    out = write_run_plots(res.files["pvt"].parent, res.files["pvt"].stem.removesuffix("_pvt")
+                          + "_scalar", t_s=sr["t_s"], n_used=sr["n_sats"],
+                          cn0_by_prn=sr["cn0_dbhz"], errors=errors)
+    _print_plots(out)
+
+
+def _print_plots(out) -> None:
+    if isinstance(out, str):
+        print(f"sdr-di: warning: {out}", file=sys.stderr)
+        return
+    for p in out:
+        print(f"plot      {p}")
 
 
 def _scalar_companions(args: argparse.Namespace, source):
@@ -516,6 +544,20 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
                   f"epochs; the rows before it have iono = 0): velocity "
                   f"{mi['vel_mps_rmse']:.4f} m/s, position {mi['pos_m_rmse']:.3f} m "
                   f"(max {mi['pos_m_max']:.3f})")
+    if args.plots:
+        import numpy as np
+
+        from .experiments.run_report import write_run_plots
+
+        err = None
+        if np.isfinite(r.pos_err).any():
+            ok = np.isfinite(r.pos_err).all(axis=1)
+            err = (r.t[ok], r.pos_err[ok], r.vel_err[ok])
+        cn0 = {p: (r.t, r.cn0_dbhz[:, j]) for j, p in enumerate(r.prns)
+               if j < r.cn0_dbhz.shape[1]}
+        _print_plots(write_run_plots(res.files["solution"].parent,
+                                     res.files["solution"].stem, t_s=r.t, n_used=r.n_used,
+                                     cn0_by_prn=cn0, errors=err))
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     return 0

@@ -51,7 +51,7 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
     out = late_file / "run"
     rc = main(["run", str(late_file / "default.bin"), "--mode", "deep", "--filter", "ekf",
                "--ephemeris", str(late_file / "no_iono.rnx"), "--out", str(out),
-               "--no-progress"])
+               "--no-progress", "--plots"])
     cap = capsys.readouterr()
     assert rc == 0, cap.err
     assert cap.err.count("sdr-di: warning:") == 1 and "without ionosphere" in cap.err
@@ -66,3 +66,9 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
     assert nav_change[k] & 2 and summ["iono_from_s"] == pytest.approx(t[k])
     assert summ["metrics_after_iono"]["n"] == t.size - k
     assert "after the ionosphere take-up" in cap.out
+    # the run's plots, and `sdr-di report RUN_DIR` on an integrated run
+    assert sorted(p.name for p in out.glob("*.png")) == [
+        "default_deep_cn0.png", "default_deep_errors.png", "default_deep_sats.png"]
+    assert main(["report", str(out)]) == 0
+    page = (out / "report.html").read_text()
+    assert "deep, filter ekf" in page and page.count("<img") == 3

@@ -27,7 +27,7 @@ def test_scalar_run_uses_the_sidecar_ephemeris_and_reports_accuracy(short_file, 
                                                                     capsys):
     out = tmp_path / "run"
     rc = main(["run", str(short_file), "--duration", "8.5", "--out", str(out),
-               "--no-progress"])
+               "--no-progress", "--plots"])
     text = capsys.readouterr().out
     assert rc == 0, text
     assert "assistance: the sidecar's navigation file" in text
@@ -41,6 +41,15 @@ def test_scalar_run_uses_the_sidecar_ephemeris_and_reports_accuracy(short_file, 
     first = lines[1].split(",")
     assert first[:2] == ["", ""] and first[3:5] == ["", ""], lines[1]
     assert lines[-1].split(",")[0] not in ("", "0")
+
+    # --plots: errors (the truth file is there), C/N0, satellites; `report RUN_DIR` renders
+    pngs = sorted(p.name for p in out.glob("*.png"))
+    assert pngs == ["default_scalar_cn0.png", "default_scalar_errors.png",
+                    "default_scalar_sats.png"]
+    assert main(["report", str(out)]) == 0
+    page = (out / "report.html").read_text()
+    assert "<h1>Run: run</h1>" in page and page.count("<img") == 3
+    assert "C08" in page                         # the channel table
 
     # the same file without assistance: no ephemeris decoded in 8.5 s, so no fix
     res = run_scalar(open_source(short_file), tmp_path / "cold", duration_s=8.5,

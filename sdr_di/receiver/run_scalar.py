@@ -100,6 +100,10 @@ class RunSummary:
     channels: list[dict]
     profile: dict
     first_fix_s: float = math.nan
+    #: per output epoch: ``t_s`` [s since the file start], ``n_sats`` (satellites in the fix,
+    #: 0 without one), ``cn0_dbhz`` ``{prn: (t_s list, C/N0 list [dB-Hz])}`` of the
+    #: channels observed (for the run's plots)
+    series: dict = dataclasses.field(default_factory=dict)
 
 
 def sidecar_assistance(source: IfSource) -> dict[int, float | None]:
@@ -213,6 +217,7 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     bar = None
     t_wall = time.perf_counter()
     counts = {"epochs": 0, "fixes": 0}
+    series: dict = {"t_s": [], "n_sats": [], "cn0_dbhz": {}}
     if progress:
         from tqdm import tqdm
 
@@ -227,6 +232,13 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         sol = engine.process(observations, sample)
         counts["epochs"] += 1
         csv_w.write(sol)
+        t_s = sample / source.sampling_rate_hz
+        series["t_s"].append(t_s)
+        series["n_sats"].append(int(sol.n_sats) if sol.valid else 0)
+        for o in observations:
+            tc = series["cn0_dbhz"].setdefault(int(o.prn), ([], []))
+            tc[0].append(t_s)
+            tc[1].append(float(o.cn0_dbhz))
         if sol.valid:
             if not counts["fixes"]:
                 counts["first_fix_s"] = sample / source.sampling_rate_hz
@@ -271,7 +283,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
             bar.close()
     wall = time.perf_counter() - t_wall
     return RunSummary(files, counts["epochs"], counts["fixes"], processed_s, wall,
-                      channels, dict(rx.profile), counts.get("first_fix_s", math.nan))
+                      channels, dict(rx.profile), counts.get("first_fix_s", math.nan),
+                      series)
 
 
 def _search_summary(rx: ScalarReceiver) -> str:
