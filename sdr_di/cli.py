@@ -278,20 +278,20 @@ def _add_run(sub) -> None:
     g.add_argument("--imu", type=Path, default=None,
                    help="IMU file (default: the sidecar's imu_file)")
     g.add_argument("--truth", type=Path, default=None,
-                   help="reference file for --align truth and the error columns (default: "
-                   "the sidecar's truth_file)")
+                   help="reference file for --align truth and the error columns; any mode: "
+                   "the errors printed (default: the sidecar's truth_file)")
     g.add_argument("--ephemeris", type=Path, default=None,
-                   help="RINEX navigation file used as assistance data (default: the "
-                   "sidecar's ephemeris_file)")
+                   help="RINEX navigation file used as assistance data, any mode (default: "
+                   "the sidecar's ephemeris_file)")
     g.add_argument("--no-assist", action="store_true",
-                   help="use decoded ephemerides and ionosphere only")
+                   help="use decoded ephemerides and ionosphere only (any mode)")
     g.add_argument("--filter-rate", type=float, default=None, metavar="HZ",
                    help="integration filter / NCO command rate [Hz] (default 50)")
     g.add_argument("--align", choices=("truth", "gnss"), default=None,
                    help="INS initial alignment: from the reference at the IMU start "
                    "(default) or from the GNSS fix at the hand-over")
     g.add_argument("--duration", type=float, default=None, metavar="S",
-                   help="process only the first S seconds")
+                   help="process only the first S seconds (any mode)")
     g.add_argument("--gnss-rate", type=float, default=None, metavar="HZ",
                    help="loose and tight: GNSS measurement rate [Hz], 10 divided by a whole "
                    "number (default 5)")
