@@ -2,13 +2,16 @@
 
 Stands in for another generator's recording (no SignalSim build here): a static 40 s file of
 our generator starting mid-frame (06:30:14 BDT, so subframe 1 with the Klobuchar set comes
-at +16..+22 s), read as a foreign file: no sidecar (``--fs/--if/--format/--start-week/
---start-sow``), the IMU and reference given by flags, and a copy of the shipped RINEX file
-without its ``IONOSPHERIC CORR`` lines as assistance. Prints the first deep row, the take-up
+at +16..+22 s), rewritten in SignalSim's layout (``--layout signalsim``, the default:
+``INT4X2`` sign-magnitude nibbles and an ``X.bin.tag`` written as IFdataGen writes it, no
+JSON sidecar) or read with flags (``--layout flags``: ``--fs/--if/--format``); the start time
+by ``--start-week/--start-sow``, the IMU and reference by flags, and a copy of the shipped
+RINEX file without its ``IONOSPHERIC CORR`` lines as assistance. Prints the first deep row, the take-up
 of the ionosphere and the 3D position RMS after it (criterion of issue 28 item 5: first row
 before 15 s, RMS at most 1 m after the take-up).
 
     python scripts/check_foreign_iono.py [--fs 2.5e6] [--out /tmp/foreign_iono] [--iono-wait S]
+        [--layout signalsim|flags]
 """
 
 from __future__ import annotations
@@ -53,12 +56,39 @@ ephemeris = "{RINEX}"
 """
 
 
+def _signalsim_copy(path: Path, meta: dict, out: Path) -> Path:
+    """``path`` (``iq_int8``, 4-bit values) rewritten as SignalSim's ``INT4X2`` (per byte I
+    in the high nibble, Q in the low, each sign bit 3 and magnitude ``|v|``: the value
+    ``+-(2|v| + 1)``) with its ``.tag``, in ``out`` (no JSON sidecar there)."""
+    if meta["sample_format"] != "iq_int8" or meta["if_hz"] != 0.0:
+        raise SystemExit("--layout signalsim needs an iq_int8 file at IF 0")
+    out.mkdir(parents=True, exist_ok=True)
+    dst = out / path.name
+    raw = np.memmap(path, dtype=np.int8, mode="r")
+
+    def nibble(v):
+        return ((v < 0).astype(np.uint8) << 3) | np.minimum(np.abs(v.astype(np.int16)),
+                                                            7).astype(np.uint8)
+
+    with open(dst, "wb") as fh:
+        step = 1 << 24
+        for k in range(0, raw.size, step):
+            iq = np.asarray(raw[k:k + step]).reshape(-1, 2)
+            fh.write((nibble(iq[:, 0]) << 4 | nibble(iq[:, 1])).astype(np.uint8).tobytes())
+    fs_mhz = meta["sampling_rate_hz"] / 1e6
+    (out / (path.name + ".tag")).write_text(
+        "PROG = IFDataGen\nTIME = 2020/06/25 06:29:46.000\nFMT  = INT4X2\n"
+        f"F_S  = {fs_mhz:.6f}\nF_LO = 1268.520000\nIQ   = 1\nBITS = 4\nSCALE = 1.0\n")
+    return dst
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fs", type=float, default=2.5e6)
     ap.add_argument("--out", type=Path, default=Path("/tmp/foreign_iono"))
     ap.add_argument("--iono-wait", default=None)
     ap.add_argument("--filter", default="ekf")
+    ap.add_argument("--layout", choices=("signalsim", "flags"), default="signalsim")
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
     sc = a.out / "static.toml"
@@ -72,10 +102,16 @@ def main() -> int:
     nav = a.out / "no_iono.rnx"
     with gzip.open(RINEX, "rt") as fh:
         nav.write_text("".join(ln for ln in fh if "IONOSPHERIC CORR" not in ln))
-    run = a.out / "run"
-    cmd = [*cli, "run", str(gen / "static.bin"), "--mode", "deep", "--filter", a.filter,
-           "--fs", str(meta["sampling_rate_hz"]), "--if", str(meta["if_hz"]),
-           "--format", meta["sample_format"], "--start-week", str(meta["start"]["week"]),
+    run = a.out / f"run_{a.layout}"
+    if a.layout == "signalsim":
+        if_file = _signalsim_copy(gen / "static.bin", meta, a.out / "peer")
+        layout = []
+    else:
+        if_file = gen / "static.bin"
+        layout = ["--fs", str(meta["sampling_rate_hz"]), "--if", str(meta["if_hz"]),
+                  "--format", meta["sample_format"]]
+    cmd = [*cli, "run", str(if_file), "--mode", "deep", "--filter", a.filter, *layout,
+           "--start-week", str(meta["start"]["week"]),
            "--start-sow", str(meta["start"]["sow"]), "--imu", str(gen / "static_imu.csv"),
            "--truth", str(gen / "static_truth.csv"), "--ephemeris", str(nav),
            "--out", str(run), "--no-progress"]
