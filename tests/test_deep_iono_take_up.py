@@ -72,3 +72,17 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
     assert main(["report", str(out)]) == 0
     page = (out / "report.html").read_text()
     assert "deep, filter ekf" in page and page.count("<img") == 3
+
+
+def test_integrated_progress_bar_reports_the_start_up_and_ends_at_100(late_file, capsys):
+    from sdr_di.deep.run_deep import run_deep
+    from sdr_di.receiver.run_scalar import open_source
+
+    run_deep(open_source(late_file / "default.bin"), late_file / "bar",
+             config=DeepConfig(filter="ekf", mode="loose"), duration_s=12.0, progress=True)
+    err = capsys.readouterr().err.replace("\r", "\n").splitlines()
+    bars = [ln for ln in err if ln.startswith("run loose")]
+    assert "scalar start-up: acquisition" in bars[0], bars[0]
+    assert any("scalar start-up, 7 tracked" in b and " 5.1/12.0 s" in b for b in bars), bars
+    assert "WLS fixes of" in bars[-1] and "in the vector" not in bars[-1], bars[-1]
+    assert "100%" in bars[-1] and "12.0/12.0 s" in bars[-1], bars[-1]
