@@ -83,8 +83,8 @@ Decisions
 * **Navigation data** in force is decided by :class:`~sdr_di.receiver.navdata.
   NavDataInForce` (decoded data as it arrives, RINEX assistance before it). The hand-over
   waits up to ``iono_wait_s`` (default 0: not at all) after the first fix for Klobuchar
-  coefficients, then goes ahead with a :class:`~sdr_di.receiver.navdata.NavDataWarning`. After it, every channel
-  keeps decoding its message (:mod:`~sdr_di.deep.navdecode`); a new ephemeris or
+  coefficients, then goes ahead with a :class:`~sdr_di.receiver.navdata.NavDataWarning`.
+  After it, every channel keeps decoding its message (:mod:`~sdr_di.deep.navdecode`); a new ephemeris or
   ionosphere model is taken up at the end of the interval in which it was decoded
   (:func:`_take_up_model_change`: the state moves by the least-squares projection of the
   range-model step, the pre-filters by the rest; reasons in docs/deep.md).
