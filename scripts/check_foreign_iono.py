@@ -7,7 +7,7 @@ at +16..+22 s), rewritten in SignalSim's layout (``--layout signalsim``, the def
 JSON sidecar) or read with flags (``--layout flags``: ``--fs/--if/--format``); the start time
 by ``--start-week/--start-sow``, the IMU and reference by flags, and a copy of the shipped
 RINEX file without its ``IONOSPHERIC CORR`` lines as assistance. Prints the first deep row,
-the take-up of the ionosphere and the 3D position RMS after it (criterion of issue 28 item 5: first row
+the take-up of the ionosphere and the 3D position RMS after it (the criterion: first row
 before 15 s, RMS at most 1 m after the take-up).
 
     python scripts/check_foreign_iono.py [--fs 2.5e6] [--out /tmp/foreign_iono] [--iono-wait S]
