@@ -234,10 +234,11 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: DeepConfig | None
                               "{postfix}]", postfix="scalar start-up: acquisition")
 
         def cb(done, n_ch, n_used):
-            bar.update(round(done - bar.n, 3))
             rt = done / max(time.perf_counter() - t_wall, 1e-9)
             bar.set_postfix_str(f"x{rt:.2f} real time, " + _progress_stage(cfg.mode, n_ch,
-                                                                             n_used))
+                                                                             n_used),
+                                refresh=False)
+            bar.update(round(done - bar.n, 3))
 
     try:
         rx = DeepReceiver(cfg, scalar=None if tracking is None

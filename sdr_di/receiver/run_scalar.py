@@ -249,11 +249,12 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
                           rx.klobuchar)
         if bar is not None:
             done = sample / source.sampling_rate_hz
-            bar.update(round(done - bar.n, 3))
             locked = sum(1 for o in observations if o.code_lock)
             rt = done / max(time.perf_counter() - t_wall, 1e-9)
             bar.set_postfix_str(f"x{rt:.2f} real time, {locked} in lock, "
-                                f"{len(ephemerides)} eph")
+                                f"{len(ephemerides)} eph decoded, {counts['fixes']} fixes",
+                                refresh=False)
+            bar.update(round(done - bar.n, 3))
 
     try:
         rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=1.0 / rate_hz,
