@@ -86,3 +86,23 @@ def test_integrated_progress_bar_reports_the_start_up_and_ends_at_100(late_file,
     assert any("scalar start-up, 7 tracked" in b and " 5.1/12.0 s" in b for b in bars), bars
     assert "WLS fixes of" in bars[-1] and "in the vector" not in bars[-1], bars[-1]
     assert "100%" in bars[-1] and "12.0/12.0 s" in bars[-1], bars[-1]
+
+
+def test_an_all_zero_decoded_klobuchar_set_does_not_displace_one_in_force():
+    """SignalSim with a RINEX file without BDS ionosphere lines broadcasts a zero set while
+    its signal carries the GPS set's delays: the zero set must not replace the assistance
+    set; with nothing in force it is taken (Klobuchar's night-time constant)."""
+    from sdr_di.orbits.ephemeris import Klobuchar
+    from sdr_di.orbits.rinex_nav import load_nav
+    from sdr_di.receiver.navdata import BROADCAST, NavDataInForce
+    from sdr_di.receiver.navdata import RINEX as FROM_RINEX
+
+    zero = Klobuchar((0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))
+    nd = NavDataInForce(load_nav(RINEX))
+    assert nd.iono_source == FROM_RINEX
+    assert not nd.offer_klobuchar(zero, 20.0) and nd.iono_source == FROM_RINEX
+    bare = NavDataInForce(None)
+    assert bare.offer_klobuchar(zero, 20.0) and bare.iono_source == BROADCAST
+    real = Klobuchar((1e-8, 0.0, 0.0, 0.0), (9e4, 0.0, 0.0, 0.0))
+    assert bare.offer_klobuchar(real, 26.0) and bare.klobuchar == real
+    assert not bare.offer_klobuchar(zero, 50.0) and bare.klobuchar == real
