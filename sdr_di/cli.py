@@ -302,30 +302,35 @@ def _add_run(sub) -> None:
     g.add_argument("--imu", type=Path, default=None,
                    help="IMU file (default: the sidecar's imu_file)")
     g.add_argument("--truth", type=Path, default=None,
-                   help="reference file for --align truth and the error columns (default: "
-                   "the sidecar's truth_file)")
+                   help="reference file for --align truth and the error columns; any mode: "
+                   "the errors printed (default: the sidecar's truth_file)")
     g.add_argument("--ephemeris", type=Path, default=None,
-                   help="RINEX navigation file used as assistance data (default: the "
-                   "sidecar's ephemeris_file)")
+                   help="RINEX navigation file used as assistance data, any mode (default: "
+                   "the sidecar's ephemeris_file)")
     g.add_argument("--no-assist", action="store_true",
-                   help="use decoded ephemerides and ionosphere only")
+                   help="use decoded ephemerides and ionosphere only (any mode)")
     g.add_argument("--filter-rate", type=float, default=None, metavar="HZ",
                    help="integration filter / NCO command rate [Hz] (default 50)")
     g.add_argument("--align", choices=("truth", "gnss"), default=None,
                    help="INS initial alignment: from the reference at the IMU start "
                    "(default) or from the GNSS fix at the hand-over")
     g.add_argument("--duration", type=float, default=None, metavar="S",
-                   help="process only the first S seconds")
+                   help="process only the first S seconds (any mode)")
     g.add_argument("--gnss-rate", type=float, default=None, metavar="HZ",
                    help="loose and tight: GNSS measurement rate [Hz], 10 divided by a whole "
                    "number (default 5)")
     g.add_argument("--iono-wait", type=float, default=None, metavar="S",
                    help="seconds after the first fix the hand-over waits for ionosphere "
                    "coefficients (assistance file or decoded subframe 1) before it goes "
-                   "without them, with a warning (default 30; 0: do not wait)")
+                   "without them, with a warning (default 0: hand over at once and take the "
+                   "model up when subframe 1 is decoded, the rows before it flagged in the "
+                   "solution's iono column; 30: one D1 frame)")
     g.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
                    help="what the integration filter believes: IMU spec, oscillator, R, P0, "
                    "initial errors (docs/assumptions.md)")
+    p.add_argument("--plots", action="store_true",
+                   help="also write the run's plots (errors against the reference when there "
+                   "is one, C/N0, satellites used) as PNG; 'sdr-di report OUT' renders them")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
 
@@ -338,16 +343,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .receiver.scalar import ScalarReceiver
 
     scalar_search = args.mode == "scalar" and args.approx_pos is not None
-    deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "truth", "ephemeris",
-                                                       "filter_rate", "align", "duration",
+    # scalar mode takes --truth, --ephemeris, --no-assist and --duration as the others do
+    deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "filter_rate", "align",
                                                        "assume", "iono_wait")
-                 if getattr(args, n) is not None
-                 and not (n == "ephemeris" and scalar_search)] \
-        + (["--no-assist"] if args.no_assist else [])
+                 if getattr(args, n) is not None]
     if args.mode == "scalar" and deep_opts:
-        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep, loose or tight"
-                         + (" (scalar mode takes --ephemeris with --approx-pos)"
-                            if "--ephemeris" in deep_opts else ""))
+        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep, loose or tight")
     if args.gnss_rate is not None and args.mode not in ("loose", "tight"):
         raise UsageError("--gnss-rate: only with --mode loose or tight")
     if args.approx_pos is not None and (args.mode != "scalar" or args.ephemeris is None):
@@ -363,17 +364,32 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if scalar_search:
         assist = _visible_assistance(args, source)
     tracking = _tracking_config(args)
+    nav, truth_path = _scalar_companions(args, source)
     with output_dir_removed_on_failure(out):
         res = run_scalar(source, out, prns=prns, rate_hz=args.rate,
                          progress=not args.no_progress, assist=assist,
                          receiver=None if tracking is None
-                         else ScalarReceiver(config=tracking, log=False))
+                         else ScalarReceiver(config=tracking, log=False), nav=nav,
+                         duration_s=args.duration)
     rt = res.processed_s / max(res.wall_s, 1e-9)
     print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
-          f"{res.n_fixes}/{res.n_epochs} epochs with a fix")
+          f"{res.n_fixes}/{res.n_epochs} epochs with a fix"
+          + (f", the first at {res.first_fix_s:.1f} s" if res.n_fixes else "")
+          + ("" if nav is None else "; assistance: the sidecar's navigation file"
+             if args.ephemeris is None else f"; assistance: {args.ephemeris}"))
     for row in res.channels:
         print(f"  C{row['prn']:02d} {row['state']:8s} C/N0 {row['cn0_dbhz']} dB-Hz  "
               f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
+    if args.plots:
+        _scalar_plots(res, source, truth_path)
+    if truth_path is not None and res.n_fixes:
+        from .receiver.accuracy import solution_vs_truth
+
+        m = solution_vs_truth(res.files["pvt"], truth_path)
+        if m["n_fixes"]:
+            print(f"errors vs reference ({m['n_fixes']} fixes from {m['first_fix_s']:.1f} s): "
+                  f"velocity {m['vel_rmse_mps']:.4f} m/s (max {m['vel_max_mps']:.4f}), "
+                  f"position {m['pos_rmse_m']:.3f} m (max {m['pos_max_m']:.3f})")
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     if res.n_fixes == 0:
@@ -395,6 +411,41 @@ def _no_fix_diagnosis(args: argparse.Namespace, source, res) -> str:
             f"--inverted), the sample rate ({source.sampling_rate_hz:g} Hz: --fs), the start "
             "time (--start-week, --start-sow), a file too short for the navigation data "
             f"({source.duration_s:.1f} s)")
+
+
+def _scalar_plots(res, source, truth_path) -> None:
+    """``run --plots`` in scalar mode (:mod:`sdr_di.experiments.run_report`)."""
+    from .experiments.run_report import write_run_plots
+    from .receiver.accuracy import solution_errors
+
+    errors = None
+    if truth_path is not None and res.n_fixes:
+        errors = solution_errors(res.files["pvt"], truth_path)
+    sr = res.series
+    out = write_run_plots(res.files["pvt"].parent, res.files["pvt"].stem.removesuffix("_pvt")
+                          + "_scalar", t_s=sr["t_s"], n_used=sr["n_sats"],
+                          cn0_by_prn=sr["cn0_dbhz"], errors=errors)
+    _print_plots(out)
+
+
+def _print_plots(out) -> None:
+    if isinstance(out, str):
+        print(f"sdr-di: warning: {out}", file=sys.stderr)
+        return
+    for p in out:
+        print(f"plot      {p}")
+
+
+def _scalar_companions(args: argparse.Namespace, source):
+    """Scalar mode's assistance navigation data (``--ephemeris``, else the sidecar's
+    ``ephemeris_file``; None with ``--no-assist``) and reference file (``--truth``, else the
+    sidecar's ``truth_file``), as the integrated modes find them."""
+    from .integration.run_integrated import companion_files
+    from .orbits.rinex_nav import load_nav
+
+    comp = companion_files(source, skip=("imu",) + (("truth",) if args.truth else ()))
+    nav_path = None if args.no_assist else (args.ephemeris or comp["ephemeris"])
+    return (None if nav_path is None else load_nav(nav_path)), (args.truth or comp["truth"])
 
 
 def _check_run_options(args: argparse.Namespace) -> None:
@@ -543,6 +594,26 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
               f"{m['att_deg_rmse']:.4f} deg (max {m['att_deg_max']:.4f}), velocity "
               f"{m['vel_mps_rmse']:.4f} m/s (max {m['vel_mps_max']:.4f}), position "
               f"{m['pos_m_rmse']:.3f} m (max {m['pos_m_max']:.3f})")
+        mi = res.metrics_after_iono
+        if mi is not None and mi["n"]:
+            print(f"  after the ionosphere take-up at {res.iono_from_s:.1f} s ({mi['n']} "
+                  f"epochs; the rows before it have iono = 0): velocity "
+                  f"{mi['vel_mps_rmse']:.4f} m/s, position {mi['pos_m_rmse']:.3f} m "
+                  f"(max {mi['pos_m_max']:.3f})")
+    if args.plots:
+        import numpy as np
+
+        from .experiments.run_report import write_run_plots
+
+        err = None
+        if np.isfinite(r.pos_err).any():
+            ok = np.isfinite(r.pos_err).all(axis=1)
+            err = (r.t[ok], r.pos_err[ok], r.vel_err[ok])
+        cn0 = {p: (r.t, r.cn0_dbhz[:, j]) for j, p in enumerate(r.prns)
+               if j < r.cn0_dbhz.shape[1]}
+        _print_plots(write_run_plots(res.files["solution"].parent,
+                                     res.files["solution"].stem, t_s=r.t, n_used=r.n_used,
+                                     cn0_by_prn=cn0, errors=err))
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     return 0

@@ -481,7 +481,7 @@ def test_gnss_alignment_recovers_a_banked_turn():
 @pytest.mark.parametrize("mode", ["deep", "loose", "tight"])
 def test_iono_wait_option_reaches_the_handover_rule(gen26, tmp_path, monkeypatch, mode):
     """``run --iono-wait S`` sets ``IntegrationConfig.iono_wait_s`` of every integrated mode (the
-    default config keeps 30 s); the run itself is stopped at ``run_deep``'s door."""
+    default config does not wait: 0 s); the run itself is stopped at ``run_deep``'s door."""
     import sdr_di.integration.run_integrated as rd
 
     seen = []
@@ -494,8 +494,8 @@ def test_iono_wait_option_reaches_the_handover_rule(gen26, tmp_path, monkeypatch
         raise Stop
 
     monkeypatch.setattr(rd, "run_deep", fake_run_deep)
-    for extra, want in ((["--iono-wait", "0"], 0.0), (["--iono-wait", "12.5"], 12.5),
-                        ([], 30.0)):
+    for extra, want in ((["--iono-wait", "30"], 30.0), (["--iono-wait", "12.5"], 12.5),
+                        ([], 0.0)):
         with pytest.raises(Stop):
             main(["run", str(gen26 / "default.bin"), "--mode", mode, "--no-progress",
                   "--out", str(tmp_path / "o"), *extra])

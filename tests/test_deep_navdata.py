@@ -390,7 +390,7 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
 
 @pytest.mark.slow
 def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, capsys):
-    """Same file and assistance without ionosphere lines, default ``iono_wait_s`` (30 s): the
+    """Same file and assistance without ionosphere lines, ``iono_wait_s`` 30 s: the
     hand-over waits for the scalar channels' first subframe 1 (+16..+22 s; their ephemeris
     sets would complete only at +34 s), so there is no warning and the loop starts with the
     broadcast Klobuchar model."""
@@ -402,7 +402,8 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav))
     src = open_source(late_start_file / "default.bin")
     out = late_start_file / "run_wait"
-    run_deep(src, out, config=IntegrationConfig(filter="ekf"), progress=False, duration_s=27.0)
+    run_deep(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=30.0), progress=False,
+             duration_s=27.0)
     assert "warning" not in capsys.readouterr().err
     s = json.loads((out / "default_deep_summary.json").read_text())
     assert s["warnings"] == []
@@ -415,7 +416,7 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
 def test_deep_config_checks_iono_wait():
     from sdr_di.integration.receiver import IntegrationConfig
 
-    assert IntegrationConfig().iono_wait_s == 30.0
+    assert IntegrationConfig().iono_wait_s == 0.0      # hand over at once, flag the rows
     for bad in (-1.0, math.inf, math.nan):
         with pytest.raises(ValueError, match="iono_wait_s"):
             IntegrationConfig(iono_wait_s=bad)

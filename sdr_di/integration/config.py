@@ -90,7 +90,10 @@ class IntegrationConfig:
     iono_wait_s : float
         Seconds after the first fix the hand-over waits for ionosphere coefficients (from the
         assistance file or the signal) before it goes ahead without them, with a warning;
-        the loop switches the model on when they are decoded (receiver notes).
+        the loop switches the model on when they are decoded (receiver notes). Default 0:
+        hand over at once; the rows before the take-up are flagged (``iono`` column of the
+        solution file), so a file whose assistance has no ionosphere lines gives up to 30 s
+        more solution instead of none.
     """
 
     filter: str = "ff-aukf"
@@ -122,7 +125,7 @@ class IntegrationConfig:
     p0_att_deg: tuple = (0.05, 0.05, 0.1)
     chunk_ms: int = 200
     coherent_ms: int = 20
-    iono_wait_s: float = 30.0
+    iono_wait_s: float = 0.0
     mode: str = "deep"
     gnss_rate_hz: float = 5.0
 

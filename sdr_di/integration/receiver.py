@@ -82,9 +82,9 @@ Decisions
   search. These thresholds were set on the ``weak-signal`` experiment (docs/experiments.md).
 * **Navigation data** in force is decided by :class:`~sdr_di.receiver.navdata.
   NavDataInForce` (decoded data as it arrives, RINEX assistance before it). The hand-over
-  waits up to ``iono_wait_s`` after the first fix for Klobuchar coefficients, then goes
-  ahead with a :class:`~sdr_di.receiver.navdata.NavDataWarning`. After it, every channel
-  keeps decoding its message (:mod:`~sdr_di.deep.navdecode`); a new ephemeris or
+  waits up to ``iono_wait_s`` (default 0: not at all) after the first fix for Klobuchar
+  coefficients, then goes ahead with a :class:`~sdr_di.receiver.navdata.NavDataWarning`.
+  After it, every channel keeps decoding its message (:mod:`~sdr_di.deep.navdecode`); a new ephemeris or
   ionosphere model is taken up at the end of the interval in which it was decoded
   (:func:`_take_up_model_change`: the state moves by the least-squares projection of the
   range-model step, the pre-filters by the rest; reasons in docs/deep.md).
@@ -285,7 +285,8 @@ class IntegratedReceiver:
             Reference: needed for ``align="truth"``; gives the error columns when on the
             IMU time grid.
         progress : callable, optional
-            ``progress(seconds_processed, n_channels, n_used)`` about once per second.
+            ``progress(seconds_processed, n_channels, n_used)`` about once per second
+            (``n_used`` None during the scalar start-up, before the hand-over).
         duration_s : float, optional
             Stop after this many seconds of the file.
         assist : dict, optional
@@ -357,6 +358,9 @@ class IntegratedReceiver:
                 hand["child"] = LoopChild.start()
             if "sample" in hand:
                 return after_handover(sample, obs, ephs)
+            if progress is not None and sample / fs >= next_progress[0]:
+                progress(sample / fs, len(obs), None)     # start-up: no filter yet
+                next_progress[0] = sample / fs + 1.0
             if not obs:            # nothing tracked at this epoch: no fix, keep going
                 return False
             take_up(sample, ephs)

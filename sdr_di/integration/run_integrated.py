@@ -63,7 +63,7 @@ DEEP_COLUMNS = (
     "t_s", "bdt_week", "bdt_sow", "lat_deg", "lon_deg", "h_m", "v_e", "v_n", "v_u",
     "pitch_deg", "roll_deg", "yaw_deg", "clock_bias_m", "clock_drift_mps", "n_used",
     "att_err_e_deg", "att_err_n_deg", "att_err_u_deg", "vel_err_e", "vel_err_n", "vel_err_u",
-    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m", "nav_change", *SD_COLUMNS,
+    "pos_err_e_m", "pos_err_n_m", "pos_err_u_m", "iono", "nav_change", *SD_COLUMNS,
 )
 
 
@@ -75,6 +75,10 @@ class DeepRunSummary:
     result: IntegrationResult
     metrics: dict
     wall_s: float
+    #: first row with an ionosphere model after rows without one (None: every row had it)
+    iono_from_s: float | None = None
+    #: ``metrics`` over the rows from ``iono_from_s`` on (None when it is None)
+    metrics_after_iono: dict | None = None
 
 
 def companion_files(source: IfSource, skip: tuple[str, ...] = ()) -> dict:
@@ -102,12 +106,37 @@ def companion_files(source: IfSource, skip: tuple[str, ...] = ()) -> dict:
     return out
 
 
+def iono_in_force(res: IntegrationResult) -> np.ndarray:
+    """``(n,)`` 1 where an ionosphere model (Klobuchar) was in force at the row, 0 where the
+    run had none yet (handed over before subframe 1 was decoded, ``iono_wait_s``): from the
+    summary's ionosphere history (deep: ``navigation.ionosphere.history``; loose and tight:
+    ``navigation.ionosphere``), the entry in force at each row's time."""
+    ion = res.navigation.get("ionosphere") if isinstance(res.navigation, dict) else None
+    hist = ion.get("history", []) if isinstance(ion, dict) else ion or []
+    if not hist:
+        return np.ones(res.t.size)        # no record: nothing to flag
+    t_h = np.array([h["t_s"] for h in hist], float)
+    on = np.array([h.get("model") == "klobuchar" for h in hist], float)
+    # an entry is written at the row that takes it up (t_s rounded to the ms)
+    k = np.searchsorted(t_h, np.asarray(res.t, float) + 1e-3, side="right") - 1
+    return on[np.clip(k, 0, None)]
+
+
+def iono_take_up_s(res: IntegrationResult) -> float | None:
+    """Time [s] of the first row with an ionosphere model after rows without one, None when
+    every row had it (or none had)."""
+    on = iono_in_force(res)
+    if on.size == 0 or on[0] == 1.0 or not on.any():
+        return None
+    return float(res.t[int(np.argmax(on))])
+
+
 def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
     """Write the solution rows (atomic)."""
     data = np.column_stack([
         res.t, np.full(res.t.size, res.week), res.sow, np.degrees(res.llh[:, :2]),
         res.llh[:, 2], res.v_n, np.degrees(res.att), res.clock_bias_m, res.clock_drift_mps,
-        res.n_used, res.att_err, res.vel_err, res.pos_err,
+        res.n_used, res.att_err, res.vel_err, res.pos_err, iono_in_force(res),
         res.nav_change if res.nav_change.size == res.t.size else np.zeros(res.t.size),
         res.sd if res.sd.shape[0] == res.t.size else np.full((res.t.size, 9), np.nan)]) \
         if res.t.size else np.zeros(
@@ -133,6 +162,17 @@ def _finite_tree(d: dict) -> dict:
     """``d`` with non-finite floats as None, one level of nesting deep."""
     return {k: {kk: _finite(vv) for kk, vv in v.items()} if isinstance(v, dict)
             else _finite(v) for k, v in d.items()}
+
+
+def _progress_stage(mode: str, n_channels: int, n_used: int | None) -> str:
+    """What the run is doing, for its progress bar."""
+    if n_used is None:
+        return f"scalar start-up, {n_channels} tracked"
+    if mode == "deep":
+        return f"{n_used}/{n_channels} in the vector"
+    if mode == "loose":
+        return f"WLS fixes of {n_channels} satellites into the filter"
+    return f"ranges and rates of {n_used} satellites into the filter"
 
 
 def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig | None = None,
@@ -197,15 +237,19 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=round(source.duration_s, 2), unit="s",
+        total = source.duration_s if duration_s is None else min(source.duration_s,
+                                                                  duration_s)
+        bar = tqdm(total=round(total, 2), unit="s",
                    desc=f"run {cfg.mode} {cfg.filter}",
                    bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
-                              "{postfix}]")
+                              "{postfix}]", postfix="scalar start-up: acquisition")
 
         def cb(done, n_ch, n_used):
-            bar.update(round(done - bar.n, 3))
             rt = done / max(time.perf_counter() - t_wall, 1e-9)
-            bar.set_postfix_str(f"x{rt:.2f} real time, {n_used}/{n_ch} in the vector")
+            bar.set_postfix_str(f"x{rt:.2f} real time, " + _progress_stage(cfg.mode, n_ch,
+                                                                             n_used),
+                                refresh=False)
+            bar.update(round(done - bar.n, 3))
 
     try:
         rx = IntegratedReceiver(cfg, scalar=None if tracking is None
@@ -215,6 +259,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
             res = rx.run(source, imu, prns=prns, nav=nav, truth=truth, progress=cb,
                          duration_s=duration_s,
                          assist=search_assistance(source, prns, search))
+        if bar is not None:     # the run is done (its last report is up to 1 s before the end)
+            bar.update(bar.total - bar.n)
     finally:
         if bar is not None:
             bar.close()
@@ -227,6 +273,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     wall = time.perf_counter() - t_wall
     metrics = res.metrics()
+    t_iono = iono_take_up_s(res)
+    m_iono = None if t_iono is None else res.metrics(t0=t_iono)
     write_deep_csv(files["solution"], res)
     summary = {
         "mode": res.mode, "filter": res.filter_name, "handover_s": res.handover_s,
@@ -235,6 +283,9 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],
         "metrics": {k: _finite(v) for k, v in metrics.items()},
         "consistency": _finite_tree(res.consistency()),
+        "iono_from_s": t_iono,
+        "metrics_after_iono": None if m_iono is None else {k: _finite(v)
+                                                           for k, v in m_iono.items()},
         "adaptation_s": res.adaptation_s,
         "profile": {k: _finite(v) for k, v in res.profile.items()},
         "wall_s": wall,
@@ -246,4 +297,5 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     with atomic_open(files["summary"], "w") as fh:
         json.dump(summary, fh, indent=2)
         fh.write("\n")
-    return DeepRunSummary(files=files, result=res, metrics=metrics, wall_s=wall)
+    return DeepRunSummary(files=files, result=res, metrics=metrics, wall_s=wall,
+                          iono_from_s=t_iono, metrics_after_iono=m_iono)

@@ -110,13 +110,22 @@ def _f(x: float, fmt: str) -> str:
     return fmt % x if math.isfinite(x) else "nan"
 
 
+def _week_sow(week: int, sow: float) -> tuple[str, str]:
+    """The week and seconds-of-week fields of a time: both empty while it is unknown (the
+    rows before the receiver clock is set by the first fix), not a week 0."""
+    if not math.isfinite(float(sow)):
+        return "", ""
+    return str(int(week)), _FMT["sow"] % float(sow)
+
+
 def _csv_row(sol) -> str:
     utc = _utc_of(sol)
     utc_s = "" if utc is None else utc.strftime("%Y-%m-%dT%H:%M:%S.%f") + "Z"
     llh = np.asarray(sol.llh, float)
     vals = {
-        "week": str(int(sol.week)), "utc": utc_s, "rx_week": str(int(sol.rx_week)),
-        "sow": _f(sol.sow, _FMT["sow"]), "rx_sow": _f(sol.rx_sow, _FMT["rx_sow"]),
+        "week": _week_sow(sol.week, sol.sow)[0], "utc": utc_s,
+        "rx_week": _week_sow(sol.rx_week, sol.rx_sow)[0],
+        "sow": _week_sow(sol.week, sol.sow)[1], "rx_sow": _week_sow(sol.rx_week, sol.rx_sow)[1],
         "lat_deg": _f(math.degrees(llh[0]), _FMT["lat_deg"]),
         "lon_deg": _f(math.degrees(llh[1]), _FMT["lon_deg"]),
         "h_m": _f(llh[2], _FMT["h_m"]),
@@ -322,7 +331,9 @@ def read_solution_csv(path: str | Path) -> dict[str, np.ndarray]:
                                     f"{len(CSV_COLUMNS)}")
         for c, p in zip(CSV_COLUMNS, parts):
             try:
-                cols[c].append(p if c in _STR_COLS else int(p) if c in _INT_COLS else float(p))
+                # an empty week / seconds of week: the time is not known yet (0 and NaN)
+                cols[c].append(p if c in _STR_COLS else (int(p) if p else 0) if c in _INT_COLS
+                               else float(p) if p else math.nan)
             except ValueError:
                 raise SolutionFileError(f"{path}: line {ln}: column {c}: bad value {p!r}") from None
     out: dict[str, np.ndarray] = {}

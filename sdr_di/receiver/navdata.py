@@ -253,10 +253,19 @@ class NavDataInForce:
         return not compared and int(eph.prn) in self._decoded
 
     def offer_klobuchar(self, klob: Klobuchar | None, t_s: float = math.nan) -> bool:
-        """Offer decoded ionosphere coefficients; True when the set in force changed."""
+        """Offer decoded ionosphere coefficients; True when the set in force changed.
+
+        A set whose eight coefficients are all zero carries none (a transmitter with none
+        to send: SignalSim, given a RINEX file without BDS ionosphere lines, broadcasts
+        zeros while its signal carries the GPS set's delays); it does not displace a set in
+        force (the assistance file's, or one decoded before), and with none in force it is
+        taken as what it is, Klobuchar's night-time constant (5 ns at the zenith).
+        """
         if klob is None or klob == self._klob:
             return False
         if not all(math.isfinite(v) for v in (*klob.alpha, *klob.beta)):
+            return False
+        if not any((*klob.alpha, *klob.beta)) and self.klobuchar is not None:
             return False
         self._klob = klob
         self.events.append(NavEvent(t_s, "ionosphere"))

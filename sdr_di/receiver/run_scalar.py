@@ -28,6 +28,7 @@ from ..io.atomic import atomic_open, ensure_output_dir
 from ..io.rinex_writer import RinexOutputs, rinex_names
 from ..io.solution_files import NmeaWriter, SolutionCsvWriter
 from .ifreader import IfSource
+from .navdata import NavDataInForce
 from .prediction import FixPredictor
 from .pvt import PvtEngine
 from .scalar import ScalarReceiver
@@ -118,6 +119,11 @@ class RunSummary:
     wall_s: float
     channels: list[dict]
     profile: dict
+    first_fix_s: float = math.nan
+    #: per output epoch: ``t_s`` [s since the file start], ``n_sats`` (satellites in the fix,
+    #: 0 without one), ``cn0_dbhz`` ``{prn: (t_s list, C/N0 list [dB-Hz])}`` of the
+    #: channels observed (for the run's plots)
+    series: dict = dataclasses.field(default_factory=dict)
 
 
 def sidecar_assistance(source: IfSource) -> dict[int, float | None]:
@@ -166,7 +172,8 @@ def search_assistance(source: IfSource, prns=None,
 def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: float = 5.0,
                stem: str | None = None, progress: bool = True,
                receiver: ScalarReceiver | None = None,
-               assist: bool | dict[int, float | None] = True) -> RunSummary:
+               assist: bool | dict[int, float | None] = True, nav=None,
+               duration_s: float | None = None) -> RunSummary:
     """Run the scalar receiver over ``source`` and write the solution files.
 
     Parameters
@@ -191,6 +198,14 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         A dict ``{prn: Doppler [Hz] or None}``: that assistance (e.g. the visible satellites
         from ephemeris and a time hint, :func:`~sdr_di.receiver.prediction
         .visible_satellites`). False: a cold search of ``prns`` (default all 63).
+    nav : NavData, optional
+        Assistance navigation data (the RINEX file the sidecar names, as the integrated
+        modes take it): ephemerides and ionosphere before they are decoded, the decoded
+        data winning as it arrives (:class:`~sdr_di.receiver.navdata.NavDataInForce`, the
+        rules every mode shares). With it the first fix needs a transmit time, not a
+        decoded ephemeris. None: decoded data only.
+    duration_s : float, optional
+        Process only the first ``duration_s`` seconds of the file.
 
     Raises
     ------
@@ -203,6 +218,13 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     stem = stem or source.path.stem
     rx = receiver or ScalarReceiver(log=False)
     engine = PvtEngine(source.sampling_rate_hz, {}, None)
+    engine.navdata = NavDataInForce(nav)
+    if source.start_week is not None and source.start_sow is not None:
+        # the file's start time: the week of transmit times decoded before the week number
+        engine.builder.rx_time.time_hint = (int(source.start_week), float(source.start_sow))
+    stop = source.n_samples if duration_s is None else min(
+        source.n_samples, round(duration_s * source.sampling_rate_hz))
+    processed_s = stop / source.sampling_rate_hz
     # after a blockage, lost channels are searched around, and timed from, the last fix
     rx.predictor = FixPredictor(engine, source.sampling_rate_hz, source.carrier_hz)
     files = {"pvt": out_dir / f"{stem}_pvt.csv", "nmea": out_dir / f"{stem}.nmea",
@@ -215,20 +237,31 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     bar = None
     t_wall = time.perf_counter()
     counts = {"epochs": 0, "fixes": 0}
+    series: dict = {"t_s": [], "n_sats": [], "cn0_dbhz": {}}
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=round(source.duration_s, 2), unit="s", desc="run scalar",
+        bar = tqdm(total=round(processed_s, 2), unit="s", desc="run scalar: tracking and fixes",
                    bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
-                              "{postfix}]")
+                              "{postfix}]", postfix="acquisition")  # shown before epoch 1
 
     def on_epoch(sample, observations, ephemerides):
-        engine.ephemerides = engine.navdata.offer_decoded(ephemerides, rx.klobuchar)
+        engine.ephemerides = engine.navdata.offer_decoded(
+            ephemerides, rx.klobuchar, sample / source.sampling_rate_hz)
         engine.iono = engine.navdata.klobuchar
         sol = engine.process(observations, sample)
         counts["epochs"] += 1
         csv_w.write(sol)
+        t_s = sample / source.sampling_rate_hz
+        series["t_s"].append(t_s)
+        series["n_sats"].append(int(sol.n_sats) if sol.valid else 0)
+        for o in observations:
+            tc = series["cn0_dbhz"].setdefault(int(o.prn), ([], []))
+            tc[0].append(t_s)
+            tc[1].append(float(o.cn0_dbhz))
         if sol.valid:
+            if not counts["fixes"]:
+                counts["first_fix_s"] = sample / source.sampling_rate_hz
             counts["fixes"] += 1
             nmea_w.write(sol)
         if observations:  # the observables the PVT used (formed again: same clock, same sample)
@@ -236,15 +269,16 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
                           rx.klobuchar)
         if bar is not None:
             done = sample / source.sampling_rate_hz
-            bar.update(round(done - bar.n, 3))
             locked = sum(1 for o in observations if o.code_lock)
             rt = done / max(time.perf_counter() - t_wall, 1e-9)
             bar.set_postfix_str(f"x{rt:.2f} real time, {locked} in lock, "
-                                f"{len(ephemerides)} eph")
+                                f"{len(ephemerides)} eph decoded, {counts['fixes']} fixes",
+                                refresh=False)
+            bar.update(round(done - bar.n, 3))
 
     try:
         rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=1.0 / rate_hz,
-               assist=search_assistance(source, prns, assist))
+               stop_sample=stop, assist=search_assistance(source, prns, assist))
         if not any(r.detected for r in rx.acquisition_results) and not any(
                 c.tracking for c in rx.channels.values()):
             raise NoSatelliteError(f"{source.path}: no satellite found by acquisition "
@@ -258,6 +292,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         csv_w.close()
         nmea_w.close()
         rinex_w.close()
+        if bar is not None:    # the last epoch is before the end of the file: the run is
+            bar.update(bar.total - bar.n)    # done, so is the bar
     except BaseException:
         csv_w.abort()
         nmea_w.abort()
@@ -267,8 +303,9 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - t_wall
-    return RunSummary(files, counts["epochs"], counts["fixes"], source.duration_s, wall,
-                      channels, dict(rx.profile))
+    return RunSummary(files, counts["epochs"], counts["fixes"], processed_s, wall,
+                      channels, dict(rx.profile), counts.get("first_fix_s", math.nan),
+                      series)
 
 
 def _search_summary(rx: ScalarReceiver) -> str:

@@ -92,10 +92,12 @@ def add_parsers(subparsers) -> None:
     p.set_defaults(func=cmd_study)
 
     p = subparsers.add_parser(
-        "report", help="render report.html for a campaign or robustness output folder",
+        "report", help="render report.html for a campaign, robustness, study or run "
+        "output folder",
         description="Write DIR/report.html: one self-contained page with every table "
         "(inline) and plot (embedded PNG) of the folder.")
-    p.add_argument("dir", type=Path, help="output folder of sdr-di campaign / robustness")
+    p.add_argument("dir", type=Path, help="output folder of sdr-di campaign / robustness / "
+                   "study, or of one sdr-di run (its summary, channels and --plots)")
     p.set_defaults(func=cmd_report)
 
 
@@ -246,6 +248,11 @@ def _render(folder: Path) -> Path:
         from .study_report import render_study_report
 
         return render_study_report(folder)
+    from .run_report import is_run_folder, render_run_report
+
+    if not any((Path(folder) / f).is_file() for f in ("campaign.json", "result.json")) \
+            and is_run_folder(folder):
+        return render_run_report(folder)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReportWarning)
         path = render_report(folder)
