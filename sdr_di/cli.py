@@ -414,8 +414,8 @@ def _no_fix_diagnosis(args: argparse.Namespace, source, res) -> str:
 
 
 def _scalar_plots(res, source, truth_path) -> None:
-    """``run --plots`` in scalar mode (:mod:`sdr_di.experiments.run_report`)."""
-    from .experiments.run_report import write_run_plots
+    """``run --plots`` in scalar mode (:mod:`sdr_di.studies.run_report`)."""
+    from .studies.run_report import write_run_plots
     from .receiver.accuracy import solution_errors
 
     errors = None
@@ -603,7 +603,7 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     if args.plots:
         import numpy as np
 
-        from .experiments.run_report import write_run_plots
+        from .studies.run_report import write_run_plots
 
         err = None
         if np.isfinite(r.pos_err).any():

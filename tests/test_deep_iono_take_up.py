@@ -58,7 +58,7 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
     rows = np.loadtxt(out / "default_deep.csv", delimiter=",", skiprows=2)
     t, iono = rows[:, 0], rows[:, DEEP_COLUMNS.index("iono")]
     summ = json.loads((out / "default_deep_summary.json").read_text())
-    nav_change = rows[:, -1].astype(int)
+    nav_change = rows[:, DEEP_COLUMNS.index("nav_change")].astype(int)
     assert t[0] < 15.0                # before subframe 1 ends: no wait for the ionosphere
     assert iono[0] == 0 and iono[-1] == 1           # taken up when subframe 1 is decoded
     k = int(np.argmax(iono))

@@ -24,8 +24,8 @@ import numpy as np
 
 from ..errors import ExperimentError
 from ..io.atomic import atomic_open
-from .plotting import PLOTS_SKIPPED, matplotlib_missing, time_series
-from .report import CSS, img_html, sig, table_html
+from ..experiments.plotting import PLOTS_SKIPPED, matplotlib_missing, time_series
+from .campaign_report import CSS, img_html, sig, table_html
 
 __all__ = ["is_run_folder", "render_run_report", "write_run_plots"]
 
