@@ -71,6 +71,9 @@ def _add_generate(sub) -> None:
                    help="override the RINEX 3 navigation file")
     p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
                    help="comma-separated PRNs instead of automatic selection (e.g. C21,C22)")
+    p.add_argument("--sigmf", action="store_true",
+                   help="also write the SigMF pair NAME.sigmf-meta and NAME.sigmf-data (the "
+                   "IF samples, hard-linked to NAME.bin)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_generate)
 
@@ -94,7 +97,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
         prns=args.prn,
     )
     out = args.out or (REPO_ROOT / "signals" / "out")
-    files = generate_files(sc, out, name=args.name, progress=not args.no_progress)
+    files = generate_files(sc, out, name=args.name, progress=not args.no_progress,
+                           sigmf=args.sigmf)
     for label, path in files.items():
         print(f"{label:9s} {path}")
     return 0
@@ -409,7 +413,10 @@ def _check_if_file(path: Path) -> None:
     if path.is_dir():
         raise UsageError(f"IF file {path}: is a folder")
     if not path.exists() and (path.suffix == ".json" or not path.with_suffix(".json").exists()):
-        raise UsageError(f"IF file {path}: no such file")
+        from .io.sigmf_files import sigmf_meta_path
+
+        if sigmf_meta_path(path) is None:  # a SigMF base name X needs only X.sigmf-meta
+            raise UsageError(f"IF file {path}: no such file")
 
 
 def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:

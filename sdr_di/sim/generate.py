@@ -31,6 +31,7 @@ from ..ins.imu import ImuErrorModel
 from ..io.atomic import OutputSet, check_output_dir, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
 from ..io.sidecar import file_fingerprint, write_sidecar
+from ..io.sigmf_files import sigmf_metadata
 from ..orbits.rinex_nav import load_nav
 from ..scenario.schema import Scenario
 from ..signal.navmsg import assistance_klobuchar
@@ -83,8 +84,12 @@ def make_generator(sc: Scenario, truth=None) -> IfGenerator:
 
 
 def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None,
-                   progress: bool = True) -> dict[str, Path]:
+                   progress: bool = True, sigmf: bool = False) -> dict[str, Path]:
     """Generate all outputs of a scenario; returns {label: path}.
+
+    ``sigmf``: also write the SigMF pair ``NAME.sigmf-data`` (a hard link to ``NAME.bin``, a
+    copy where the file system has none) and ``NAME.sigmf-meta``
+    (:func:`~sdr_di.io.sigmf_files.sigmf_metadata`), members of the same output set.
 
     Raises
     ------
@@ -100,6 +105,9 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
     rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
     imu = imu_model(sc).apply(truth, rng)
 
+    if sigmf:  # before any work: a format SigMF has no datatype for is refused here
+        sigmf_metadata(sample_format=sc.signal.sample_format, sampling_rate_hz=gen.fs,
+                       if_hz=sc.signal.if_hz, start_week=sc.week, start_sow=sc.sow)
     out_dir = ensure_output_dir(out_dir)
     paths = {
         "if": out_dir / f"{name}.bin",
@@ -172,9 +180,30 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
         }
         meta["files"] = {paths[k].name: _fingerprint(paths[k], files)
                          for k in ("if", "imu", "truth")}
+        if sigmf:
+            paths.update(_write_sigmf_pair(out_dir / name, paths["if"], meta, sc, files))
         write_sidecar(paths["metadata"], meta, output_set=files)  # opened last: renamed last
         files.commit()
     return paths
+
+
+def _write_sigmf_pair(base: Path, if_path: Path, meta: dict, sc: Scenario,
+                      files: OutputSet) -> dict[str, Path]:
+    """``BASE.sigmf-data`` (the IF file's content, linked) and ``BASE.sigmf-meta``."""
+    data, meta_path = base.with_name(base.name + ".sigmf-data"), \
+        base.with_name(base.name + ".sigmf-meta")
+    files.link(if_path, data)
+    text = sigmf_metadata(
+        sample_format=meta["sample_format"], sampling_rate_hz=meta["sampling_rate_hz"],
+        if_hz=meta["if_hz"], start_week=meta["start"]["week"], start_sow=meta["start"]["sow"],
+        description=f"BeiDou B3I IF samples of scenario {sc.name!r} (seed {sc.seed})",
+        author="sdr-di generate", recorder=f"sdr-di {__version__}",
+        extra={"scenario_name": sc.name, "scenario_hash": sc.hash, "seed": sc.seed,
+               "quantization_bits": meta["quantization_bits"],
+               "sidecar": base.name + ".json"})
+    with files.open(meta_path, "w") as fh:
+        fh.write(text)
+    return {"sigmf-data": data, "sigmf-meta": meta_path}
 
 
 def write_overlapped(fh, chunks, bar=None) -> None:
