@@ -169,10 +169,12 @@ def check_b3i_in_band(center_hz: float, sampling_rate_hz: float, is_complex: boo
 
     The recorded band is ``+-fs/2`` about the centre (complex samples) or ``0..fs/2`` above
     the LO (real samples: half-width ``fs/4`` about ``fs/4``); B3I's main lobe is
-    ``+-10.23 MHz`` about the carrier. The band must hold the narrower of the main lobe and
-    the central half of the band itself: with a band wider than the lobe the whole lobe must
-    fit; with a narrower band (2.5 MHz...) the carrier must lie in the inner half of the band,
-    so that the code's central part, where its power is, is recorded.
+    ``+-10.23 MHz`` about the carrier. The band must hold as much of the main lobe as it can:
+    a band wider than the lobe holds all of it (``|IF - mid| <= half - 10.23 MHz``), a
+    narrower band lies inside it (``|IF - mid| <= 10.23 MHz - half``) and has the carrier in
+    its inner half (``|IF - mid| <= half / 2``, room for the Doppler search and the filter
+    edges). The limit is continuous in ``fs`` (0 at ``half = 10.23 MHz``); at 2.5 MHz
+    complex it is 0.625 MHz, at 25 MHz 2.27 MHz.
 
     Parameters
     ----------
@@ -203,15 +205,16 @@ def check_b3i_in_band(center_hz: float, sampling_rate_hz: float, is_complex: boo
         mid, half = 0.0, fs / 2.0
     else:
         mid, half = fs / 4.0, fs / 4.0
-    need = min(B3I_MAIN_LOBE_HALF_WIDTH_HZ, half / 2.0)
-    off = abs(if_hz) - mid if is_complex else abs(abs(if_hz) - mid)
-    if not (math.isfinite(if_hz) and off + need <= half):
+    lobe = B3I_MAIN_LOBE_HALF_WIDTH_HZ
+    limit = half - lobe if half >= lobe else min(lobe - half, half / 2.0)
+    off = abs(abs(if_hz) - mid)
+    if not (math.isfinite(if_hz) and off <= limit + 1e-6):
         kind = "complex" if is_complex else "real"
         raise SampleFormatError(
-            f"{where}core:frequency {center_hz / 1e6:.6g} MHz puts B3I ({carrier_hz / 1e6:g} "
+            f"{where}core:frequency {center_hz / 1e6:.9g} MHz puts B3I ({carrier_hz / 1e6:g} "
             f"MHz) at IF {if_hz / 1e6:+.6g} MHz, outside the {kind} band of fs "
-            f"{fs / 1e6:g} MHz (its IF must lie within {(half - need) / 1e6:g} MHz of "
-            f"{mid / 1e6:g} MHz to hold +-{need / 1e6:g} MHz of the main lobe)")
+            f"{fs / 1e6:g} MHz (the IF must lie within {limit / 1e6:g} MHz of "
+            f"{mid / 1e6:g} MHz: docs/formats.md, SigMF); give --if to read it anyway")
     return if_hz
 
 
