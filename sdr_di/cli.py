@@ -113,8 +113,8 @@ def _add_file_options(p) -> None:
     p.add_argument("--format", dest="sample_format", default=None,
                    help="foreign file: sample format (iq_int8/ibyte, real_int8, iq_int16, "
                    "real_int16, iq_int4, gr_complex, and peers' formats: docs/formats.md). "
-                   "A file with a PocketSDR/SignalSim tag (X.bin.tag) needs no options; "
-                   "these override the tag's values")
+                   "A file with a PocketSDR/SignalSim tag (X.bin.tag) or a SigMF recording "
+                   "needs no options; these override the tag's or SigMF's values")
     p.add_argument("--rfch", type=int, default=None, metavar="N",
                    help="RF channel (1-based) of a multi-channel PocketSDR RAW file (default: "
                    "the channel whose tagged LO is nearest B3I)")
@@ -143,7 +143,8 @@ def _add_acquire(sub) -> None:
         "and writes STEM_acquisition.csv with one row per searched PRN. Works on any file "
         "of at least one code period (1 ms) and says which sensitivity it gives.",
     )
-    p.add_argument("if_file", type=Path, help="IF samples (or its .json sidecar)")
+    p.add_argument("if_file", type=Path,
+                   help="IF samples (or its .json sidecar, or a SigMF X.sigmf-meta/-data)")
     p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
                    help="comma-separated PRNs to search (default all 63)")
     p.add_argument("--coherent-ms", type=int, default=1, metavar="MS",
@@ -250,7 +251,8 @@ def _add_run(sub) -> None:
         "navigation solution (CSV and NMEA). The file is described by its sidecar (X.json "
         "beside X.bin) or, for a file sdr-di did not write, by --fs/--if/--format.",
     )
-    p.add_argument("if_file", type=Path, help="IF samples (or its .json sidecar)")
+    p.add_argument("if_file", type=Path,
+                   help="IF samples (or its .json sidecar, or a SigMF X.sigmf-meta/-data)")
     p.add_argument("--mode", choices=("scalar", "deep", "loose", "tight"), default="scalar",
                    help="receiver architecture: scalar tracking loops; deep (INS-aided "
                    "vector tracking: scalar start-up, then every NCO commanded from the "
