@@ -208,3 +208,41 @@ def test_meta_path_resolution(tmp_path):
     assert sigmf_meta_path(tmp_path / "a.sigmf-meta") == tmp_path / "a.sigmf-meta"
     assert sigmf_meta_path(tmp_path / "b.bin") is None
     assert sigmf_meta_path(tmp_path / "c") is None
+
+
+def _edit(f):
+    doc = {"global": {"core:datatype": "ci8", "core:sample_rate": 2.5e6, "core:version": "1.2.0"},
+           "captures": [{"core:sample_start": 0, "core:frequency": F_B3I}], "annotations": []}
+    f(doc)
+    return doc
+
+
+@pytest.mark.parametrize("doc, words", [
+    ("[1, 2]", 'no "global" object'),
+    ("{not json", "not JSON"),
+    (_edit(lambda m: m.update(captures="x")), "captures: 'x' is not of type 'array'"),
+    (_edit(lambda m: m["captures"][0].update({"core:datetime": "2020-13-45T00:00:00Z"})),
+     "is not an ISO 8601 UTC time"),
+    (_edit(lambda m: m["captures"][0].update({"core:datetime": "1999-01-01T00:00:00Z"})),
+     "before the BDT epoch"),
+    (_edit(lambda m: m["global"].update({"core:num_channels": 2})), "core:num_channels 2"),
+    (_edit(lambda m: m["global"].pop("core:sample_rate")), "give --fs"),
+    (_edit(lambda m: m["captures"][0].update({"core:header_bytes": 16})), "non-sample bytes"),
+    (_edit(lambda m: m["global"].update({"core:extensions": [
+        {"name": "foo", "version": "1", "optional": False}]})), "extension 'foo'"),
+    (_edit(lambda m: m["global"].update({"core:dataset": "missing.bin"})), "not found"),
+    (_edit(lambda m: m.update(captures=[])), "no capture"),
+])
+def test_malformed_metadata_is_a_sample_format_error(tmp_path, doc, words):
+    (tmp_path / "a.sigmf-data").write_bytes(bytes(20000))
+    (tmp_path / "a.sigmf-meta").write_text(doc if isinstance(doc, str) else json.dumps(doc))
+    with pytest.raises(SampleFormatError, match="SigMF .*") as exc:
+        sigmf_source(tmp_path / "a.sigmf-meta")
+    assert words in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_byte_datatypes_with_byte_order_suffix(tmp_path):
+    doc = _edit(lambda m: m["global"].update({"core:datatype": "ci8_le"}))
+    (tmp_path / "a.sigmf-data").write_bytes(bytes(20000))
+    (tmp_path / "a.sigmf-meta").write_text(json.dumps(doc))
+    assert sigmf_source(tmp_path / "a.sigmf-meta").sample_format == "iq_int8"

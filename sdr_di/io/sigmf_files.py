@@ -5,7 +5,8 @@ metadata file is JSON; its structure is checked with the ``sigmf`` library (sche
 namespace checks: :meth:`sigmf.SigMFFile.validate`), not by hand. What sdr-di reads:
 
 =====================  ====================================================================
-``core:datatype``      sample layout: ``ci8`` -> ``iq_int8``, ``ri8`` -> ``real_int8``,
+``core:datatype``      sample layout: ``ci8`` -> ``iq_int8``, ``ri8`` -> ``real_int8`` (also
+                       with an ``_le``/``_be`` suffix, meaningless for bytes),
                        ``ci16_le`` -> ``iq_int16``, ``ri16_le`` -> ``real_int16``,
                        ``cf32_le`` -> ``gr_complex`` (:data:`DATATYPES`); any other datatype
                        (unsigned ``cu8``, big-endian, 32-bit integers, float64, real float)
@@ -264,6 +265,8 @@ def sigmf_source(meta_path: str | Path, *, sample_format: str | None = None,
             raise SampleFormatError(f"{where}requires the SigMF extension {ext.get('name')!r} "
                                     "(optional: false), which sdr-di does not read")
     datatype = str(glob.get("core:datatype"))
+    if datatype[1:] in ("i8_le", "i8_be"):  # byte order means nothing for 8-bit samples
+        datatype = datatype[:3]
     if sample_format is None:
         if datatype not in DATATYPES:
             raise SampleFormatError(
@@ -297,8 +300,8 @@ def sigmf_source(meta_path: str | Path, *, sample_format: str | None = None,
     inverted = bool(spectrum_inverted)
     if if_hz is None:
         if not _num(center):
-            raise SampleFormatError(f"{where}the first capture has no core:frequency; give "
-                                    "--if")
+            what = "no core:frequency" if center is None else f"core:frequency {center!r}"
+            raise SampleFormatError(f"{where}the first capture has {what}; give --if")
         if_hz = check_b3i_in_band(center, sampling_rate_hz, fmt.is_complex, where=where,
                                   carrier_hz=carrier_hz)
         if not fmt.is_complex and if_hz < 0.0:
