@@ -246,3 +246,29 @@ def test_byte_datatypes_with_byte_order_suffix(tmp_path):
     (tmp_path / "a.sigmf-data").write_bytes(bytes(20000))
     (tmp_path / "a.sigmf-meta").write_text(json.dumps(doc))
     assert sigmf_source(tmp_path / "a.sigmf-meta").sample_format == "iq_int8"
+
+
+@pytest.mark.parametrize("hard_links", [True, False])
+def test_output_set_link_is_a_member(tmp_path, monkeypatch, hard_links):
+    import os
+
+    from sdr_di.io.atomic import OutputSet
+
+    if not hard_links:  # a file system without hard links: the member is a copy
+        def no_link(*a):
+            raise OSError(1, "Operation not permitted")
+        monkeypatch.setattr(os, "link", no_link)
+    a, b = tmp_path / "x.bin", tmp_path / "x.sigmf-data"
+    with pytest.raises(KeyboardInterrupt), OutputSet() as files:
+        with files.open(a) as fh:
+            fh.write(b"123")
+        files.link(a, b)
+        raise KeyboardInterrupt  # before the commit: nothing under any name
+    assert list(tmp_path.iterdir()) == []
+    with OutputSet() as files:
+        with files.open(a) as fh:
+            fh.write(b"456")
+        files.link(a, b)
+        files.commit()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.bin", "x.sigmf-data"]
+    assert b.read_bytes() == b"456" and os.path.samefile(a, b) == hard_links

@@ -43,8 +43,9 @@ def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
                 start_sow: float | None = None, rfch: int | None = None) -> IfSource:
     """Open an IF file: a SigMF recording when the path names one (``X.sigmf-meta``,
     ``X.sigmf-data`` or the base name ``X``: :func:`open_sigmf`); else from its sidecar
-    (``X.json`` beside ``X.bin``, or the JSON itself); else from a peer's tag (``X.bin.tag``, PocketSDR/SignalSim, :mod:`sdr_di.io.tag_sidecar`),
-    the explicit options overriding the tag's values; else from the explicit options alone
+    (``X.json`` beside ``X.bin``, or the JSON itself); else from a peer's tag
+    (``X.bin.tag``, PocketSDR/SignalSim, :mod:`sdr_di.io.tag_sidecar`), the explicit options
+    overriding the tag's values; else from the explicit options alone
     (foreign files). Explicit options given, a JSON sidecar is not read.
 
     ``rfch`` picks the RF channel (1-based) of a multi-channel layout (PocketSDR ``RAW*``).
