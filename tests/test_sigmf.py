@@ -208,6 +208,8 @@ def test_meta_path_resolution(tmp_path):
     assert sigmf_meta_path(tmp_path / "a.sigmf-meta") == tmp_path / "a.sigmf-meta"
     assert sigmf_meta_path(tmp_path / "b.bin") is None
     assert sigmf_meta_path(tmp_path / "c") is None
+    with pytest.raises(SampleFormatError, match="archives and collections are not read"):
+        sigmf_meta_path(tmp_path / "a.sigmf")
 
 
 def _edit(f):

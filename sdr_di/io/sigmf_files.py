@@ -113,10 +113,18 @@ def sigmf_meta_path(path: str | Path) -> Path | None:
     ``X.sigmf-meta`` is itself; ``X.sigmf-data`` and the base name ``X`` (no such file, or a
     file without suffix) give ``X.sigmf-meta`` when it exists. Any other path (``X.bin``,
     ``X.json``) gives None: those are described by a JSON sidecar, a tag or the options.
+
+    Raises
+    ------
+    SampleFormatError
+        A SigMF archive (``X.sigmf``, compressed or not) or collection: not read.
     """
     p = Path(path)
     if p.name.endswith(META_EXT):
         return p
+    if p.name.endswith((".sigmf", ".sigmf.gz", ".sigmf.xz", ".sigmf.zip", ".sigmf-collection")):
+        raise SampleFormatError(f"SigMF {p}: archives and collections are not read; extract "
+                                "the recording and name its .sigmf-meta or .sigmf-data")
     if p.name.endswith(DATA_EXT):
         meta = p.with_name(p.name[:-len(DATA_EXT)] + META_EXT)
         return meta if meta.exists() else None
