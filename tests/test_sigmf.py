@@ -274,3 +274,14 @@ def test_output_set_link_is_a_member(tmp_path, monkeypatch, hard_links):
         files.commit()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["x.bin", "x.sigmf-data"]
     assert b.read_bytes() == b"456" and os.path.samefile(a, b) == hard_links
+
+
+@pytest.mark.parametrize("mode", ["scalar", "deep"])
+def test_run_refuses_unreadable_datatype_before_any_work(tmp_path, capsys, mode):
+    meta = _noise_pair(tmp_path, "cu8")
+    out = tmp_path / "run"
+    assert main(["run", str(meta.with_name("n.sigmf-data")), "--mode", mode, "--no-progress",
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "core:datatype cu8 cannot be read" in err and err.count("\n") == 1, err
+    assert not out.exists()
