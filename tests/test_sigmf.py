@@ -104,12 +104,16 @@ def test_generate_sigmf_pair_validated_by_the_library(generated):
     assert (src.start_week, src.start_sow) == (meta["start"]["week"], meta["start"]["sow"])
 
 
-def test_generate_sigmf_refuses_format_without_datatype(tmp_path, capsys):
+@pytest.mark.parametrize("flags, words", [
+    (["--format", "iq_int4"], "iq_int4 has no SigMF datatype"),
+    (["--format", "real_int8", "--if", "0.2e6"], "--sigmf: core:frequency"),
+])
+def test_generate_sigmf_refusals_before_any_work(tmp_path, capsys, flags, words):
     out = tmp_path / "o"
-    assert main(["generate", "--no-progress", "--duration", "0.1", "--fs", "2.5e6", "--format",
-                 "iq_int4", "--out", str(out), "--sigmf"]) == 2
+    assert main(["generate", "--no-progress", "--duration", "0.1", "--fs", "2.5e6", *flags,
+                 "--out", str(out), "--sigmf"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "iq_int4 has no SigMF datatype" in err
+    assert err.count("\n") == 1 and words in err, err
     assert not out.exists()
 
 

@@ -173,7 +173,8 @@ def _load(meta_path: Path):
 
 
 def check_b3i_in_band(center_hz: float, sampling_rate_hz: float, is_complex: bool, *,
-                      where: str = "", carrier_hz: float = F_B3I) -> float:
+                      where: str = "", carrier_hz: float = F_B3I,
+                      hint: str = "give --if to read it anyway") -> float:
     """The IF of B3I in a recording centred at ``center_hz``, checked to lie in its band.
 
     The recorded band is ``+-fs/2`` about the centre (complex samples) or ``0..fs/2`` above
@@ -193,8 +194,8 @@ def check_b3i_in_band(center_hz: float, sampling_rate_hz: float, is_complex: boo
         Sample rate ``fs`` [Hz].
     is_complex : bool
         I/Q samples.
-    where : str, optional
-        Prefix of the error message (the file).
+    where, hint : str, optional
+        Prefix (the file) and end (what to do) of the error message.
     carrier_hz : float, optional
         Carrier [Hz] (B3I).
 
@@ -223,7 +224,7 @@ def check_b3i_in_band(center_hz: float, sampling_rate_hz: float, is_complex: boo
             f"{where}core:frequency {center_hz / 1e6:.9g} MHz puts B3I ({carrier_hz / 1e6:g} "
             f"MHz) at IF {if_hz / 1e6:+.6g} MHz, outside the {kind} band of fs "
             f"{fs / 1e6:g} MHz (the IF must lie within {limit / 1e6:g} MHz of "
-            f"{mid / 1e6:g} MHz: docs/formats.md, SigMF); give --if to read it anyway")
+            f"{mid / 1e6:g} MHz: docs/formats.md, SigMF); {hint}")
     return if_hz
 
 

@@ -26,12 +26,14 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..constants import F_B3I
 from ..errors import OutputError, ScenarioError
 from ..ins.imu import ImuErrorModel
 from ..io.atomic import OutputSet, check_output_dir, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
+from ..io.sample_formats import get_format
 from ..io.sidecar import file_fingerprint, write_sidecar
-from ..io.sigmf_files import sigmf_metadata
+from ..io.sigmf_files import check_b3i_in_band, sigmf_metadata
 from ..orbits.rinex_nav import load_nav
 from ..scenario.schema import Scenario
 from ..signal.navmsg import assistance_klobuchar
@@ -100,14 +102,18 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
     name = sc.name if name is None else name
     if not name or "/" in name or name.startswith("."):
         raise OutputError(f"invalid output name {name!r}")
+    if sigmf:  # before any work: no SigMF datatype, or a pair the reader would refuse
+        sig = sc.signal
+        sigmf_metadata(sample_format=sig.sample_format, sampling_rate_hz=sig.sampling_rate_hz,
+                       if_hz=sig.if_hz, start_week=sc.week, start_sow=sc.sow)
+        check_b3i_in_band(F_B3I - sig.if_hz, sig.sampling_rate_hz,
+                          get_format(sig.sample_format).is_complex, where="--sigmf: ",
+                          hint="choose --if inside that range or leave out --sigmf")
     truth = simulate_truth(sc)
     gen = make_generator(sc, truth)
     rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
     imu = imu_model(sc).apply(truth, rng)
 
-    if sigmf:  # before any work: a format SigMF has no datatype for is refused here
-        sigmf_metadata(sample_format=sc.signal.sample_format, sampling_rate_hz=gen.fs,
-                       if_hz=sc.signal.if_hz, start_week=sc.week, start_sow=sc.sow)
     out_dir = ensure_output_dir(out_dir)
     paths = {
         "if": out_dir / f"{name}.bin",
