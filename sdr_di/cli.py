@@ -249,7 +249,8 @@ def _add_run(sub) -> None:
         help="run the receiver on a recorded IF file",
         description="Acquire, track and decode the B3I signals of an IF file and write the "
         "navigation solution (CSV and NMEA). The file is described by its sidecar (X.json "
-        "beside X.bin) or, for a file sdr-di did not write, by --fs/--if/--format.",
+        "beside X.bin), a SigMF recording (X.sigmf-meta) or, for a file sdr-di did not "
+        "write, by --fs/--if/--format.",
     )
     p.add_argument("if_file", type=Path,
                    help="IF samples (or its .json sidecar, or a SigMF X.sigmf-meta/-data)")

@@ -6,8 +6,10 @@ Outputs in ``out_dir`` (``NAME`` = scenario name unless given):
 ``NAME.json``       metadata sidecar (:mod:`sdr_di.io.sidecar`), written last
 ``NAME_imu.csv``    200 Hz IMU data (:mod:`sdr_di.io.imu_files`)
 ``NAME_truth.csv``  200 Hz truth (position, velocity, attitude, specific force, rates)
+``NAME.sigmf-data``, ``NAME.sigmf-meta``  with ``sigmf=True`` (``--sigmf``): the SigMF pair
+                    (the data a hard link to ``NAME.bin``; :mod:`sdr_di.io.sigmf_files`)
 
-The four files are one :class:`~sdr_di.io.atomic.OutputSet`: each is written under
+The four files (six with the SigMF pair) are one :class:`~sdr_di.io.atomic.OutputSet`: each is written under
 ``<file>.part``; only when all four are complete are they renamed, the sidecar last. On any
 error or interrupt the ``.part`` files are removed and the files of an earlier set under the
 same names are left as they were. The sidecar records the size and digest of the other three
