@@ -12,9 +12,9 @@ Outputs in ``out_dir`` (``NAME`` = scenario name unless given):
 The four files (six with the SigMF pair) are one :class:`~sdr_di.io.atomic.OutputSet`: each
 is written under ``<file>.part``; only when all are complete are they renamed, the sidecar
 last. On any error or interrupt the ``.part`` files are removed and the files of an earlier
-set under the same names are left as they were. The sidecar records the size and digest of the other three
-(:func:`~sdr_di.io.sidecar.file_fingerprint`), so a set mixed by a kill between the renames
-is refused by every reader (:func:`~sdr_di.io.sidecar.check_member`).
+set under the same names are left as they were. The sidecar records the size and digest of
+the IF, IMU and truth files (:func:`~sdr_di.io.sidecar.file_fingerprint`), so a set mixed by
+a kill between the renames is refused by every reader (:func:`~sdr_di.io.sidecar.check_member`).
 """
 
 from __future__ import annotations
