@@ -122,7 +122,8 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
              if_hz: float | None = None, sample_format: str | None = None,
              bits: int | None = None, cn0_dbhz: float | None = None,
              ephemeris: PathLike | None = None, prns: Sequence[str | int] | None = None,
-             progress: bool = False, _names: dict[str, str] | None = None) -> GeneratedFiles:
+             progress: bool = False, sigmf: bool = False,
+             _names: dict[str, str] | None = None) -> GeneratedFiles:
     """Generate B3I IF samples, 200 Hz IMU data, truth and a sidecar (``sdr-di generate``).
 
     Parameters
@@ -192,7 +193,7 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
         raise with_flag_names(exc, sc, {k: names[k] for k, v in over.items()
                                         if v is not None}) from None
     files = generate_files(sc, REPO_ROOT / "signals" / "out" if out is None else Path(out),
-                           name=name, progress=progress)
+                           name=name, progress=progress, sigmf=sigmf)
     return GeneratedFiles(if_file=files["if"], imu=files["imu"], truth=files["truth"],
                           metadata=files["metadata"])
 

@@ -71,6 +71,9 @@ def _add_generate(sub) -> None:
                    help="override the RINEX 3 navigation file")
     p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
                    help="comma-separated PRNs instead of automatic selection (e.g. C21,C22)")
+    p.add_argument("--sigmf", action="store_true",
+                   help="also write the SigMF pair NAME.sigmf-meta and NAME.sigmf-data (the "
+                   "IF samples, hard-linked to NAME.bin)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_generate)
 
@@ -89,7 +92,8 @@ def _cmd_generate(args: argparse.Namespace) -> int:
                      duration_s=args.duration, seed=args.seed, sampling_rate_hz=args.fs,
                      if_hz=args.if_hz, sample_format=args.sample_format, bits=args.bits,
                      cn0_dbhz=args.cn0, ephemeris=args.ephemeris, prns=args.prn,
-                     progress=not args.no_progress, _names=_GENERATE_FLAGS)
+                     progress=not args.no_progress, sigmf=args.sigmf,
+                     _names=_GENERATE_FLAGS)
     for label, path in files.files.items():
         print(f"{label:9s} {path}")
     return 0
@@ -104,8 +108,8 @@ def _add_file_options(p) -> None:
     p.add_argument("--format", dest="sample_format", default=None,
                    help="foreign file: sample format (iq_int8/ibyte, real_int8, iq_int16, "
                    "real_int16, iq_int4, gr_complex, and peers' formats: docs/formats.md). "
-                   "A file with a PocketSDR/SignalSim tag (X.bin.tag) needs no options; "
-                   "these override the tag's values")
+                   "A file with a PocketSDR/SignalSim tag (X.bin.tag) or a SigMF recording "
+                   "needs no options; these override the tag's or SigMF's values")
     p.add_argument("--rfch", type=int, default=None, metavar="N",
                    help="RF channel (1-based) of a multi-channel PocketSDR RAW file (default: "
                    "the channel whose tagged LO is nearest B3I)")
@@ -147,7 +151,8 @@ def _add_acquire(sub) -> None:
         "and writes STEM_acquisition.csv with one row per searched PRN. Works on any file "
         "of at least one code period (1 ms) and says which sensitivity it gives.",
     )
-    p.add_argument("if_file", type=Path, help="IF samples (or its .json sidecar)")
+    p.add_argument("if_file", type=Path,
+                   help="IF samples (or its .json sidecar, or a SigMF X.sigmf-meta/-data)")
     p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
                    help="comma-separated PRNs to search (default all 63)")
     p.add_argument("--coherent-ms", type=int, default=1, metavar="MS",
@@ -265,9 +270,11 @@ def _add_run(sub) -> None:
         help="run the receiver on a recorded IF file",
         description="Acquire, track and decode the B3I signals of an IF file and write the "
         "navigation solution (CSV and NMEA). The file is described by its sidecar (X.json "
-        "beside X.bin) or, for a file sdr-di did not write, by --fs/--if/--format.",
+        "beside X.bin), a SigMF recording (X.sigmf-meta) or, for a file sdr-di did not "
+        "write, by --fs/--if/--format.",
     )
-    p.add_argument("if_file", type=Path, help="IF samples (or its .json sidecar)")
+    p.add_argument("if_file", type=Path,
+                   help="IF samples (or its .json sidecar, or a SigMF X.sigmf-meta/-data)")
     p.add_argument("--mode", choices=("scalar", "deep", "loose", "tight"), default="scalar",
                    help="receiver architecture: scalar tracking loops; deep (INS-aided "
                    "vector tracking: scalar start-up, then every NCO commanded from the "
@@ -506,7 +513,10 @@ def _check_if_file(path: Path) -> None:
     if path.is_dir():
         raise UsageError(f"IF file {path}: is a folder")
     if not path.exists() and (path.suffix == ".json" or not path.with_suffix(".json").exists()):
-        raise UsageError(f"IF file {path}: no such file")
+        from .io.sigmf_files import sigmf_meta_path
+
+        if sigmf_meta_path(path) is None:  # a SigMF base name X needs only X.sigmf-meta
+            raise UsageError(f"IF file {path}: no such file")
 
 
 def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:

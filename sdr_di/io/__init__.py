@@ -1,1 +1,2 @@
-"""File formats: IF samples, metadata sidecar, IMU and truth files, atomic writing."""
+"""File formats: IF samples, metadata sidecar, peers' tags, SigMF recordings, IMU and truth files,
+atomic writing."""

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
@@ -198,6 +199,33 @@ class OutputSet:
                 yield fh
         except OSError as exc:
             raise OutputError(f"{final}: write failed ({exc.strerror or exc})") from None
+
+    def link(self, source: str | Path, final: str | Path) -> None:
+        """Add the member ``final`` with the content of the member ``source`` (already
+        written): a hard link to ``source``'s ``.part`` file, a copy where the file system
+        has no hard links. Renamed by :meth:`commit` in its turn like an opened member.
+
+        Raises
+        ------
+        OutputError
+            Neither link nor copy could be made.
+        """
+        source, final = Path(source), Path(final)
+        src_part = next((p for f, p in self._members if f == source), None)
+        if src_part is None:
+            raise ValueError(f"{source}: not a member of this output set")
+        if any(f == final for f, _ in self._members):
+            raise ValueError(f"{final}: already a member of this output set")
+        part = self.part_name(final)
+        part.unlink(missing_ok=True)  # a .part left by a killed run
+        self._members.append((final, part))
+        try:
+            os.link(src_part, part)
+        except OSError:
+            try:
+                shutil.copyfile(src_part, part)
+            except OSError as exc:
+                raise OutputError(f"{final}: cannot write ({exc.strerror or exc})") from None
 
     def commit(self) -> list[Path]:
         """Rename every member to its final name, in the order opened; returns the names.

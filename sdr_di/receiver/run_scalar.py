@@ -43,10 +43,11 @@ def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
                 spectrum_inverted: bool = False, start_week: int | None = None,
                 start_sow: float | None = None, rfch: int | None = None,
                 ignore_sidecar: bool = False, check_format: bool = True) -> IfSource:
-    """Open an IF file: from its sidecar (``X.json`` beside ``X.bin``, or the JSON itself);
-    else from a peer's tag (``X.bin.tag``, PocketSDR/SignalSim, :mod:`sdr_di.io.tag_sidecar`),
-    the explicit options overriding the tag's values; else from the explicit options alone
-    (foreign files).
+    """Open an IF file: a SigMF recording when the path names one (``X.sigmf-meta``,
+    ``X.sigmf-data`` or the base name ``X``: :func:`open_sigmf`); else from its sidecar
+    (``X.json`` beside ``X.bin``, or the JSON itself); else from a peer's tag
+    (``X.bin.tag``, PocketSDR/SignalSim, :mod:`sdr_di.io.tag_sidecar`), the explicit options
+    overriding the tag's values; else from the explicit options alone (foreign files).
 
     With a sidecar, explicit options must agree with it (``--fs``, ``--if``, ``--format``,
     ``--inverted``, ``--start-week``, ``--start-sow``): a contradiction is an error naming
@@ -65,9 +66,15 @@ def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
     """
     from ..errors import SampleFormatError, SidecarError
     from ..io.sidecar import flag_conflicts, read_sidecar
+    from ..io.sigmf_files import sigmf_meta_path
     from ..io.tag_sidecar import read_tag, tag_path, tag_source
 
     path = Path(path)
+    sigmf_meta = sigmf_meta_path(path)
+    if sigmf_meta is not None:  # X.sigmf-meta, X.sigmf-data or the base name X
+        return open_sigmf(sigmf_meta, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
+                          sample_format=sample_format, spectrum_inverted=spectrum_inverted,
+                          start_week=start_week, start_sow=start_sow, rfch=rfch)
     if path.suffix == ".tag":  # the tag itself was named: read the file it describes
         path = path.with_suffix("")
     explicit = sampling_rate_hz is not None or sample_format is not None
@@ -106,6 +113,28 @@ def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
     return IfSource(path, sampling_rate_hz, if_hz or 0.0, sample_format,
                     spectrum_inverted=spectrum_inverted, start_week=start_week,
                     start_sow=start_sow, rf_channel=rfch, check_format=check_format)
+
+
+def open_sigmf(meta_path: str | Path, *, rfch: int | None = None, **options) -> IfSource:
+    """Open a SigMF recording (:mod:`sdr_di.io.sigmf_files`): datatype, rate, IF from the
+    first capture's centre frequency, start time from its ``core:datetime``; the explicit
+    ``options`` of :func:`open_source` override them one by one, as for a tag.
+
+    Raises
+    ------
+    SampleFormatError
+        Unreadable or invalid metadata, unreadable datatype, B3I outside the band, ...
+    """
+    from ..errors import SampleFormatError
+    from ..io.sigmf_files import sigmf_source
+
+    if rfch not in (None, 1):
+        raise SampleFormatError(f"{meta_path}: --rfch {rfch}: a SigMF recording read here has "
+                                "one channel")
+    ss = sigmf_source(meta_path, **options)
+    return IfSource(ss.data_path, ss.sampling_rate_hz, ss.if_hz, ss.sample_format,
+                    spectrum_inverted=ss.spectrum_inverted, start_week=ss.start_week,
+                    start_sow=ss.start_sow)
 
 
 @dataclasses.dataclass

@@ -6,13 +6,15 @@ Outputs in ``out_dir`` (``NAME`` = scenario name unless given):
 ``NAME.json``       metadata sidecar (:mod:`sdr_di.io.sidecar`), written last
 ``NAME_imu.csv``    200 Hz IMU data (:mod:`sdr_di.io.imu_files`)
 ``NAME_truth.csv``  200 Hz truth (position, velocity, attitude, specific force, rates)
+``NAME.sigmf-data``, ``NAME.sigmf-meta``  with ``sigmf=True`` (``--sigmf``): the SigMF pair
+                    (the data a hard link to ``NAME.bin``; :mod:`sdr_di.io.sigmf_files`)
 
-The four files are one :class:`~sdr_di.io.atomic.OutputSet`: each is written under
-``<file>.part``; only when all four are complete are they renamed, the sidecar last. On any
-error or interrupt the ``.part`` files are removed and the files of an earlier set under the
-same names are left as they were. The sidecar records the size and digest of the other three
-(:func:`~sdr_di.io.sidecar.file_fingerprint`), so a set mixed by a kill between the renames
-is refused by every reader (:func:`~sdr_di.io.sidecar.check_member`).
+The four files (six with the SigMF pair) are one :class:`~sdr_di.io.atomic.OutputSet`: each
+is written under ``<file>.part``; only when all are complete are they renamed, the sidecar
+last. On any error or interrupt the ``.part`` files are removed and the files of an earlier
+set under the same names are left as they were. The sidecar records the size and digest of
+the IF, IMU and truth files (:func:`~sdr_di.io.sidecar.file_fingerprint`), so a set mixed by
+a kill between the renames is refused by every reader (:func:`~sdr_di.io.sidecar.check_member`).
 """
 
 from __future__ import annotations
@@ -26,11 +28,14 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..constants import F_B3I
 from ..errors import OutputError, ScenarioError
 from ..ins.imu import ImuErrorModel
 from ..io.atomic import OutputSet, check_output_dir, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
+from ..io.sample_formats import get_format
 from ..io.sidecar import file_fingerprint, write_sidecar
+from ..io.sigmf_files import check_b3i_in_band, sigmf_metadata
 from ..orbits.rinex_nav import load_nav
 from ..scenario.schema import Scenario
 from ..signal.navmsg import assistance_klobuchar
@@ -83,8 +88,12 @@ def make_generator(sc: Scenario, truth=None) -> IfGenerator:
 
 
 def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None,
-                   progress: bool = True) -> dict[str, Path]:
+                   progress: bool = True, sigmf: bool = False) -> dict[str, Path]:
     """Generate all outputs of a scenario; returns {label: path}.
+
+    ``sigmf``: also write the SigMF pair ``NAME.sigmf-data`` (a hard link to ``NAME.bin``, a
+    copy where the file system has none) and ``NAME.sigmf-meta``
+    (:func:`~sdr_di.io.sigmf_files.sigmf_metadata`), members of the same output set.
 
     Raises
     ------
@@ -95,6 +104,13 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
     name = sc.name if name is None else name
     if not name or "/" in name or name.startswith("."):
         raise OutputError(f"invalid output name {name!r}")
+    if sigmf:  # before any work: no SigMF datatype, or a pair the reader would refuse
+        sig = sc.signal
+        sigmf_metadata(sample_format=sig.sample_format, sampling_rate_hz=sig.sampling_rate_hz,
+                       if_hz=sig.if_hz, start_week=sc.week, start_sow=sc.sow)
+        check_b3i_in_band(F_B3I - sig.if_hz, sig.sampling_rate_hz,
+                          get_format(sig.sample_format).is_complex, where="--sigmf: ",
+                          hint="choose --if inside that range or leave out --sigmf")
     truth = simulate_truth(sc)
     gen = make_generator(sc, truth)
     rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
@@ -172,9 +188,30 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
         }
         meta["files"] = {paths[k].name: _fingerprint(paths[k], files)
                          for k in ("if", "imu", "truth")}
+        if sigmf:
+            paths.update(_write_sigmf_pair(out_dir / name, paths["if"], meta, sc, files))
         write_sidecar(paths["metadata"], meta, output_set=files)  # opened last: renamed last
         files.commit()
     return paths
+
+
+def _write_sigmf_pair(base: Path, if_path: Path, meta: dict, sc: Scenario,
+                      files: OutputSet) -> dict[str, Path]:
+    """``BASE.sigmf-data`` (the IF file's content, linked) and ``BASE.sigmf-meta``."""
+    data, meta_path = base.with_name(base.name + ".sigmf-data"), \
+        base.with_name(base.name + ".sigmf-meta")
+    files.link(if_path, data)
+    text = sigmf_metadata(
+        sample_format=meta["sample_format"], sampling_rate_hz=meta["sampling_rate_hz"],
+        if_hz=meta["if_hz"], start_week=meta["start"]["week"], start_sow=meta["start"]["sow"],
+        description=f"BeiDou B3I IF samples of scenario {sc.name!r} (seed {sc.seed})",
+        author="sdr-di generate", recorder=f"sdr-di {__version__}",
+        extra={"scenario_name": sc.name, "scenario_hash": sc.hash, "seed": sc.seed,
+               "quantization_bits": meta["quantization_bits"],
+               "sidecar": base.name + ".json"})
+    with files.open(meta_path, "w") as fh:
+        fh.write(text)
+    return {"sigmf-data": data, "sigmf-meta": meta_path}
 
 
 def write_overlapped(fh, chunks, bar=None) -> None:
