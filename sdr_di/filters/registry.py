@@ -15,7 +15,8 @@ name               core    adaptive rule
 ``ml-r-ckf``       CKF     :class:`~.adaptive.MLMeasurementNoiseCKF` (paper 003)
 =================  ======  ==============================================================
 
-Options are routed by name: ``dt``, ``psd_fallback`` (all cores), ``alpha``, ``beta``,
+Options are routed by name: ``dt``, ``psd_fallback``, ``q_scale``, ``r_scale`` (all cores),
+``alpha``, ``beta``,
 ``kappa`` (UKF cores) go to the core filter, the others to the rule's constructor (see each
 rule); an unknown option raises :class:`~.errors.FilterError` listing the accepted ones.
 """
@@ -56,7 +57,7 @@ _REGISTRY = {
 #: Valid registry names, in table order.
 FILTER_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 
-_BASE_OPTIONS = ("dt", "psd_fallback")
+_BASE_OPTIONS = ("dt", "psd_fallback", "q_scale", "r_scale")
 _CORE_OPTIONS = {EKF: _BASE_OPTIONS, CKF: _BASE_OPTIONS,
                  UKF: _BASE_OPTIONS + ("alpha", "beta", "kappa")}
 

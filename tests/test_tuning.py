@@ -1,0 +1,168 @@
+"""Study tuning (issue 26 item 1): the ``[tuning]`` table's checks, the choice on training
+seeds, and a tuned study end to end on a cheap stand-in experiment (in this process)."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sdr_di.errors import FilterError, StudyError
+from sdr_di.experiments import Experiment, register_experiment
+from sdr_di.experiments.campaign import run_seed
+from sdr_di.experiments.filter_figures import parse_filter_spec
+from sdr_di.experiments.study import run_study
+from sdr_di.experiments.study_spec import parse_study
+from sdr_di.experiments.tuning_spec import grid_entry
+from sdr_di.filters import make_filter
+
+
+def _toy_run(params: dict, seed: int, out_dir) -> dict:
+    """Stand-in for ``compare``: a filter's position RMSE is ``base (1 + ln(q_scale/2)^2)``
+    (optimal at q_scale = 2) times 1.2 for ukf; ``r_scale`` = 8 makes the run diverge."""
+    rng = np.random.default_rng(seed)
+    base = 1.0 + rng.random()
+    fig = {}
+    for entry in params["filters"].split(","):
+        name, opts = parse_filter_spec("toy", entry)
+        k = (1.2 if name == "ukf" else 1.0) * (1 + math.log(opts.get("q_scale", 1) / 2) ** 2)
+        fig[f"{entry}.completed"] = int(opts.get("r_scale", 1) != 8)
+        fig[f"{entry}.handover_s"] = 12.0
+        for q in ("pos_m", "vel_mps", "att_deg"):
+            fig[f"{entry}.{q}_rmse"] = base * k
+        if opts.get("r_scale", 1) == 8:
+            fig[f"{entry}.pos_m_rmse"] = math.nan
+    return fig
+
+
+register_experiment(Experiment(name="test-tuning-toy", run=_toy_run,
+                               default_params={"filters": "", "modes": "deep", "cell": ""}))
+
+
+def _spec(**tuning) -> dict:
+    return {"study": {"name": "toy", "experiment": "test-tuning-toy", "runs": 3,
+                      "filters": ["ekf", "ukf"], "baseline": "ekf"},
+            "cells": [{"name": "a", "cell": "a"}, {"name": "b", "cell": "b"}],
+            "claims": [{"text": "ukf beats ekf", "filter": "ukf", "quantities": ["pos"],
+                        "min_wins": 2}],
+            "tuning": {"base_seed": 7, "runs": 2, "criterion": "mean_log_pos_rmse",
+                       "grid": {"ekf": {"q_scale": [0.5, 2.0, 8], "r_scale": [1.0, 8]}},
+                       **tuning}}
+
+
+def _csv(path: Path) -> list[dict]:
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_q_and_r_scale_are_core_options_of_every_filter():
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(3, 3))
+    Q0, R0 = A @ A.T + np.eye(3), np.diag([1.0, 2.0])
+    for name in ("ekf", "ukf", "ckf", "ff-aukf"):
+        f = make_filter(name, None, None, np.zeros(3), np.eye(3), Q0, R0, q_scale=3.0,
+                        r_scale=0.5)
+        assert np.allclose(f.Q, 3.0 * Q0) and np.allclose(f.R, 0.5 * R0)
+        assert np.allclose(f._resolve_R(np.array([4.0, 6.0]), 2, "t"), np.diag([2.0, 3.0]))
+        plain = make_filter(name, None, None, np.zeros(3), np.eye(3), Q0, R0)
+        assert np.array_equal(plain.Q, Q0) and np.array_equal(plain.R, R0)
+    with pytest.raises(FilterError, match="q_scale must be a positive number"):
+        make_filter("ekf", None, None, np.zeros(3), np.eye(3), Q0, q_scale=0.0)
+
+
+def test_grid_entries_carry_no_dots():
+    assert grid_entry("ekf", (("q_scale", 0.5),)) == "ekf:q_scale=5e-1"
+    assert grid_entry("ff-aukf:window=20@tight", (("window", 40), ("d", 0.96))) == \
+        "ff-aukf:window=40:d=96e-2@tight"
+    assert parse_filter_spec("t", "ff-aukf:d=96e-2")[1] == {"d": 0.96}
+
+
+@pytest.mark.parametrize("patch, match", [
+    ({"base_seed": 0}, "training seeds overlap the evaluation seeds"),
+    ({"grid": {"ff-aukf": {"window": [10, 20]}}}, "not one of the study's filters"),
+    ({"grid": {"ekf": {"q_sacle": [1.0]}}}, "ekf has no option 'q_sacle'"),
+    ({"grid": {"ekf": {"q_scale": ["2"]}}}, r"q_scale='2' must be a finite number"),
+    ({"grid": {"ekf": {"q_scale": [1.0, 1]}}}, "duplicate values"),
+    ({"criterion": "min_pos"}, "criterion must be one of"),
+    ({"cells": ["c"]}, "cells must be a non-empty list"),
+    ({"nis_band": [0.5, 2.0]}, "nis_column and nis_band go together"),
+])
+def test_bad_tuning_tables_are_one_line_study_errors(patch, match):
+    with pytest.raises(StudyError, match=match) as info:
+        parse_study(_spec(**patch))
+    assert "\n" not in str(info.value)
+
+
+def test_a_boolean_grid_of_strings_is_refused():
+    raw = _spec(grid={"ff-aukf": {"adapt_q": ["false", "true"]}})
+    raw["study"]["filters"] = ["ekf", "ff-aukf"]
+    raw["claims"] = []
+    from sdr_di.experiments.tuning_spec import _option_defaults
+
+    defaults = _option_defaults("ff-aukf")
+    flag = next((k for k, v in defaults.items() if isinstance(v, bool)), None)
+    if flag is None:
+        pytest.skip("ff-aukf has no boolean option")
+    raw["tuning"]["grid"] = {"ff-aukf": {flag: ["false", "true"]}}
+    with pytest.raises(StudyError, match="TOML boolean"):
+        parse_study(raw)
+    raw["tuning"]["grid"] = {"ff-aukf": {flag: [False, True]}}
+    assert len(parse_study(raw).tuning.grids["ff-aukf"]) == 2
+
+
+def test_tuning_picks_the_optimal_grid_point_then_evaluates_it(tmp_path):
+    spec = parse_study(_spec())
+    assert spec.tuning is not None and spec.hash != parse_study(
+        {k: v for k, v in _spec().items() if k != "tuning"}).hash
+    out = tmp_path / "toy"
+    res = run_study(spec, out, workers=0)
+    # 2 cells x 2 training seeds + 2 cells x 3 evaluation seeds
+    assert res.n_run == 4 + 6 and res.n_skipped == 0
+    assert res.tuning["ekf"].entry == "ekf:q_scale=2:r_scale=1"
+    tab = _csv(out / "tuning.csv")
+    train = {run_seed(7, i) for i in range(2)}
+    per_run = [r for r in tab if r["seed"] != "mean"]
+    assert {int(r["seed"]) for r in per_run} == train
+    assert len(per_run) == 2 * 2 * 6 and sum(r["seed"] == "mean" for r in tab) == 6
+    chosen = {r["options"] for r in tab if r["chosen"] == "1"}
+    assert chosen == {"q_scale=2.0 r_scale=1.0"}
+    means = {r["options"]: float(r["score"]) for r in tab if r["seed"] == "mean"}
+    assert means["q_scale=2.0 r_scale=8"] == math.inf        # diverged runs lose
+    assert min(means, key=means.get) == "q_scale=2.0 r_scale=1.0"
+    # evaluation: the chosen entry on the evaluation seeds, the claim follows it
+    runs = _csv(out / "runs.csv")
+    assert {r["filter"] for r in runs} == {"ekf:q_scale=2:r_scale=1", "ukf"}
+    assert {int(r["seed"]) for r in runs} == {run_seed(0, i) for i in range(3)}
+    cells = {(r["cell"], r["filter"]): r for r in _csv(out / "cells.csv")}
+    assert float(cells[("a", "ukf")]["pos_ratio"]) == pytest.approx(
+        1.2 * (1 + math.log(0.5) ** 2))
+    assert cells[("a", "ukf")]["claim1"] in ("reversed", "not shown")
+    assert {r["against"] for r in _csv(out / "comparisons.csv")} == {"ekf:q_scale=2:r_scale=1"}
+    html = (out / "report.html").read_text()
+    assert "Tuning" in html and "q_scale=2" in html
+    # item 5: 3 paired seeds give no interval worth printing; seeds as in runs.csv
+    assert "interval not informative at n = 3" in html
+    assert f"<td>{run_seed(0, 2)}</td>" in html and f"<td>{run_seed(7, 1)}</td>" in html
+    # resumable: nothing runs again
+    again = run_study(parse_study(_spec()), out, workers=0)
+    assert again.n_run == 0 and again.n_skipped == 10
+
+
+def test_nis_band_restricts_the_choice(tmp_path):
+    from sdr_di.experiments.tuning import choose
+
+    spec = parse_study(_spec(nis_column="nis_mean", nis_band=[0.5, 2.0]))
+    rows = []
+    for q, rmse, nis in ((0.5, 3.0, 1.0), (2.0, 1.0, 5.0), (8, 2.0, 1.5)):
+        for r in (1.0, 8):
+            rows.append({"cell": "a", "seed_index": 0, "seed": 11, "status": "ok",
+                         "filter": grid_entry("ekf", (("q_scale", q), ("r_scale", r))),
+                         "pos_rmse_m": rmse * (1 if r == 1.0 else 2), "nis_mean": nis})
+    choices, tab = choose(spec.tuning, rows)
+    assert choices["ekf"].options == {"q_scale": 8, "r_scale": 1.0}
+    assert choices["ekf"].constraint_met is True
+    with pytest.raises(StudyError, match="nis_column 'nis_mean' is not a runs.csv column"):
+        choose(spec.tuning, [{k: v for k, v in r.items() if k != "nis_mean"} for r in rows])
