@@ -69,3 +69,20 @@ def test_q_adaptation_off_keeps_q_and_options_are_checked():
         with pytest.raises(FilterError, match="rae-aukf"):
             make_filter("rae-aukf", LinearProcessModel(PHI), None, np.zeros(2), np.eye(2),
                         np.eye(2), **bad)
+
+
+@pytest.mark.parametrize("entry, want", [("ff-aukf:adapt_q=false", (False, True)),
+                                         ("ff-aukf:adapt_r=false", (True, False)),
+                                         ("rae-aukf:adapt_q=0", (False, True)),
+                                         ("rae-aukf:adapt_r=true", (True, True))])
+def test_on_off_options_from_a_filter_entry_are_read_as_written(entry, want):
+    # a filter entry gives "false" as a string; bool("false") is True
+    from sdr_di.experiments.filter_figures import parse_filter_spec
+
+    name, opts = parse_filter_spec("t", entry)
+    kf = make_filter(name, LinearProcessModel(PHI), None, np.zeros(2), np.eye(2), np.eye(2),
+                     **opts)
+    assert (kf.rule.adapt_q, kf.rule.adapt_r) == want
+    with pytest.raises(FilterError, match="adapt_q must be true or false"):
+        make_filter(name, LinearProcessModel(PHI), None, np.zeros(2), np.eye(2), np.eye(2),
+                    adapt_q="no")

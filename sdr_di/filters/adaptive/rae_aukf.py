@@ -14,21 +14,24 @@ diagonal of ``R_{k+1}``), ``H P^+ H^T = R - R S^-1 R`` as in :mod:`.ff_aukf` (ex
 linear update; for the UKF the same identity of its ``P_zz``), and ``Q_{k+1}`` the IAE
 approximation that drops ``P^+ - Phi P^+ Phi^T`` (steady state), as paper 004 eq 27 does.
 ``R_{k+1}`` is used by the next update, ``Q_{k+1}`` by the next predict. What the source
-fixes and what is ours: ``docs/filters.md`` (RAE-AUKF). The rule stores the last ``m`` innovation and residual vectors (ring
-buffers) and forms the window covariances with one matrix product each (numpy, ``jit=False``)
-or in one numba kernel (:mod:`._numba_rae`; same results to rounding, compiled at bind
-time with the same options as ``ff-aukf``'s kernels). By default (``jit=None``) the faster
-of the two for the size is used -- the kernel for the receiver's sizes, BLAS for large
-``m^2 W`` -- so that ``ff-aukf`` is compared with the baseline at its best. Positive
-definiteness: ``R_{k+1}`` gets ``r_floor_rel * diag(R^-)`` added and ``Q_{k+1}`` the ``Q`` floor
-added (both are sums of positive semi-definite terms; the tiny additive floor makes them
-definite). Window ``m`` default 20 epochs (paper 004 gives no value; same default as
-``ff-aukf`` so the two compare at equal memory). ``pd_rule="clip"`` instead raises
-``R_{k+1}`` to at least that floor in the Loewner order (``_linalg.floor_pd``: unchanged where
-it already exceeds it, unit-aware across the pseudorange and rate blocks); ``pd_rule="none"`` applies
-the equations bare (``R_{k+1}`` is positive semi-definite by construction; a singular one
-fails the next update's Cholesky, handled by the filter's ``psd_fallback``). ``Q_{k+1}``
-keeps the ``Q`` floor of every adaptive rule in all three.
+fixes and what is ours: ``docs/filters.md`` (RAE-AUKF).
+
+The rule stores the last ``m`` innovation and residual vectors (ring buffers) and forms the
+window covariances with one matrix product each (numpy, ``jit=False``) or in one numba
+kernel (:mod:`._numba_rae`; same results to rounding, compiled at bind time with the same
+options as ``ff-aukf``'s kernels). By default (``jit=None``) the faster of the two for the
+size is used -- the kernel for the receiver's sizes, BLAS for large ``m^2 W`` -- so that
+``ff-aukf`` is compared with the baseline at its best.
+
+Positive definiteness (``pd_rule``): by default (``"floor"``) ``R_{k+1}`` gets
+``r_floor_rel * diag(R^-)`` added (it is a sum of positive semi-definite terms; the tiny
+additive floor makes it definite); ``"clip"`` instead raises ``R_{k+1}`` to at least that
+floor in the Loewner order (``_linalg.floor_pd``: unchanged where it already exceeds it,
+unit-aware across the pseudorange and rate blocks); ``"none"`` applies the equations bare (a
+singular estimate fails the next update's Cholesky, handled by the filter's
+``psd_fallback``). ``Q_{k+1}`` keeps the ``Q`` floor of every adaptive rule in all three.
+Window ``m`` default 20 epochs (paper 004 gives no value; same default as ``ff-aukf`` so the
+two compare at equal memory).
 
 Change of the measurement count N -- the limitation paper 004 states
     "The smoothing method implies that the number of the measurements should have the same
@@ -50,7 +53,7 @@ import numpy as np
 from ...errors import FilterError
 from .._linalg import floor_pd
 from . import _numba_rae
-from .base import AdaptiveRule
+from .base import AdaptiveRule, flag
 
 __all__ = ["SageWindowAUKF"]
 
@@ -104,11 +107,12 @@ class SageWindowAUKF(AdaptiveRule):
             raise FilterError(f"rae-aukf: pd_rule must be 'floor', 'clip' or 'none', got "
                               f"{pd_rule!r}")
         self.r_form, self.pd_rule = r_form, pd_rule
-        self.jit = None if jit is None else bool(jit)
+        self.jit = None if jit is None else flag("rae-aukf", "jit", jit)
         if int(window) < 1:
             raise FilterError(f"rae-aukf: window must be >= 1, got {window}")
         self.window = int(window)
-        self.adapt_q, self.adapt_r = bool(adapt_q), bool(adapt_r)
+        self.adapt_q = flag("rae-aukf", "adapt_q", adapt_q)
+        self.adapt_r = flag("rae-aukf", "adapt_r", adapt_r)
         self.r_floor_rel = float(r_floor_rel)
         self.R_hat: np.ndarray | None = None
         self.active = False
