@@ -166,3 +166,29 @@ def test_nis_band_restricts_the_choice(tmp_path):
     assert choices["ekf"].constraint_met is True
     with pytest.raises(StudyError, match="nis_column 'nis_mean' is not a runs.csv column"):
         choose(spec.tuning, [{k: v for k, v in r.items() if k != "nis_mean"} for r in rows])
+
+
+def test_overlapping_seeds_are_a_one_line_cli_error_before_any_work(tmp_path):
+    import subprocess
+    import sys
+
+    spec = tmp_path / "overlap.toml"
+    spec.write_text('[study]\nfilters = ["ekf", "ukf"]\nruns = 2\nbase_seed = 3\n'
+                    '[tuning]\nbase_seed = 3\nruns = 1\ncriterion = "mean_log_pos_rmse"\n'
+                    '[tuning.grid.ekf]\nq_scale = [1.0, 2.0]\n')
+    out = tmp_path / "o"
+    proc = subprocess.run([sys.executable, "-m", "sdr_di.cli", "study", str(spec), "--out",
+                           str(out)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("sdr-di: error: ") and proc.stderr.count("\n") == 1
+    assert "training seeds overlap the evaluation seeds" in proc.stderr
+    assert not out.exists()
+
+
+def test_the_smoke_spec_tunes_one_option_on_one_training_seed():
+    from sdr_di.experiments.study_spec import load_study
+
+    spec = load_study(Path(__file__).resolve().parents[1] / "studies" / "smoke.toml")
+    t = spec.tuning
+    assert t.runs == 1 and t.cells == ("baseline",)
+    assert t.grids == {"ekf": ((("q_scale", 1.0),), (("q_scale", 4.0),))}

@@ -30,6 +30,12 @@ coupling mode, filter rate, sampling rate, any parameter of the experiment) with
     [factorial]                      # optional: every cell crossed with every combination
     filter_rate_hz = [50.0, 5.0]
 
+    [tuning]                         # optional: options chosen on training seeds first
+    base_seed = 1000                 # (sdr_di.experiments.tuning_spec, .tuning)
+    criterion = "mean_log_pos_rmse"
+    [tuning.grid.ekf]
+    q_scale = [0.5, 1.0, 2.0]
+
     [[claims]]
     text = "ff-aukf beats ekf in position and velocity"
     filter = "ff-aukf"

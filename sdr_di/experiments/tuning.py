@@ -190,8 +190,10 @@ def run_tuned_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = 
         raise StudyError(f"--runs {n_eval}: the evaluation seeds overlap the training seeds "
                          "([tuning] base_seed)")
     _check_folder(spec, out, force)
+    shown = None if on_record is None else (                # training records name their
+        lambda rec: on_record({**rec, "cell": f"tuning: {rec['cell']}"}))     # stage
     train = run_study(training_spec(spec), out / "tuning", scheduler=scheduler,
-                      workers=workers, force=force, on_record=on_record, render=False)
+                      workers=workers, force=force, on_record=shown, render=False)
     choices, table = choose(t, train.runs)
     write_table(out, "tuning", table)
     ev = tuned_spec(spec, choices)
