@@ -67,6 +67,7 @@ def test_q_and_r_scale_are_core_options_of_every_filter():
                         r_scale=0.5)
         assert np.allclose(f.Q, 3.0 * Q0) and np.allclose(f.R, 0.5 * R0)
         assert np.allclose(f._resolve_R(np.array([4.0, 6.0]), 2, "t"), np.diag([2.0, 3.0]))
+        assert np.allclose(f._resolve_R(None, 2, "t"), 0.5 * R0)      # scaled once
         plain = make_filter(name, None, None, np.zeros(3), np.eye(3), Q0, R0)
         assert np.array_equal(plain.Q, Q0) and np.array_equal(plain.R, R0)
     with pytest.raises(FilterError, match="q_scale must be a positive number"):
