@@ -165,6 +165,12 @@ def test_nis_band_restricts_the_choice(tmp_path):
     choices, tab = choose(spec.tuning, rows)
     assert choices["ekf"].options == {"q_scale": 8, "r_scale": 1.0}
     assert choices["ekf"].constraint_met is True
+    assert {r["nis_ok"] for r in tab if r["options"].startswith("q_scale=2.0")} == {0}
+    # two columns: a point is eligible only when both stay in the band
+    two = parse_study(_spec(nis_column=["nis_mean", "nis_rate"], nis_band=[0.5, 2.0]))
+    rows2 = [{**r, "nis_rate": 3.0 if r["filter"].startswith("ekf:q_scale=8") else 1.0}
+             for r in rows]
+    assert choose(two.tuning, rows2)[0]["ekf"].options == {"q_scale": 0.5, "r_scale": 1.0}
     with pytest.raises(StudyError, match="nis_column 'nis_mean' is not a runs.csv column"):
         choose(spec.tuning, [{k: v for k, v in r.items() if k != "nis_mean"} for r in rows])
 

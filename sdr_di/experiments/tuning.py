@@ -109,7 +109,7 @@ def _score(row: dict, quantity: str, log: bool) -> float:
 def choose(t: TuningSpec, rows: list[dict]) -> tuple[dict[str, Choice], list[dict]]:
     """Choose each filter's grid point from the training runs' rows (``runs.csv`` rows of the
     training study: ``cell``, ``seed_index``, ``seed``, ``filter``, ``status``, the RMSE
-    columns and, with a band, ``t.nis_column``).
+    columns and, with a band, the ``t.nis_column`` columns).
 
     Returns
     -------
@@ -140,10 +140,11 @@ def choose(t: TuningSpec, rows: list[dict]) -> tuple[dict[str, Choice], list[dic
             if t.nis_band is not None:
                 vals = []
                 for r in runs:
-                    if t.nis_column not in r:
-                        raise StudyError(f"[tuning] nis_column {t.nis_column!r} is not a "
-                                         "runs.csv column")
-                    vals.append(r[t.nis_column])
+                    for c in t.nis_column:
+                        if c not in r:
+                            raise StudyError(f"[tuning] nis_column {c!r} is not a runs.csv "
+                                             "column")
+                        vals.append(r[c])
                 ok = bool(runs) and all(isinstance(v, (int, float)) and
                                         t.nis_band[0] <= v <= t.nis_band[1] for v in vals)
             scored.append((p, entry, runs, scores, mean, ok))
@@ -155,13 +156,15 @@ def choose(t: TuningSpec, rows: list[dict]) -> tuple[dict[str, Choice], list[dic
             opts = " ".join(f"{k}={v}" for k, v in p)
             extra = {} if t.nis_band is None else {"nis_ok": "" if ok is None else int(ok)}
             for r, s in zip(runs, scores):
-                nis = {} if t.nis_band is None else {"nis": r.get(t.nis_column, "")}
+                nis = {} if t.nis_band is None else {
+                    c: r.get(c, "") for c in t.nis_column}
                 table.append({"cell": r["cell"], "filter": f, "options": opts,
                               "seed_index": r["seed_index"], "seed": r["seed"], "score": s,
                               **nis, **extra, "chosen": int(entry == best[1])})
             table.append({"cell": "+".join(t.cells), "filter": f, "options": opts,
                           "seed_index": "", "seed": "mean", "score": mean,
-                          **({} if t.nis_band is None else {"nis": ""}), **extra,
+                          **({} if t.nis_band is None else dict.fromkeys(t.nis_column, "")),
+                          **extra,
                           "chosen": int(entry == best[1])})
     return choices, table
 
@@ -205,5 +208,6 @@ def run_tuned_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = 
                     force=force or same_source, on_record=on_record, render=render)
     res.n_run += train.n_run
     res.n_skipped += train.n_skipped
+    res.elapsed_s += train.elapsed_s
     res.tuning = choices
     return res

@@ -7,9 +7,10 @@ Format (``docs/studies.md``)::
     runs = 2                         # refused if any equals an evaluation seed
     criterion = "mean_log_pos_rmse"  # or mean_log_{vel,att}_rmse, mean_{pos,vel,att}_rmse
     cells = ["baseline"]             # cells the scores are pooled over (default: all)
-    nis_column = "nis_mean"          # optional constraint, off unless both are given: a
-    nis_band = [0.5, 2.0]            # grid point is eligible when every training run's
-                                     # runs.csv value of that column lies in the band
+    nis_column = ["nis_code", "nis_rate"]   # optional constraint, off unless both are
+    nis_band = [0.5, 2.0]            # given: a grid point is eligible when every training
+                                     # run's runs.csv value of each column (one name or a
+                                     # list) lies in the band
     [tuning.grid.ekf]                # per study filter entry, a grid over registry options
     q_scale = [0.5, 1.0, 2.0]
     r_scale = [1.0, 4.0]
@@ -53,14 +54,14 @@ class TuningSpec:
     runs: int
     criterion: str
     cells: tuple[str, ...]
-    nis_column: str | None
+    nis_column: tuple[str, ...] | None
     nis_band: tuple[float, float] | None
     grids: dict
 
     def canonical(self) -> dict:
         """JSON-able form (part of the study's hash)."""
         return {"base_seed": self.base_seed, "runs": self.runs, "criterion": self.criterion,
-                "cells": list(self.cells), "nis_column": self.nis_column,
+                "cells": list(self.cells), "nis_column": list(self.nis_column) if self.nis_column else None,
                 "nis_band": list(self.nis_band) if self.nis_band else None,
                 "grids": {f: [list(map(list, p)) for p in pts] for f, pts in self.grids.items()}}
 
@@ -187,12 +188,14 @@ def parse_tuning(raw, *, where: str, filters, cells, base_seed: int, runs: int
     if (col is None) != (band is None):
         raise StudyError(f"{w} nis_column and nis_band go together")
     if band is not None:
-        if not (isinstance(col, str) and col and isinstance(band, list) and len(band) == 2
+        col = [col] if isinstance(col, str) else col
+        if not (isinstance(col, list) and col and all(isinstance(c, str) and c for c in col)
+                and isinstance(band, list) and len(band) == 2
                 and all(isinstance(b, (int, float)) and not isinstance(b, bool) for b in band)
                 and 0 <= band[0] < band[1]):
-            raise StudyError(f"{w} nis_column must be a runs.csv column name and nis_band "
+            raise StudyError(f"{w} nis_column must be runs.csv column name(s) and nis_band "
                              f"[low, high] with 0 <= low < high, got {col!r}, {band!r}")
-        band = (float(band[0]), float(band[1]))
+        band, col = (float(band[0]), float(band[1])), tuple(col)
     grid_raw = raw.get("grid")
     if not (isinstance(grid_raw, dict) and grid_raw):
         raise StudyError(f"{w} grid must be a table of filter entries, each a table of "
