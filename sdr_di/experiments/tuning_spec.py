@@ -61,7 +61,8 @@ class TuningSpec:
     def canonical(self) -> dict:
         """JSON-able form (part of the study's hash)."""
         return {"base_seed": self.base_seed, "runs": self.runs, "criterion": self.criterion,
-                "cells": list(self.cells), "nis_column": list(self.nis_column) if self.nis_column else None,
+                "cells": list(self.cells),
+                "nis_column": list(self.nis_column) if self.nis_column else None,
                 "nis_band": list(self.nis_band) if self.nis_band else None,
                 "grids": {f: [list(map(list, p)) for p in pts] for f, pts in self.grids.items()}}
 
