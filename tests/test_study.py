@@ -303,8 +303,9 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
     assert {r["options"] for r in tuning} == {"q_scale=1.0", "q_scale=4.0"}
     assert {r["seed"] for r in tuning} == {"mean", str(run_seed(1000, 0))}
     assert sum(r["chosen"] == "1" for r in tuning) == 2     # the chosen point's run + mean
-    ekf = res.tuning["ekf"].entry
-    assert {r["filter"] for r in _csv(out / "runs.csv")} == {ekf, "ff-aukf"}
+    ekf = res.tuning[(None, "ekf")].entry
+    assert {(r["filter"], r["entry"]) for r in _csv(out / "runs.csv")} == {
+        ("ekf", ekf), ("ff-aukf", "ff-aukf")}
     cells = {(r["cell"], r["filter"]): r for r in _csv(out / "cells.csv")}
     for cell in ("baseline", "imu-noise-10x"):
         row = cells[(cell, "ff-aukf")]

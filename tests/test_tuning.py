@@ -21,14 +21,16 @@ from sdr_di.filters import make_filter
 
 
 def _toy_run(params: dict, seed: int, out_dir) -> dict:
-    """Stand-in for ``compare``: a filter's position RMSE is ``base (1 + ln(q_scale/2)^2)``
-    (optimal at q_scale = 2) times 1.2 for ukf; ``r_scale`` = 8 makes the run diverge."""
+    """Stand-in for ``compare``: a filter's position RMSE is ``base (1 + ln(q_scale/opt)^2)``
+    (optimal at q_scale = opt, 2 unless the cell says) times 1.2 for ukf; ``r_scale`` = 8
+    makes the run diverge."""
     rng = np.random.default_rng(seed)
     base = 1.0 + rng.random()
     fig = {}
     for entry in params["filters"].split(","):
         name, opts = parse_filter_spec("toy", entry)
-        k = (1.2 if name == "ukf" else 1.0) * (1 + math.log(opts.get("q_scale", 1) / 2) ** 2)
+        k = (1.2 if name == "ukf" else 1.0) * (
+            1 + math.log(opts.get("q_scale", 1) / params["opt"]) ** 2)
         fig[f"{entry}.completed"] = int(opts.get("r_scale", 1) != 8)
         fig[f"{entry}.handover_s"] = 12.0
         for q in ("pos_m", "vel_mps", "att_deg"):
@@ -39,7 +41,8 @@ def _toy_run(params: dict, seed: int, out_dir) -> dict:
 
 
 register_experiment(Experiment(name="test-tuning-toy", run=_toy_run,
-                               default_params={"filters": "", "modes": "deep", "cell": ""}))
+                               default_params={"filters": "", "modes": "deep", "cell": "",
+                                               "opt": 2.0}))
 
 
 def _spec(**tuning) -> dict:
@@ -122,7 +125,7 @@ def test_tuning_picks_the_optimal_grid_point_then_evaluates_it(tmp_path):
     res = run_study(spec, out, workers=0)
     # 2 cells x 2 training seeds + 2 cells x 3 evaluation seeds
     assert res.n_run == 4 + 6 and res.n_skipped == 0
-    assert res.tuning["ekf"].entry == "ekf:q_scale=2:r_scale=1"
+    assert res.tuning[(None, "ekf")].entry == "ekf:q_scale=2:r_scale=1"
     tab = _csv(out / "tuning.csv")
     train = {run_seed(7, i) for i in range(2)}
     per_run = [r for r in tab if r["seed"] != "mean"]
@@ -135,13 +138,14 @@ def test_tuning_picks_the_optimal_grid_point_then_evaluates_it(tmp_path):
     assert min(means, key=means.get) == "q_scale=2.0 r_scale=1.0"
     # evaluation: the chosen entry on the evaluation seeds, the claim follows it
     runs = _csv(out / "runs.csv")
-    assert {r["filter"] for r in runs} == {"ekf:q_scale=2:r_scale=1", "ukf"}
+    assert {(r["filter"], r["entry"]) for r in runs} == {("ekf", "ekf:q_scale=2:r_scale=1"),
+                                                         ("ukf", "ukf")}
     assert {int(r["seed"]) for r in runs} == {run_seed(0, i) for i in range(3)}
     cells = {(r["cell"], r["filter"]): r for r in _csv(out / "cells.csv")}
     assert float(cells[("a", "ukf")]["pos_ratio"]) == pytest.approx(
         1.2 * (1 + math.log(0.5) ** 2))
     assert cells[("a", "ukf")]["claim1"] in ("reversed", "not shown")
-    assert {r["against"] for r in _csv(out / "comparisons.csv")} == {"ekf:q_scale=2:r_scale=1"}
+    assert {r["against"] for r in _csv(out / "comparisons.csv")} == {"ekf"}
     html = (out / "report.html").read_text()
     assert "Tuning" in html and "q_scale=2" in html
     # item 5: 3 paired seeds give no interval worth printing; seeds as in runs.csv
@@ -163,14 +167,15 @@ def test_nis_band_restricts_the_choice(tmp_path):
                          "filter": grid_entry("ekf", (("q_scale", q), ("r_scale", r))),
                          "pos_rmse_m": rmse * (1 if r == 1.0 else 2), "nis_mean": nis})
     choices, tab = choose(spec.tuning, rows)
-    assert choices["ekf"].options == {"q_scale": 8, "r_scale": 1.0}
-    assert choices["ekf"].constraint_met is True
+    assert choices[(None, "ekf")].options == {"q_scale": 8, "r_scale": 1.0}
+    assert choices[(None, "ekf")].constraint_met is True
     assert {r["nis_ok"] for r in tab if r["options"].startswith("q_scale=2.0")} == {0}
     # two columns: a point is eligible only when both stay in the band
     two = parse_study(_spec(nis_column=["nis_mean", "nis_rate"], nis_band=[0.5, 2.0]))
     rows2 = [{**r, "nis_rate": 3.0 if r["filter"].startswith("ekf:q_scale=8") else 1.0}
              for r in rows]
-    assert choose(two.tuning, rows2)[0]["ekf"].options == {"q_scale": 0.5, "r_scale": 1.0}
+    assert choose(two.tuning, rows2)[0][(None, "ekf")].options == {"q_scale": 0.5,
+                                                                   "r_scale": 1.0}
     with pytest.raises(StudyError, match="nis_column 'nis_mean' is not a runs.csv column"):
         choose(spec.tuning, [{k: v for k, v in r.items() if k != "nis_mean"} for r in rows])
 
@@ -199,3 +204,20 @@ def test_the_smoke_spec_tunes_one_option_on_one_training_seed():
     t = spec.tuning
     assert t.runs == 1 and t.cells == ("baseline",)
     assert t.grids == {"ekf": ((("q_scale", 1.0),), (("q_scale", 4.0),))}
+
+
+def test_per_cell_tuning_picks_each_cells_optimum(tmp_path):
+    raw = _spec(per_cell=True)
+    raw["cells"][1]["opt"] = 8.0                 # cell b: q_scale = 8 is optimal
+    spec = parse_study(raw)
+    res = run_study(spec, tmp_path / "toy", workers=0)
+    assert res.tuning[("a", "ekf")].entry == "ekf:q_scale=2:r_scale=1"
+    assert res.tuning[("b", "ekf")].entry == "ekf:q_scale=8:r_scale=1"
+    runs = _csv(tmp_path / "toy" / "runs.csv")
+    assert {(r["cell"], r["entry"]) for r in runs if r["filter"] == "ekf"} == {
+        ("a", "ekf:q_scale=2:r_scale=1"), ("b", "ekf:q_scale=8:r_scale=1")}
+    means = [r for r in _csv(tmp_path / "toy" / "tuning.csv") if r["seed"] == "mean"]
+    assert {(r["cell"], r["options"]) for r in means if r["chosen"] == "1"} == {
+        ("a", "q_scale=2.0 r_scale=1.0"), ("b", "q_scale=8 r_scale=1.0")}
+    with pytest.raises(StudyError, match="per_cell = true tunes every cell"):
+        parse_study(_spec(per_cell=True, cells=["a"]))

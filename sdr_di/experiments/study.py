@@ -284,9 +284,10 @@ def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
             rec = records.get((c, i), {})
             figs = restore_floats(rec.get("figures", {})) if rec.get("status") == "ok" else {}
             for f in spec.filters:
-                lab = entry_label(f, mode)
+                entry = cell.entries.get(f, f)              # a tuned study: the chosen one
+                lab = entry_label(entry, mode)
                 row: dict = {"cell": cell.name, "seed_index": i, "seed": rec.get("seed"),
-                             "filter": f}
+                             "filter": f, "entry": entry}
                 if rec.get("status") != "ok":
                     row.update(status="failed", error=rec.get("error", "no record"))
                 elif f"{lab}.error" in figs:

@@ -105,6 +105,8 @@ class Cell:
     name: str
     factors: dict
     params: dict
+    entries: dict = dataclasses.field(default_factory=dict)  # study filter -> entry run here
+                                                             # (tuned); empty: as written
 
 
 @dataclasses.dataclass(frozen=True)

@@ -6,17 +6,19 @@ resumable):
 
 1. **Training** (``DIR/tuning/``): the tuning cells x the training seeds, with one filter
    entry per grid point (``"ekf:q_scale=5e-1"``, ...), all paired on the same files.
-2. **Choice** (:func:`choose`): per study filter, the grid point with the best criterion
-   (mean over the tuning cells and training seeds of each run's RMSE or log RMSE; a failed or
-   diverged run scores ``+inf``), among the points whose training runs all keep the NIS
-   column inside the band when a band is given (when no point does, the best point is
-   chosen and ``constraint_met`` says so). Ties go to the first point in grid order.
-   ``DIR/tuning.csv`` holds one row per (cell, filter, options, seed) and one ``mean`` row
-   per (filter, options); ``chosen`` marks the chosen point's rows.
-3. **Evaluation** (``DIR``): the study with each tuned filter entry replaced by its chosen
-   entry (claims and the baseline follow), on the evaluation seeds. Its ``study.json`` keeps
-   ``tuned_from`` (the hash of the spec as written) and ``tuning`` (the choices), so that a
-   rerun of the same spec resumes.
+2. **Choice** (:func:`choose`): per study filter (and per cell with ``per_cell``), the grid
+   point with the best criterion (mean over the tuning cells and training seeds of each
+   run's RMSE or log RMSE; a failed or diverged run scores ``+inf``), among the points whose
+   training runs all keep the NIS columns inside the band when a band is given (when no
+   point does, the best point is chosen and ``constraint_met`` says so). Ties go to the
+   first point in grid order. ``DIR/tuning.csv`` holds one row per (cell, filter, options,
+   seed) and one ``mean`` row per (cell group, filter, options); ``chosen`` marks the chosen
+   point's rows.
+3. **Evaluation** (``DIR``): the study as written, each cell running the chosen entry of
+   every tuned filter (:attr:`~.study_spec.Cell.entries`; ``runs.csv`` keeps the study's
+   filter names and gives the entry run in ``entry``; claims and statistics are unchanged),
+   on the evaluation seeds. Its ``study.json`` keeps ``tuned_from`` (the hash of the spec as
+   written), so that a rerun of the same spec resumes.
 """
 
 from __future__ import annotations
@@ -39,9 +41,11 @@ __all__ = ["Choice", "choose", "run_tuned_study", "training_spec", "tuned_spec"]
 
 @dataclasses.dataclass(frozen=True)
 class Choice:
-    """The outcome for one study filter: its chosen entry and options, the chosen point's
-    score, and whether it met the NIS band (``None`` without a band)."""
+    """The outcome for one study filter (in one cell with ``per_cell``, else ``cell`` is
+    ``None``): its chosen entry and options, the chosen point's score, and whether it met the
+    NIS band (``None`` without a band)."""
 
+    cell: str | None
     filter: str
     entry: str
     options: dict
@@ -75,25 +79,26 @@ def _cell_over(spec: StudySpec, name: str) -> dict:
     return {k: v for k, v in cell.params.items() if k != "filters"}
 
 
-def tuned_spec(spec: StudySpec, choices: dict[str, Choice]) -> StudySpec:
-    """The evaluation study: each tuned entry replaced by its chosen entry (the baseline and
-    the claims follow); ``tuned_from`` is ``spec``'s hash."""
-    ren = {f: c.entry for f, c in choices.items()}
-    raw = _raw_without_tuning(spec)
-    st = raw["study"]
-    filters = [str(f).strip().lower() for f in st["filters"]]
-    base = str(st.get("baseline", filters[0])).strip().lower()
-    raw["study"] = {**st, "filters": [ren.get(f, f) for f in filters],
-                    "baseline": ren.get(base, base)}
-    for cl in raw.get("claims", []):
-        for k in ("filter", "against"):
-            if k in cl:
-                v = str(cl[k]).strip().lower()
-                cl[k] = ren.get(v, v)
-        if "against" not in cl:
-            cl["against"] = ren.get(base, base)
-    out = parse_study(raw, source=spec.source)
-    return dataclasses.replace(out, tuned_from=spec.hash, raw=raw)
+def tuned_spec(spec: StudySpec, choices: dict) -> StudySpec:
+    """The evaluation study: every cell runs the chosen entry of each tuned filter
+    (``choices`` from :func:`choose`); ``tuned_from`` is ``spec``'s hash.
+
+    Raises
+    ------
+    StudyError
+        A chosen entry equals another filter entry of the study.
+    """
+    cells = []
+    for cell in spec.cells:
+        entries = {f: (choices.get((cell.name, f)) or choices[(None, f)]).entry
+                   for f in spec.tuning.grids}
+        run = [entries.get(f, f) for f in spec.filters]
+        if len(set(run)) != len(run):
+            raise StudyError(f"cell {cell.name!r}: a chosen entry ({', '.join(run)}) equals "
+                             "another filter of the study; take that point out of the grid")
+        cells.append(dataclasses.replace(cell, params={**cell.params, "filters": ",".join(run)},
+                                         entries=entries))
+    return dataclasses.replace(spec, cells=tuple(cells), tuning=None, tuned_from=spec.hash)
 
 
 def _score(row: dict, quantity: str, log: bool) -> float:
@@ -106,7 +111,7 @@ def _score(row: dict, quantity: str, log: bool) -> float:
     return math.log(v) if log else v
 
 
-def choose(t: TuningSpec, rows: list[dict]) -> tuple[dict[str, Choice], list[dict]]:
+def choose(t: TuningSpec, rows: list[dict]) -> tuple[dict, list[dict]]:
     """Choose each filter's grid point from the training runs' rows (``runs.csv`` rows of the
     training study: ``cell``, ``seed_index``, ``seed``, ``filter``, ``status``, the RMSE
     columns and, with a band, the ``t.nis_column`` columns).
@@ -114,7 +119,7 @@ def choose(t: TuningSpec, rows: list[dict]) -> tuple[dict[str, Choice], list[dic
     Returns
     -------
     choices : dict
-        ``{study filter entry: Choice}``.
+        ``{(cell or None, study filter entry): Choice}`` (``None``: pooled over the cells).
     table : list of dict
         The rows of ``tuning.csv`` (module docstring).
 
@@ -124,49 +129,61 @@ def choose(t: TuningSpec, rows: list[dict]) -> tuple[dict[str, Choice], list[dic
         A NIS band is set but the rows have no such column.
     """
     quantity, log = CRITERIA[t.criterion]
-    by_entry: dict[str, list[dict]] = {}
-    for r in rows:
-        by_entry.setdefault(r["filter"], []).append(r)
+    groups = [(c, (c,)) for c in t.cells] if t.per_cell else [(None, t.cells)]
     choices, table = {}, []
-    for f, points in t.grids.items():
-        scored = []
-        for p in points:
-            entry = grid_entry(f, p)
-            runs = by_entry.get(entry, [])
-            scores = [_score(r, quantity, log) for r in runs]
-            mean = sum(scores) / len(scores) if scores and all(map(math.isfinite, scores)) \
-                else math.inf
-            ok = None
-            if t.nis_band is not None:
-                vals = []
-                for r in runs:
-                    for c in t.nis_column:
-                        if c not in r:
-                            raise StudyError(f"[tuning] nis_column {c!r} is not a runs.csv "
-                                             "column")
-                        vals.append(r[c])
-                ok = bool(runs) and all(isinstance(v, (int, float)) and
-                                        t.nis_band[0] <= v <= t.nis_band[1] for v in vals)
-            scored.append((p, entry, runs, scores, mean, ok))
-        eligible = [s for s in scored if s[5] is not False] or scored
-        best = min(eligible, key=lambda s: s[4])           # first of equals: grid order
-        choices[f] = Choice(f, best[1], dict(best[0]), best[4],
-                            None if t.nis_band is None else bool(best[5]))
-        for p, entry, runs, scores, mean, ok in scored:
-            opts = " ".join(f"{k}={v}" for k, v in p)
-            extra = {} if t.nis_band is None else {"nis_ok": "" if ok is None else int(ok)}
-            for r, s in zip(runs, scores):
-                nis = {} if t.nis_band is None else {
-                    c: r.get(c, "") for c in t.nis_column}
-                table.append({"cell": r["cell"], "filter": f, "options": opts,
-                              "seed_index": r["seed_index"], "seed": r["seed"], "score": s,
-                              **nis, **extra, "chosen": int(entry == best[1])})
-            table.append({"cell": "+".join(t.cells), "filter": f, "options": opts,
-                          "seed_index": "", "seed": "mean", "score": mean,
-                          **({} if t.nis_band is None else dict.fromkeys(t.nis_column, "")),
-                          **extra,
-                          "chosen": int(entry == best[1])})
+    for group, group_cells in groups:
+        by_entry: dict[str, list[dict]] = {}
+        for r in rows:
+            if r["cell"] in group_cells:
+                by_entry.setdefault(r["filter"], []).append(r)
+        label = "+".join(group_cells)
+        for f, points in t.grids.items():
+            scored = [_score_point(t, f, p, by_entry, quantity, log) for p in points]
+            eligible = [sc for sc in scored if sc["ok"] is not False] or scored
+            best = min(eligible, key=lambda sc: sc["mean"])        # first of equals
+            choices[(group, f)] = Choice(group, f, best["entry"], dict(best["point"]),
+                                         best["mean"],
+                                         None if t.nis_band is None else bool(best["ok"]))
+            for sc in scored:
+                table += _table_rows(t, f, sc, label, sc is best)
     return choices, table
+
+
+def _score_point(t: TuningSpec, f: str, point, by_entry: dict, quantity: str,
+                 log: bool) -> dict:
+    """One grid point's training runs, their scores, the mean and the NIS verdict."""
+    entry = grid_entry(f, point)
+    runs = by_entry.get(entry, [])
+    scores = [_score(r, quantity, log) for r in runs]
+    mean = sum(scores) / len(scores) if scores and all(map(math.isfinite, scores)) \
+        else math.inf
+    ok = None
+    if t.nis_band is not None:
+        vals = []
+        for r in runs:
+            for c in t.nis_column:
+                if c not in r:
+                    raise StudyError(f"[tuning] nis_column {c!r} is not a runs.csv column")
+                vals.append(r[c])
+        ok = bool(runs) and all(isinstance(v, (int, float)) and
+                                t.nis_band[0] <= v <= t.nis_band[1] for v in vals)
+    return {"point": point, "entry": entry, "runs": runs, "scores": scores, "mean": mean,
+            "ok": ok}
+
+
+def _table_rows(t: TuningSpec, f: str, sc: dict, label: str, chosen: bool) -> list[dict]:
+    """``tuning.csv`` rows of one grid point: one per training run, then its ``mean``."""
+    opts = " ".join(f"{k}={v}" for k, v in sc["point"])
+    band = t.nis_band is not None
+    extra = {"nis_ok": "" if sc["ok"] is None else int(sc["ok"])} if band else {}
+    out = [{"cell": r["cell"], "filter": f, "options": opts, "seed_index": r["seed_index"],
+            "seed": r["seed"], "score": s,
+            **({c: r.get(c, "") for c in t.nis_column} if band else {}), **extra,
+            "chosen": int(chosen)} for r, s in zip(sc["runs"], sc["scores"])]
+    out.append({"cell": label, "filter": f, "options": opts, "seed_index": "", "seed": "mean",
+                "score": sc["mean"], **(dict.fromkeys(t.nis_column, "") if band else {}),
+                **extra, "chosen": int(chosen)})
+    return out
 
 
 def run_tuned_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
@@ -175,7 +192,7 @@ def run_tuned_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = 
                     render: bool = True):
     """Train, choose, evaluate (module docstring); arguments as
     :func:`~.study.run_study`. Returns the evaluation's :class:`~.study.StudyResult` with the
-    training tasks added to its counts and ``tuning`` set to the choices.
+    training tasks added to its counts and ``tuning`` set to the choices (:func:`choose`).
 
     Raises
     ------

@@ -25,16 +25,19 @@ def tuning_html(path: Path) -> str:
              "(mean over those runs; a failed run scores inf)"
              + (", among the points whose NIS stayed in the band" if "nis_ok" in head else "")
              + ". Chosen:</p><ul>"]
+    groups = len(set(r["cell"] for r in means))
     for r in means:
         if r["chosen"] == "1":
-            parts.append(f"<li><b>{html.escape(r['filter'])}</b>: "
+            where = f" in {r['cell']}" if groups > 1 else ""
+            parts.append(f"<li><b>{html.escape(r['filter'])}</b>{html.escape(where)}: "
                          f"<code>{html.escape(r['options'])}</code> (score "
                          f"{sig(float(r['score']))})</li>")
-    parts.append("</ul><table><tr><th>filter</th><th>options</th><th>score</th>"
+    parts.append("</ul><table><tr><th>cells</th><th>filter</th><th>options</th><th>score</th>"
                  + ("<th>NIS in band</th>" if "nis_ok" in head else "") + "</tr>")
     for r in means:
         b, e = ("<b>", "</b>") if r["chosen"] == "1" else ("", "")
-        parts.append(f"<tr><td>{html.escape(r['filter'])}</td><td>{b}"
+        parts.append(f"<tr><td>{html.escape(r['cell'])}</td><td>{html.escape(r['filter'])}</td>"
+                     f"<td>{b}"
                      f"{html.escape(r['options'])}{e}</td><td>{b}{sig(float(r['score']))}{e}"
                      "</td>" + (f"<td>{html.escape(r.get('nis_ok', ''))}</td>"
                                 if "nis_ok" in head else "") + "</tr>")

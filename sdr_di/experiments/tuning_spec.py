@@ -7,6 +7,7 @@ Format (``docs/studies.md``)::
     runs = 2                         # refused if any equals an evaluation seed
     criterion = "mean_log_pos_rmse"  # or mean_log_{vel,att}_rmse, mean_{pos,vel,att}_rmse
     cells = ["baseline"]             # cells the scores are pooled over (default: all)
+    per_cell = false                 # true: one choice per cell and filter (all cells tuned)
     nis_column = ["nis_code", "nis_rate"]   # optional constraint, off unless both are
     nis_band = [0.5, 2.0]            # given: a grid point is eligible when every training
                                      # run's runs.csv value of each column (one name or a
@@ -16,10 +17,10 @@ Format (``docs/studies.md``)::
     r_scale = [1.0, 4.0]
 
 The grid of a filter is the product of its option lists. One choice is made per filter for
-the whole study, from the scores pooled over the tuning cells and the training seeds (a
-per-cell choice: one study per cell). Grid values are checked against the type of the
-option's default (:func:`check_option_value`): a boolean option takes ``true``/``false``,
-not strings.
+the whole study, from the scores pooled over the tuning cells and the training seeds, or,
+with ``per_cell = true``, one per cell and filter from that cell's training runs. Grid
+values are checked against the type of the option's default (:func:`check_option_value`): a
+boolean option takes ``true``/``false``, not strings.
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ CRITERIA: dict[str, tuple[str, bool]] = {
     **{f"mean_log_{q}_rmse": (q, True) for q in ("pos", "vel", "att")},
     **{f"mean_{q}_rmse": (q, False) for q in ("pos", "vel", "att")}}
 
-_KEYS = {"base_seed", "runs", "criterion", "cells", "nis_column", "nis_band", "grid"}
+_KEYS = {"base_seed", "runs", "criterion", "cells", "per_cell", "nis_column", "nis_band",
+         "grid"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,6 +56,7 @@ class TuningSpec:
     runs: int
     criterion: str
     cells: tuple[str, ...]
+    per_cell: bool
     nis_column: tuple[str, ...] | None
     nis_band: tuple[float, float] | None
     grids: dict
@@ -61,7 +64,7 @@ class TuningSpec:
     def canonical(self) -> dict:
         """JSON-able form (part of the study's hash)."""
         return {"base_seed": self.base_seed, "runs": self.runs, "criterion": self.criterion,
-                "cells": list(self.cells),
+                "cells": list(self.cells), "per_cell": self.per_cell,
                 "nis_column": list(self.nis_column) if self.nis_column else None,
                 "nis_band": list(self.nis_band) if self.nis_band else None,
                 "grids": {f: [list(map(list, p)) for p in pts] for f, pts in self.grids.items()}}
@@ -185,6 +188,11 @@ def parse_tuning(raw, *, where: str, filters, cells, base_seed: int, runs: int
     if not (isinstance(tc, list) and tc and all(c in cells for c in tc)):
         raise StudyError(f"{w} cells must be a non-empty list of the study's cell names "
                          f"({', '.join(cells)})")
+    per_cell = raw.get("per_cell", False)
+    if not isinstance(per_cell, bool):
+        raise StudyError(f"{w} per_cell must be true or false, got {per_cell!r}")
+    if per_cell and set(tc) != set(cells):
+        raise StudyError(f"{w} per_cell = true tunes every cell: leave out cells")
     col, band = raw.get("nis_column"), raw.get("nis_band")
     if (col is None) != (band is None):
         raise StudyError(f"{w} nis_column and nis_band go together")
@@ -226,5 +234,6 @@ def parse_tuning(raw, *, where: str, filters, cells, base_seed: int, runs: int
         raise StudyError(f"{w} training seeds overlap the evaluation seeds ([tuning] "
                          f"base_seed {tb}, [study] base_seed {base_seed}); use another "
                          "[tuning] base_seed")
-    return TuningSpec(base_seed=tb, runs=tr, criterion=crit, cells=tuple(tc), nis_column=col,
+    return TuningSpec(base_seed=tb, runs=tr, criterion=crit, cells=tuple(tc),
+                      per_cell=per_cell, nis_column=col,
                       nis_band=band, grids=grids)
