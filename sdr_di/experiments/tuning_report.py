@@ -20,8 +20,9 @@ def tuning_html(path: Path) -> str:
     seeds = list(dict.fromkeys(r["seed"] for r in rows if r["seed"] != "mean"))
     parts = ["<h2>Tuning</h2>",
              f"<p>Each filter's options chosen before the evaluation, on the training seeds "
-             f"{html.escape(', '.join(seeds))} (disjoint from the evaluation seeds) of the "
-             f"cells {html.escape(means[0]['cell'] if means else '')}: the lowest criterion "
+             f"{html.escape(', '.join(seeds))} (disjoint from the evaluation seeds) of "
+             f"{html.escape(' / '.join(dict.fromkeys(r['cell'] for r in means)))} "
+             "(cells joined by + are pooled; one choice per group): the lowest criterion "
              "(mean over those runs; a failed run scores inf)"
              + (", among the points whose NIS stayed in the band" if "nis_ok" in head else "")
              + ". Chosen:</p><ul>"]
