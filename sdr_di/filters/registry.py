@@ -16,9 +16,9 @@ name               core    adaptive rule
 =================  ======  ==============================================================
 
 Options are routed by name: ``dt``, ``psd_fallback``, ``q_scale``, ``r_scale`` (all cores),
-``alpha``, ``beta``,
-``kappa`` (UKF cores) go to the core filter, the others to the rule's constructor (see each
-rule); an unknown option raises :class:`~.errors.FilterError` listing the accepted ones.
+``alpha``, ``beta``, ``kappa`` (UKF cores) go to the core filter, the others to the rule's
+constructor (see each rule); an unknown option raises :class:`~.errors.FilterError` listing
+the accepted ones.
 """
 
 from __future__ import annotations
@@ -96,8 +96,9 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
         As :class:`~sdr_di.filters.base.KalmanFilterBase` (``R0`` may be ``None`` when ``R``
         is given to every update).
     **options
-        Core options (``dt``, ``psd_fallback``; ``alpha``, ``beta``, ``kappa`` for the UKF
-        cores) and rule options (e.g. ``window``, ``d`` for ``ff-aukf``).
+        Core options (``dt``, ``psd_fallback``, ``q_scale``, ``r_scale``; ``alpha``, ``beta``,
+        ``kappa`` for the UKF cores) and rule options (e.g. ``window``, ``d`` for
+        ``ff-aukf``).
 
     Returns
     -------
