@@ -11,12 +11,12 @@ For every seed and C/N0 the default scenario (``signals/default.toml``; the seed
 IMU errors and the signal noise; truth IMU and oscillator equal to the assumed ones) is
 generated once at ``--fs`` for ``--duration`` s
 (:class:`~sdr_di.experiments._deep.generated_inputs`, the experiments' generator and file
-cache), and every mode x filter runs on those files with ``DeepConfig(mode=..., filter=...)``
+cache), and every mode x filter runs on those files with ``IntegrationConfig(mode=..., filter=...)``
 (the run of ``sdr-di run``). As in the weak-signal experiment, every satellite is at 40
 dB-Hz until ``--t-step`` s (the start-up needs a strong signal: at 30 dB-Hz the default
 scenario never hands over) and at ``--cn0`` from then to the end (an attenuation window of
 the scenario schema, :func:`~sdr_di.experiments._deep.with_outages`). The figures are the
-run's :meth:`~sdr_di.deep.vector_loop.DeepResult.consistency` (the summary JSON's
+run's :meth:`~sdr_di.integration.receiver.IntegrationResult.consistency` (the summary JSON's
 ``consistency`` entry): mean NIS per degree of freedom of each measurement block and NEES
 per degree of freedom of position, velocity and attitude, from ``--t0`` s of the file
 (default: 2 s after the step) to its end.
@@ -37,7 +37,7 @@ import time
 
 import numpy as np
 
-from sdr_di.deep import DeepConfig, DeepReceiver
+from sdr_di.integration.receiver import IntegratedReceiver, IntegrationConfig
 from sdr_di.integration.consistency import CONSISTENCY_KEYS, NIS_BLOCKS, flat
 
 #: Figure columns of the table (a mode has two of the NIS ones).
@@ -64,7 +64,7 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
                         rec = {"mode": mode, "cn0_dbhz": cn0, "filter": f, "seed": seed}
                         t0 = time.perf_counter()
                         try:
-                            res = DeepReceiver(DeepConfig(mode=mode, filter=f)).run(
+                            res = IntegratedReceiver(IntegrationConfig(mode=mode, filter=f)).run(
                                 inp.source, inp.imu, prns=inp.prns, nav=inp.nav,
                                 truth=inp.truth)
                             rec.update(flat(res.consistency(args.t0, None)))

@@ -1,5 +1,5 @@
 """Deep on a file whose assistance has no ionosphere lines: the hand-over does not wait for
-subframe 1 (``DeepConfig.iono_wait_s`` = 0 by default) and the rows before the model is
+subframe 1 (``IntegrationConfig.iono_wait_s`` = 0 by default) and the rows before the model is
 taken up are flagged (``iono`` column, ``docs/deep.md``)."""
 
 import gzip
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from sdr_di.cli import main
-from sdr_di.deep.run_deep import DEEP_COLUMNS, iono_in_force, iono_take_up_s
-from sdr_di.deep.vector_loop import DeepConfig
+from sdr_di.integration.run_integrated import DEEP_COLUMNS, iono_in_force, iono_take_up_s
+from sdr_di.integration.receiver import IntegrationConfig
 from sdr_di.scenario import REPO_ROOT
 
 RINEX = REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
@@ -28,7 +28,7 @@ def test_iono_flag_follows_the_history():
     loose = SimpleNamespace(t=t, navigation={"ionosphere": [{"t_s": 10.0,
                                                                "model": "klobuchar"}]})
     assert np.all(iono_in_force(loose) == 1) and iono_take_up_s(loose) is None
-    assert DeepConfig().iono_wait_s == 0.0
+    assert IntegrationConfig().iono_wait_s == 0.0
 
 
 @pytest.fixture(scope="module")
@@ -75,11 +75,11 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
 
 
 def test_integrated_progress_bar_reports_the_start_up_and_ends_at_100(late_file, capsys):
-    from sdr_di.deep.run_deep import run_deep
+    from sdr_di.integration.run_integrated import run_deep
     from sdr_di.receiver.run_scalar import open_source
 
     run_deep(open_source(late_file / "default.bin"), late_file / "bar",
-             config=DeepConfig(filter="ekf", mode="loose"), duration_s=12.0, progress=True)
+             config=IntegrationConfig(filter="ekf", mode="loose"), duration_s=12.0, progress=True)
     err = capsys.readouterr().err.replace("\r", "\n").splitlines()
     bars = [ln for ln in err if ln.startswith("run loose")]
     assert "scalar start-up: acquisition" in bars[0], bars[0]

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from sdr_di.deep.run_deep import DEEP_COLUMNS
+from sdr_di.integration.run_integrated import DEEP_COLUMNS
 from sdr_di.errors import NoEphemerisError
 from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.receiver.navdata import BROADCAST, RINEX, NavDataInForce

@@ -117,7 +117,7 @@ def short_file(tmp_path_factory):
 def test_run_builds_the_config_from_an_entry(short_file, tmp_path, monkeypatch, mode):
     """``run --filter ff-aukf:q_states=nominal:adapt_q=false`` and ``ekf:psd_fallback=clip``:
     the configuration handed to ``run_deep`` carries the name and the typed options."""
-    import sdr_di.deep.run_deep as rd
+    import sdr_di.integration.run_integrated as rd
 
     seen = []
 
@@ -288,7 +288,7 @@ def test_example_filter_inflates_q_on_large_innovations(monkeypatch):
 
 
 def test_example_study_spec_parses_with_the_plugin(monkeypatch):
-    from sdr_di.experiments.study_spec import load_study
+    from sdr_di.studies.spec import load_study
 
     monkeypatch.chdir(REPO)             # the module is found under the current folder
     spec = load_study(REPO / "examples" / "custom_filter_study.toml")
@@ -312,10 +312,10 @@ def test_run_deep_with_a_plugin_by_import_path(plugin, tmp_path, capsys):
     used = summ["assumptions"]["filter"]
     assert used["spec"] == f"{plugin}:TunedEKF:scale=2.0"
     assert used["class"] == f"{plugin}:TunedEKF"
-    from sdr_di.deep.vector_loop import DeepConfig
+    from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.ins.error_model import process_noise
 
-    imu = DeepConfig().imu
+    imu = IntegrationConfig().imu
     q0 = np.diag(process_noise(0.02, gyro_random_walk_si=imu.gyro_random_walk_si,
                                accel_random_walk_si=imu.accel_random_walk_si,
                                gyro_bias_si=imu.gyro_bias_si, accel_bias_si=imu.accel_bias_si,
@@ -330,8 +330,8 @@ def test_a_study_spec_runs_a_plugin_by_import_path(plugin, tmp_path, monkeypatch
     import path and the typed options, and runs.csv/cells.csv carry the entry as its label.
     The receiver runs are stand-ins (the real deep run is the test above)."""
     from sdr_di.experiments import _deep, variants
-    from sdr_di.experiments.study import run_study
-    from sdr_di.experiments.study_spec import load_study
+    from sdr_di.studies.study import run_study
+    from sdr_di.studies.spec import load_study
 
     spec_path = tmp_path / "plug.toml"
     entry = f"{plugin}:TunedEKF:scale=3"

@@ -298,7 +298,14 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
 
     monkeypatch.setattr(variants, "run_deep_variant", flaky)
     res = run_study(spec, out, runs=2, workers=0)
-    assert res.n_run == 4
+    assert res.n_run == 1 + 4           # the tuning task (baseline, training seed), then 4
+    tuning = _csv(out / "tuning.csv")
+    assert {r["options"] for r in tuning} == {"q_scale=1.0", "q_scale=4.0"}
+    assert {r["seed"] for r in tuning} == {"mean", str(run_seed(1000, 0))}
+    assert sum(r["chosen"] == "1" for r in tuning) == 2     # the chosen point's run + mean
+    ekf = res.tuning[(None, "ekf")].entry
+    assert {(r["filter"], r["entry"]) for r in _csv(out / "runs.csv")} == {
+        ("ekf", ekf), ("ff-aukf", "ff-aukf")}
     cells = {(r["cell"], r["filter"]): r for r in _csv(out / "cells.csv")}
     for cell in ("baseline", "imu-noise-10x"):
         row = cells[(cell, "ff-aukf")]
@@ -322,12 +329,12 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
         assert float(cells[("baseline", "ekf")][k]) > 0, k
     assert all(math.isnan(float(r["nis_pos"])) for r in runs)
     assert math.isfinite(float(cells[("baseline", "ff-aukf")]["d_pos_ci_low"]))
-    # both cells of a seed ran on one IF file
-    assert len(set(shared)) == 2
+    # both cells of a seed ran on one IF file (2 evaluation seeds, 1 training seed)
+    assert len(set(shared)) == 3
     assert not (out / "cache").exists()
     assert "injected" in (out / "report.html").read_text()
     again = run_study(spec, out, runs=2, workers=0)
-    assert again.n_run == 0 and again.n_skipped == 4
+    assert again.n_run == 0 and again.n_skipped == 5
 
 
 # ---- command line ----------------------------------------------------------------------------

@@ -426,7 +426,7 @@ def record_run(fig: dict, name: str, dr: DeepRun) -> Any:
 
 def consistency_figures(res: Any, t0: float | None, t1: float | None, prefix: str) -> dict:
     """``{prefix}nis_<block>`` and ``{prefix}nees_<q>`` of a result over ``t0 <= t <= t1``:
-    the means of its :meth:`~sdr_di.deep.vector_loop.DeepResult.consistency` entry (NaN
+    the means of its :meth:`~sdr_di.integration.receiver.IntegrationResult.consistency` entry (NaN
     without samples)."""
     from ..integration.consistency import flat
 

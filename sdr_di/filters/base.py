@@ -149,6 +149,10 @@ class KalmanFilterBase:
         Default predict interval [s] (default 1.0).
     psd_fallback : {'raise', 'clip'}
         What to do when ``P`` or ``S`` is not positive definite (see module docstring).
+    q_scale, r_scale : float
+        Positive factors on ``Q0`` (at construction) and on every ``R`` (``R0`` and the ``R``
+        given to :meth:`update`), default 1: the free parameters a study tunes for a filter
+        without an adaptive rule (an adaptive rule starts from the scaled values).
     name : str, optional
         Name used in messages and reports (registry name, e.g. ``'ff-aukf'``).
     rule : AdaptiveRule, optional
@@ -159,6 +163,7 @@ class KalmanFilterBase:
 
     def __init__(self, process_model: ProcessModel, measurement_model: MeasurementModel | None,
                  x0, P0, Q0, R0=None, *, dt: float = 1.0, psd_fallback: str = "raise",
+                 q_scale: float = 1.0, r_scale: float = 1.0,
                  name: str | None = None, rule=None) -> None:
         self.name = name or self.kind
         who = self.name
@@ -169,6 +174,11 @@ class KalmanFilterBase:
         if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
             raise FilterError(f"{who}: dt must be a positive number of seconds, got {dt!r}")
         self.dt = float(dt)
+        for key, val in (("q_scale", q_scale), ("r_scale", r_scale)):
+            if isinstance(val, bool) or not (isinstance(val, (int, float))
+                                             and math.isfinite(val) and val > 0):
+                raise FilterError(f"{who}: {key} must be a positive number, got {val!r}")
+        self.q_scale, self.r_scale = float(q_scale), float(r_scale)
         self.process_model = process_model
         self.measurement_model = measurement_model
 
@@ -185,13 +195,13 @@ class KalmanFilterBase:
         if cholesky_lower(P) is None:
             raise FilterError(f"{who}: initial covariance P0 is not positive definite "
                               f"(smallest eigenvalue {min_eigenvalue(P):.3e})")
-        Q = _as_square("Q0", Q0, n, who)
+        Q = _as_square("Q0", Q0, n, who) * self.q_scale
         qmin = min_eigenvalue(Q)
         if qmin < -1e-12 * max(float(np.max(np.abs(Q))), 1e-300):
             raise FilterError(f"{who}: process noise Q0 is not positive semi-definite "
                               f"(smallest eigenvalue {qmin:.3e})")
         if R0 is not None:
-            R = _as_square("R0", R0, None, who)
+            R = _as_square("R0", R0, None, who) * self.r_scale
             if cholesky_lower(R) is None:
                 raise FilterError(f"{who}: measurement noise R0 is not positive definite "
                                   f"(smallest eigenvalue {min_eigenvalue(R):.3e})")
@@ -347,7 +357,7 @@ class KalmanFilterBase:
             raise FilterError(f"{who}: R contains NaN or infinite values")
         if np.any(np.diagonal(R) <= 0.0):
             raise FilterError(f"{who}: R has a non-positive variance on its diagonal")
-        return R
+        return R * self.r_scale if self.r_scale != 1.0 else R
 
     def _cholesky(self, A: np.ndarray, step: str, matrix: str) -> tuple[np.ndarray, np.ndarray]:
         """Lower Cholesky factor of ``A`` with the filter's failure policy.

@@ -15,9 +15,10 @@ name               core    adaptive rule
 ``ml-r-ckf``       CKF     :class:`~.adaptive.MLMeasurementNoiseCKF` (paper 003)
 =================  ======  ==============================================================
 
-Options are routed by name: ``dt``, ``psd_fallback`` (all cores), ``alpha``, ``beta``,
-``kappa`` (UKF cores) go to the core filter, the others to the rule's constructor (see each
-rule); an unknown option raises :class:`~.errors.FilterError` listing the accepted ones.
+Options are routed by name: ``dt``, ``psd_fallback``, ``q_scale``, ``r_scale`` (all cores),
+``alpha``, ``beta``, ``kappa`` (UKF cores) go to the core filter, the others to the rule's
+constructor (see each rule); an unknown option raises :class:`~.errors.FilterError` listing
+the accepted ones.
 
 Any other name is a plugin (:mod:`.plugins`): one added by :func:`~.plugins.register_filter`
 or an installed package's entry point, or an import path ``package.module:Name``; its factory
@@ -80,7 +81,7 @@ _EQUATIONS = {
 #: Valid registry names, in table order.
 FILTER_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 
-_BASE_OPTIONS = ("dt", "psd_fallback")
+_BASE_OPTIONS = ("dt", "psd_fallback", "q_scale", "r_scale")
 _CORE_OPTIONS = {EKF: _BASE_OPTIONS, CKF: _BASE_OPTIONS,
                  UKF: _BASE_OPTIONS + ("alpha", "beta", "kappa")}
 
@@ -120,8 +121,9 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
         As :class:`~sdr_di.filters.base.KalmanFilterBase` (``R0`` may be ``None`` when ``R``
         is given to every update).
     **options
-        Core options (``dt``, ``psd_fallback``; ``alpha``, ``beta``, ``kappa`` for the UKF
-        cores) and rule options (e.g. ``window``, ``d`` for ``ff-aukf``).
+        Core options (``dt``, ``psd_fallback``, ``q_scale``, ``r_scale``; ``alpha``, ``beta``,
+        ``kappa`` for the UKF cores) and rule options (e.g. ``window``, ``d`` for
+        ``ff-aukf``).
 
     Returns
     -------

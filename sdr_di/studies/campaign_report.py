@@ -52,15 +52,22 @@ def _cell(text: str, digits: int) -> str:
         return text
 
 
+#: Columns that name something (a seed, an index, a count) and are shown exactly as written.
+VERBATIM_COLUMNS = frozenset({"seed", "seed_index", "index", "n", "n_pairs", "n_runs",
+                              "n_ok", "n_failed"})
+
+
 def table_html(path: Path, digits: int = REPORT_DIGITS) -> str:
-    """A CSV table as HTML, numbers at ``digits`` significant digits."""
+    """A CSV table as HTML, numbers at ``digits`` significant digits (the identifiers of
+    :data:`VERBATIM_COLUMNS` as written: a seed is a name, not a measurement)."""
     head, rows = read_csv_table(path)
     out = ['<div class="scroll"><table><tr>']
     out += [f"<th>{html.escape(h)}</th>" for h in head]
     out.append("</tr>")
     for row in rows:
-        out.append("<tr>" + "".join(f"<td>{html.escape(_cell(c, digits))}</td>" for c in row)
-                   + "</tr>")
+        out.append("<tr>" + "".join(
+            f"<td>{html.escape(c if h in VERBATIM_COLUMNS else _cell(c, digits))}</td>"
+            for h, c in zip(head, row)) + "</tr>")
     out.append("</table></div>")
     return "".join(out)
 

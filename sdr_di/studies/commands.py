@@ -219,6 +219,9 @@ def cmd_study(args: argparse.Namespace) -> int:
     print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
           f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
           f"{res.elapsed_s:.1f} s")
+    for c in (res.tuning or {}).values():
+        where = f" in {c.cell}" if c.cell else ""
+        print(f"tuned: {c.filter}{where} -> {c.entry} (training score {c.score:.4g})")
     for r in res.failed:
         print(f"  failed: {r['cell']} seed {r['seed_index']} {r['filter']}: {r['error']}",
               file=sys.stderr)

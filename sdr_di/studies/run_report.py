@@ -10,7 +10,7 @@ Plots (PNG beside the run's files, :func:`~sdr_di.experiments.plotting.time_seri
                           tight: in the measurement vector / fix)
 
 :func:`render_run_report` writes ``RUN_DIR/report.html`` with the renderer pieces of
-:mod:`~sdr_di.experiments.report` (same page style, plots embedded): the run's summary
+:mod:`~sdr_di.studies.campaign_report` (same page style, plots embedded): the run's summary
 (``*_summary.json`` of an integrated mode, or the scalar channel table), then the plots.
 """
 

@@ -30,6 +30,12 @@ coupling mode, filter rate, sampling rate, any parameter of the experiment) with
     [factorial]                      # optional: every cell crossed with every combination
     filter_rate_hz = [50.0, 5.0]
 
+    [tuning]                         # optional: options chosen on training seeds first
+    base_seed = 1000                 # (sdr_di.studies.tuning_spec, .tuning)
+    criterion = "mean_log_pos_rmse"
+    [tuning.grid.ekf]
+    q_scale = [0.5, 1.0, 2.0]
+
     [[claims]]
     text = "ff-aukf beats ekf in position and velocity"
     filter = "ff-aukf"
@@ -63,6 +69,7 @@ from ..errors import SdrDiError, StudyError
 from ..experiments.filter_figures import canonical_entry, parse_filter_spec
 from ..experiments.registry import get_experiment, parse_params
 from ..experiments.variants import MODES, split_entry
+from .tuning_spec import TuningSpec, parse_tuning
 
 __all__ = ["QUANTITY_KEYS", "Cell", "Claim", "StudySpec", "load_study", "parse_study"]
 
@@ -98,6 +105,8 @@ class Cell:
     name: str
     factors: dict
     params: dict
+    entries: dict = dataclasses.field(default_factory=dict)  # study filter -> entry run here
+                                                             # (tuned); empty: as written
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,6 +127,8 @@ class StudySpec:
     cells: tuple[Cell, ...]
     claims: tuple[Claim, ...]
     raw: dict = dataclasses.field(repr=False, compare=False)
+    tuning: TuningSpec | None = None     # the [tuning] table (sdr_di.studies.tuning)
+    tuned_from: str = ""                 # evaluation spec of a tuned study: the spec's hash
 
     @property
     def hash(self) -> str:
@@ -128,6 +139,8 @@ class StudySpec:
                  "cells": [[c.name, c.params] for c in self.cells],
                  "claims": [dataclasses.asdict(c) for c in self.claims],
                  "scenario_files": _scenario_digests(self.cells)}
+        if self.tuning is not None:          # only then: untuned studies keep their hash
+            canon["tuning"] = self.tuning.canonical()
         text = json.dumps(canon, sort_keys=True, default=str).encode()
         return hashlib.sha256(text).hexdigest()[:16]
 
@@ -229,7 +242,7 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
 
     where = f"study {source}" if source is not None else "study"
     _need(isinstance(raw.get("study"), dict), where, "missing [study] table")
-    unknown = set(raw) - {"study", "base", "cells", "factorial", "claims"}
+    unknown = set(raw) - {"study", "base", "cells", "factorial", "claims", "tuning"}
     _need(not unknown, where, f"unknown table(s) {', '.join(sorted(unknown))}")
     st = raw["study"]
     bad = set(st) - _STUDY_KEYS
@@ -343,7 +356,9 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
                      baseline=baseline, runs=runs, base_seed=int(base_seed),
                      alpha=float(alpha), interval=interval,
                      mode=next(iter(modes)) if len(modes) == 1 else "mixed",
-                     cells=tuple(cells), claims=tuple(claims), raw=raw)
+                     cells=tuple(cells), claims=tuple(claims), raw=raw,
+                     tuning=parse_tuning(raw.get("tuning"), where=where, filters=filters,
+                                         cells=names, base_seed=int(base_seed), runs=runs))
 
 
 def spec_summary(spec: StudySpec) -> dict:
@@ -355,4 +370,5 @@ def spec_summary(spec: StudySpec) -> dict:
             "interval": spec.interval,
             "cells": [{"name": c.name, "factors": c.factors, "params": c.params}
                       for c in spec.cells],
-            "claims": [dataclasses.asdict(c) for c in spec.claims]}
+            "claims": [dataclasses.asdict(c) for c in spec.claims],
+            **({"tuned_from": spec.tuned_from} if spec.tuned_from else {})}

@@ -86,6 +86,7 @@ class StudyResult:
     n_skipped: int
     out_dir: Path
     elapsed_s: float
+    tuning: dict | None = None           # {filter: tuning.Choice} of a tuned study
 
     @property
     def failed(self) -> list[dict]:
@@ -139,10 +140,11 @@ def _check_folder(spec: StudySpec, out: Path, force: bool) -> None:
                              "study; choose another --out or pass --force")
         return
     try:
-        old = read_json(meta_path).get("hash")
+        meta = read_json(meta_path)
+        old, tuned_from = meta.get("hash"), meta.get("tuned_from")
     except (OSError, ValueError, AttributeError):
-        old = None
-    if old != spec.hash and not force:
+        old = tuned_from = None
+    if spec.hash not in (old, tuned_from) and not force:
         raise StudyError(f"output folder {out} holds study {old} (a different spec than "
                          f"{spec.hash}); choose another --out or pass --force to replace it")
 
@@ -180,6 +182,11 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
     CampaignError
         Scheduler unreachable.
     """
+    if spec.tuning is not None:          # train, choose, then evaluate (.tuning)
+        from .tuning import run_tuned_study
+
+        return run_tuned_study(spec, out_dir, runs=runs, scheduler=scheduler, workers=workers,
+                               force=force, on_record=on_record, render=render)
     t0 = time.perf_counter()
     runs = spec.runs if runs is None else runs
     if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
@@ -278,9 +285,10 @@ def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
             rec = records.get((c, i), {})
             figs = restore_floats(rec.get("figures", {})) if rec.get("status") == "ok" else {}
             for f in spec.filters:
-                lab = entry_label(f, mode)
+                entry = cell.entries.get(f, f)              # a tuned study: the chosen one
+                lab = entry_label(entry, mode)
                 row: dict = {"cell": cell.name, "seed_index": i, "seed": rec.get("seed"),
-                             "filter": f}
+                             "filter": f, "entry": entry}
                 if rec.get("status") != "ok":
                     row.update(status="failed", error=rec.get("error", "no record"))
                 elif f"{lab}.error" in figs:

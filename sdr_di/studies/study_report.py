@@ -43,9 +43,24 @@ def _num(text) -> float:
         return math.nan
 
 
-def _interval(lo, hi) -> str:
+#: Fewest paired seeds whose t interval the report prints (below it the t quantile at the
+#: Bonferroni level makes the interval span orders of magnitude: [1.9e-08, 2.4e+08] at n = 2).
+MIN_INTERVAL_N = 4
+
+
+def _interval(lo, hi, n=None) -> str:
+    """``[lo, hi]``, or a note when ``n`` paired seeds are too few to bound anything."""
+    n = _num(n)
+    if math.isfinite(n) and n < MIN_INTERVAL_N:
+        return f"(interval not informative at n = {int(n)})"
     lo, hi = _num(lo), _num(hi)
     return f"[{sig(lo)}, {sig(hi)}]" if math.isfinite(lo) and math.isfinite(hi) else ""
+
+
+def _n_pairs(comps: list[dict], cell: str, filt: str, against: str, q: str):
+    c = next((c for c in comps if c["cell"] == cell and c["filter"] == filt
+              and c["against"] == against and c["quantity"] == q), None)
+    return c.get("n_pairs") if c else None
 
 
 def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> Path | None:
@@ -69,6 +84,8 @@ def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> 
                     continue
                 y, a, b = (_num(r.get(f"{q}_ratio")), _num(r.get(f"{q}_ratio_ci_low")),
                            _num(r.get(f"{q}_ratio_ci_high")))
+                if _num(r.get("n_ok")) < MIN_INTERVAL_N:      # no bar: not informative
+                    a = b = math.nan
                 if not math.isfinite(y):
                     continue
                 xs.append(j - 0.4 + width * (k + 0.5))
@@ -151,8 +168,8 @@ def render_study_report(folder: str | Path) -> Path:
                     ratio = math.exp(_num(c["log_mean"])) if math.isfinite(
                         _num(c["log_mean"])) else math.nan
                     lo, hi = _num(c["log_ci_low"]), _num(c["log_ci_high"])
-                    iv = _interval(math.exp(lo), math.exp(hi)) if math.isfinite(lo) and \
-                        math.isfinite(hi) else ""
+                    iv = _interval(math.exp(lo), math.exp(hi), c.get("n_pairs")) if \
+                        math.isfinite(lo) and math.isfinite(hi) else ""
                     tds.append(f"{c['wins']}/{c['n']}, {sig(ratio)} {iv}")
                 out.append("<tr>" + "".join(f"<td>{t}</td>" for t in tds) + "</tr>")
             out.append("</table>")
@@ -183,13 +200,18 @@ def render_study_report(folder: str | Path) -> Path:
                 if r["filter"] == baseline:
                     tds += ["(baseline)", "", ""]
                 else:
-                    tds += [(f"{sig(_num(r[f'{q}_ratio']))} "
-                             f"{_interval(r[f'{q}_ratio_ci_low'], r[f'{q}_ratio_ci_high'])}"),
+                    iv = _interval(r[f"{q}_ratio_ci_low"], r[f"{q}_ratio_ci_high"],
+                                   _n_pairs(comps, cn, r["filter"], baseline, q))
+                    tds += [f"{sig(_num(r[f'{q}_ratio']))} {iv}",
                             f"{r[f'{q}_wins']}/{r['n_runs']}", sig(_num(r[f"{q}_sign_p_holm"]))]
             out.append("<tr>" + "".join(f"<td>{t}</td>" for t in tds) + "</tr>")
         out.append("</table></div>")
         parts.append("".join(out))
 
+    if (folder / "tuning.csv").is_file():
+        from .tuning_report import tuning_html
+
+        parts.append(tuning_html(folder / "tuning.csv"))
     parts.append("<h2>Plots</h2>")
     plot = _ratio_plot(folder / "paired_ratios.png", cells, baseline, qs) if cells else None
     if plot is not None:
@@ -204,12 +226,13 @@ def render_study_report(folder: str | Path) -> Path:
     bad = [r for r in runs if r.get("status") != "ok"]
     if bad:
         parts.append("<h2>Failed or diverged runs</h2><ul class='failed'>")
-        parts += [f"<li>{html.escape(r['cell'])}, seed {r['seed_index']}, "
+        parts += [f"<li>{html.escape(r['cell'])}, seed {html.escape(r.get('seed', ''))} "
+                  f"(index {r['seed_index']}), "
                   f"{html.escape(r['filter'])}: {html.escape(r['status'])} "
                   f"({html.escape(r.get('error', ''))})</li>" for r in bad]
         parts.append("</ul>")
     parts.append("<h2>Raw tables</h2>")
-    for t in ("cells", "comparisons", "runs"):
+    for t in ("cells", "comparisons", "runs", "tuning"):
         path = folder / f"{t}.csv"
         if path.is_file():
             parts.append(f"<details><summary>{t}.csv</summary>{table_html(path)}</details>")

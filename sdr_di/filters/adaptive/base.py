@@ -43,7 +43,21 @@ import numpy as np
 
 from ...errors import FilterError
 
-__all__ = ["AdaptiveRule", "default_q_floor"]
+__all__ = ["AdaptiveRule", "default_q_floor", "flag"]
+
+
+def flag(who: str, name: str, value) -> bool:
+    """A rule's on/off option: a bool, or ``"true"``/``"false"``/``1``/``0`` as a filter entry
+    (``"ff-aukf:adapt_q=false"``) gives it. ``bool("false")`` would be ``True``: anything else
+    raises :class:`~sdr_di.errors.FilterError`."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    text = str(value).strip().lower()
+    if text in ("true", "1"):
+        return True
+    if text in ("false", "0"):
+        return False
+    raise FilterError(f"{who}: {name} must be true or false, got {value!r}")
 
 
 def default_q_floor(Q0: np.ndarray, P0: np.ndarray, q_floor_rel: float = 1e-6) -> np.ndarray:

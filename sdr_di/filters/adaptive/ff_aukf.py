@@ -69,7 +69,7 @@ import numpy as np
 
 from ...errors import FilterError
 from . import _numba_ff
-from .base import AdaptiveRule
+from .base import AdaptiveRule, flag
 
 __all__ = ["ForgettingFactorAUKF", "forgetting_weights"]
 
@@ -124,7 +124,7 @@ class ForgettingFactorAUKF(AdaptiveRule):
         if q_states not in ("all", "nominal"):
             raise FilterError(f"ff-aukf: q_states must be 'all' or 'nominal', got {q_states!r}")
         self.q_states = q_states
-        self.jit = bool(jit)
+        self.jit = flag("ff-aukf", "jit", jit)
         if int(window) < 1:
             raise FilterError(f"ff-aukf: window must be >= 1, got {window}")
         if not 0.0 < d < 1.0:
@@ -132,7 +132,8 @@ class ForgettingFactorAUKF(AdaptiveRule):
         if int(n_blocks) < 1:
             raise FilterError(f"ff-aukf: n_blocks must be >= 1, got {n_blocks}")
         self.window, self.d, self.n_blocks = int(window), float(d), int(n_blocks)
-        self.adapt_q, self.adapt_r = bool(adapt_q), bool(adapt_r)
+        self.adapt_q = flag("ff-aukf", "adapt_q", adapt_q)
+        self.adapt_r = flag("ff-aukf", "adapt_r", adapt_r)
         self.s_bounds = (float(s_bounds[0]), float(s_bounds[1]))
         self.mu = forgetting_weights(self.window, self.d)
         # weight of ring slot j when the newest sample sits in slot p: mu[(p - j) mod m]

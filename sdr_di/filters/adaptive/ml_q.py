@@ -40,7 +40,7 @@ import numpy as np
 
 from ...errors import FilterError
 from .._linalg import floor_pd
-from .base import AdaptiveRule
+from .base import AdaptiveRule, flag
 
 __all__ = ["MLProcessNoiseUKF"]
 
@@ -81,7 +81,7 @@ class MLProcessNoiseUKF(AdaptiveRule):
             raise FilterError(f"ml-q-ukf: steady_test must be '2sigma', 'nis' or None, "
                               f"got {steady_test!r}")
         self.window = int(window)
-        self.diagonal = bool(diagonal)
+        self.diagonal = flag("ml-q-ukf", "diagonal", diagonal)
         self.steady_test = steady_test
         self._mask_opt = mask
         self.steady = False

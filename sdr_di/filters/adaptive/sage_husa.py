@@ -46,7 +46,7 @@ import numpy as np
 
 from ...errors import FilterError
 from .._linalg import floor_pd
-from .base import AdaptiveRule
+from .base import AdaptiveRule, flag
 
 __all__ = ["SageHusaUKF"]
 
@@ -97,7 +97,7 @@ class SageHusaUKF(AdaptiveRule):
         self.estimate = frozenset(est)
         self.warmup = max(int(warmup), 1)
         self.forgetting = forgetting
-        self.bias_correction = bool(bias_correction)
+        self.bias_correction = flag("sage-husa-ukf", "bias_correction", bias_correction)
         self.r_floor_rel = float(r_floor_rel)
         self.n_restarts = 0
         self._m = -1
