@@ -3,7 +3,7 @@
 Run it from the repository root (the current folder is searched for the module)::
 
     sdr-di run FILE.bin --mode deep --filter examples.innovation_q_ekf:InnovationQEKF:gain=2
-    sdr-di study examples/custom_filter_study.toml
+    sdr-di study examples/custom_filter_study.toml --out out/custom
 
 Rule: the mean normalized innovation squared per measurement, ``NIS / m``, over the last
 ``window`` updates is 1 for a consistent filter. Its excess over 1 scales the nominal ``Q``:

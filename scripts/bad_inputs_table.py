@@ -44,6 +44,7 @@ def _cases_module():
 def _cut(msg: str, d: Path) -> str:
     """``msg`` as a table cell: the work folder as ``{d}``, the repository as ``.``, cut."""
     msg = msg.replace(str(d), "{d}").replace(f"{REPO}/", "./").replace("|", "\\|")
+    msg = msg.replace("][", "]\\[")  # "[[x]][0]" is not a Markdown reference link
     return msg if len(msg) <= MSG_CHARS else msg[:MSG_CHARS] + "..."
 
 
