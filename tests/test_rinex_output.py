@@ -297,6 +297,7 @@ class _RecordingEngine(PvtEngine):
             if self._inside:
                 self.used.append(obs)
             return obs
+        builder.rx_time = inner.rx_time       # the receiver time the run sets its hint on
         self.builder = builder
         _RecordingEngine.last = self
 
@@ -313,9 +314,11 @@ def test_run_writes_rinex_read_back_with_georinex(tmp_path, monkeypatch, capsys)
     assert main(["generate", "--no-progress", "--duration", "8", "--fs", "2.5e6", "--out",
                  str(g)]) == 0
     monkeypatch.setattr(run_scalar_mod, "PvtEngine", _RecordingEngine)
-    # 8 s: pseudoranges, but too short for decoded ephemerides, hence no fix: exit 1
-    # (docs/errors.md); the observation and navigation files are written all the same
-    assert main(["run", str(g / "default.bin"), "--out", str(g / "run"), "--no-progress"]) == 1
+    # 8 s without assistance (--no-assist: not the sidecar's navigation file): too short
+    # for decoded ephemerides, hence no fix: exit 1 (docs/errors.md); the observation and
+    # navigation files are written all the same
+    assert main(["run", str(g / "default.bin"), "--out", str(g / "run"), "--no-progress",
+                 "--no-assist"]) == 1
     out = capsys.readouterr().out
     obs_path, nav_path = g / "run" / "default_obs.rnx", g / "run" / "default_nav.rnx"
     assert f"rinex_obs {obs_path}" in out and f"rinex_nav {nav_path}" in out
