@@ -39,6 +39,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from ..frames import radii_of_curvature
+from .metrics import time_window
 
 __all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "block_nis",
            "chi2_band", "consistency_summary", "effective_count", "enu_blocks", "flat",
@@ -194,24 +195,15 @@ def consistency_summary(mode: str, t_nis, nis_blocks, nis_dof, t_rows, nees,
         "nees_att": entry}``; an entry is ``{"value" (mean), "expected": 1, "n", "n_eff",
         "band": [low, high]}``, ``value`` None without samples.
     """
-    def window(t):
-        t = np.asarray(t, float)
-        sel = np.ones(t.size, bool)
-        if t0 is not None:
-            sel &= t >= t0
-        if t1 is not None:
-            sel &= t <= t1
-        return sel
-
     out: dict = {"band_rule": BAND_RULE}
     nb = np.asarray(nis_blocks, float).reshape(-1, 2)
     dof = np.asarray(nis_dof, float).reshape(-1)
-    sel = window(t_nis)
+    sel = time_window(t_nis, t0, t1)
     d = int(round(float(np.median(dof[sel])))) if sel.any() else 1
     for j, name in enumerate(NIS_BLOCKS[mode]):
         out[f"nis_{name}"] = _entry(nb[sel, j], max(d, 1))
     ne = np.asarray(nees, float).reshape(-1, 3)
-    sel = window(t_rows)
+    sel = time_window(t_rows, t0, t1)
     for j, q in enumerate(("pos", "vel", "att")):
         out[f"nees_{q}"] = _entry(ne[sel, j], 3)
     return out

@@ -14,7 +14,7 @@ import numpy as np
 from ..frames import radii_of_curvature
 from ..ins.error_model import dcm_to_rotvec
 
-__all__ = ["nav_errors", "rmse_max", "summarize"]
+__all__ = ["nav_errors", "rmse_max", "summarize", "time_window"]
 
 
 def nav_errors(llh, v_n, C_b_n, llh_true, v_true, C_true):
@@ -37,18 +37,24 @@ def rmse_max(e: np.ndarray) -> tuple[float, float]:
     return float(math.sqrt(np.mean(n2))), float(math.sqrt(np.max(n2)))
 
 
-def summarize(t, att, vel, pos, t0: float | None = None, t1: float | None = None) -> dict:
-    """RMSE and max of attitude [deg], velocity [m/s], position [m] over ``t0 <= t <= t1``.
-
-    Keys ``<q>_rmse``, ``<q>_max`` (norms) and ``<q>_rmse_axes`` (per-axis RMSE, E, N, U; the
-    form of paper 000 Table 1) for ``q`` in ``att_deg``, ``vel_mps``, ``pos_m``; ``n`` epochs.
-    """
+def time_window(t, t0: float | None = None, t1: float | None = None) -> np.ndarray:
+    """Boolean mask of ``t0 <= t <= t1`` (an open end where a bound is None); ``t`` [s]."""
     t = np.asarray(t, float)
     sel = np.ones(t.size, bool)
     if t0 is not None:
         sel &= t >= t0
     if t1 is not None:
         sel &= t <= t1
+    return sel
+
+
+def summarize(t, att, vel, pos, t0: float | None = None, t1: float | None = None) -> dict:
+    """RMSE and max of attitude [deg], velocity [m/s], position [m] over ``t0 <= t <= t1``.
+
+    Keys ``<q>_rmse``, ``<q>_max`` (norms) and ``<q>_rmse_axes`` (per-axis RMSE, E, N, U; the
+    form of paper 000 Table 1) for ``q`` in ``att_deg``, ``vel_mps``, ``pos_m``; ``n`` epochs.
+    """
+    sel = time_window(t, t0, t1)
     out = {"n": int(sel.sum())}
     for name, e in (("att_deg", att), ("vel_mps", vel), ("pos_m", pos)):
         r, m = rmse_max(np.asarray(e)[sel])
