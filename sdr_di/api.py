@@ -239,7 +239,7 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
     Other Parameters
     ----------------
     filter : str, optional
-        Integration filter (``--filter``; default ``ff-aukf``). Integrated modes only, as
+        Integration filter (``--filter``; default ``ekf``). Integrated modes only, as
         are the parameters down to ``assume``.
     imu, truth, ephemeris : path, optional
         IMU file, reference file, RINEX assistance file (``--imu``, ``--truth``,
@@ -375,7 +375,7 @@ def _run_integrated(source, out_dir: Path, prns, mode: str, rate_hz: float, cold
     from .integration.receiver import IntegrationConfig
     from .integration.run_integrated import run_deep
 
-    kw: dict[str, Any] = {"filter": (opt["filter"] or "ff-aukf").strip().lower(),
+    kw: dict[str, Any] = {"filter": (opt["filter"] or "ekf").strip().lower(),
                           "output_rate_hz": rate_hz, "mode": mode}
     for key, name in (("gnss_rate_hz", None), ("filter_rate_hz", "filter_rate_hz"),
                       ("align", "align"), ("iono_wait_s", "iono_wait_s")):

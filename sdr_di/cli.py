@@ -301,9 +301,10 @@ def _add_run(sub) -> None:
     _add_file_options(p)
     g = p.add_argument_group("deep, loose and tight modes")
     g.add_argument("--filter", default=None, metavar="NAME[:OPT=VALUE...]",
-                   help="integration filter and its options (default ff-aukf; any of ekf, "
-                   "ukf, ckf, ff-aukf, rae-aukf, ml-q-ukf, sage-husa-ukf, q-scaling-ekf, "
-                   "q-scaling-ukf, ml-r-ckf, a plugin name, or an import path "
+                   help="integration filter and its options (default ekf, chosen by a paired "
+                   "study: docs/filters.md; any of ekf, ukf, ckf, ff-aukf, rae-aukf, "
+                   "ml-q-ukf, sage-husa-ukf, q-scaling-ekf, q-scaling-ukf, ml-r-ckf, a "
+                   "plugin name, or an import path "
                    "package.module:Name; e.g. ff-aukf:q_states=nominal; sdr-di filters "
                    "lists the options)")
     g.add_argument("--imu", type=Path, default=None,
@@ -554,7 +555,7 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
     from .integration.receiver import IntegrationConfig
     from .integration.run_integrated import run_deep
 
-    spec = parse_filter_spec(args.filter or "ff-aukf")  # typed options; FilterError: exit 2
+    spec = parse_filter_spec(args.filter or "ekf")  # typed options; FilterError: exit 2
     kw = {"filter": spec.name, "filter_options": spec.options, "output_rate_hz": args.rate,
           "mode": args.mode}
     if args.gnss_rate is not None:

@@ -96,7 +96,7 @@ class IntegrationConfig:
         more solution instead of none.
     """
 
-    filter: str = "ff-aukf"
+    filter: str = "ekf"
     filter_rate_hz: float = 50.0
     output_rate_hz: float = 5.0
     align: str = "truth"
