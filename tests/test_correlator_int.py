@@ -174,3 +174,22 @@ def test_dispatch_and_agreement_with_float_kernel(monkeypatch):
     p_f = np.hypot(*o_flt[0, 1])
     assert p_f > 0.9 * 20.0 * nsamp[0]
     assert abs(p_i / p_f - 1) < 1e-3
+
+
+def test_low_rate_int8_stays_on_float_kernel():
+    """At 2.5 MHz (code step 4.1 chips per sample) the integer kernel's runs are 14 samples
+    and it is the slower one: the dispatcher keeps the float32 kernel."""
+    rng = np.random.default_rng(9)
+    fs = 2.5e6
+    table, start, nsamp, theta0, dchip, phi0, dphi = _case(rng, 2, fs, n_rows=2)
+    assert not kb.int_kernel_pays(0.5, float(dchip.max()))
+    assert kb.int_kernel_pays(0.5, 10.23e6 / 25e6)
+    xs, n_comp = _samples("iq_int4", rng, 30_000)
+    rot_re, rot_im = carrier_rotation(dphi)
+    idx = np.arange(start.size, dtype=np.int64)
+    args = (xs, n_comp, bit_windows(table), idx, CODE_PAD, L, start, nsamp, theta0, dchip,
+            phi0, dphi, rot_re, rot_im, idx, 0.5, 1)
+    o_disp, o_flt = np.empty((2, 3, 2)), np.empty((2, 3, 2))
+    kb.correlate_epl_bits(*args, o_disp)
+    kb.correlate_epl_float(*args, o_flt)
+    np.testing.assert_array_equal(o_disp, o_flt)

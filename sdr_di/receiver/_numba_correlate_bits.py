@@ -91,7 +91,7 @@ import os
 import numpy as np
 from numba import njit, prange
 
-from ._numba_correlate_int import correlate_epl_int8
+from ._numba_correlate_int import correlate_epl_int8, int_kernel_pays
 
 
 def _integer_path_from_env() -> bool:
@@ -147,11 +147,15 @@ def _run_sums(lo, hi, br, bi, k, th0, dc, off, ae, ap, al):
 
 def correlate_epl_bits(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, theta0, dchip,
                        phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out) -> None:
-    """E/P/L sums of every row into ``out`` (arguments: :func:`correlate_epl_float`): the
-    integer kernel :func:`~sdr_di.receiver._numba_correlate_int.correlate_epl_int8` for
-    ``int8`` samples when :data:`INTEGER_PATH` is set (the default), else the float32
-    kernel :func:`correlate_epl_float`."""
-    if INTEGER_PATH and xs.dtype == np.int8:
+    """E/P/L sums of every row into ``out`` (arguments: :func:`correlate_epl_float`).
+
+    Runs the integer kernel :func:`~sdr_di.receiver._numba_correlate_int.correlate_epl_int8`
+    for ``int8`` samples when :data:`INTEGER_PATH` is set (the default) and every row's runs
+    are long enough for it to be the faster one (:func:`~sdr_di.receiver.
+    _numba_correlate_int.int_kernel_pays`: code step at most about 0.9 chip per sample, i.e.
+    B3I sampled at 11 MHz or more), else the float32 kernel :func:`correlate_epl_float`."""
+    if (INTEGER_PATH and xs.dtype == np.int8 and dchip.size
+            and int_kernel_pays(spacing, float(dchip.max()))):
         correlate_epl_int8(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, theta0,
                            dchip, phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out)
     else:

@@ -64,6 +64,17 @@ def run_length(spacing, dc):
     return run
 
 
+def int_kernel_pays(spacing: float, dchip_max: float) -> bool:
+    """Whether this kernel is faster than the float32 one for rows with code steps up to
+    ``dchip_max`` [chips/sample] and E/L offset ``spacing`` [chips]: its runs (at most
+    ``_SPAN = 60`` table entries, against the float kernel's 124) must hold at least 64
+    samples. Shorter runs cost more in per-run set-up and sum reductions than the integer
+    index saves: 7 channels, 1 ms rows, one thread, ``scripts/bench.py correlate``: 0.83 -
+    1.03 against 1.12 - 1.29 ns per sample-channel at 25 MHz (runs of 128), but 3.7 against
+    2.9 ns at 2.5 MHz (runs of 14)."""
+    return run_length(spacing, dchip_max) >= 64
+
+
 @njit(cache=True, fastmath={"reassoc", "contract"}, boundscheck=False)
 def _run_sums_int(lo, hi, br, bi, e0, p0, l0, st):
     """E/P/L sums of one run: wiped samples ``br + j bi`` (integer values in float32),
