@@ -193,3 +193,14 @@ def test_low_rate_int8_stays_on_float_kernel():
     kb.correlate_epl_bits(*args, o_disp)
     kb.correlate_epl_float(*args, o_flt)
     np.testing.assert_array_equal(o_disp, o_flt)
+
+
+def test_environment_switch(monkeypatch):
+    """SDR_DI_CORRELATOR=float (read at import) selects the float32 reference; a typo is an
+    error, not a silent default."""
+    for value, want in (("float", False), ("int", True), ("", True), (" Float ", False)):
+        monkeypatch.setenv("SDR_DI_CORRELATOR", value)
+        assert kb._integer_path_from_env() is want
+    monkeypatch.setenv("SDR_DI_CORRELATOR", "fp32")
+    with pytest.raises(ValueError, match="SDR_DI_CORRELATOR"):
+        kb._integer_path_from_env()
