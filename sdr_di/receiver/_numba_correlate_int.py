@@ -1,37 +1,43 @@
 """Numba kernel of the E/P/L correlator on integer (``int8``) samples: integer arithmetic.
 
-Same interface, blocks, runs, bit windows and block phasor as the float32 kernel
+Same interface, blocks, code-wrap split and block phasor as the float32 kernel
 (:func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_float`, module notes there);
 :func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_bits` chooses this one for
-``int8`` samples (every integer format of :mod:`~sdr_di.io.sample_formats` except the 16-bit
-ones reaches the receiver as ``int8``: the 2/3/4-bit formats are unpacked to ``int8`` by
-table). What differs, per task (row x range of blocks):
+``int8`` samples when its runs hold at least 64 samples (:func:`int_kernel_pays`: B3I at
+11 MHz or more). Every integer format of :mod:`~sdr_di.io.sample_formats` except the 16-bit
+ones reaches the receiver as ``int8`` (the 2/3/4-bit formats unpacked by table). What
+differs, per task (row x range of blocks):
 
 * **Integer rotation table.** The row's float32 table ``exp(-j 2 pi m dphi)``, ``m < B``, is
-  rounded once to integers ``qr_m = round(S cos)``, ``qi_m = round(-S sin)`` with
+  rounded once to integers ``qr_m = rint(S cos)``, ``qi_m = rint(-S sin)`` with
   ``S = ROT_SCALE = 127``: an amplitude quantization of the exact phasors (each component
   within 1/(2 S) of the exact value), not a coarse phase table, so the carrier phase error is
   at most ``1 / (sqrt(2) S)`` rad (0.32 degree) and about 0.0023 rad rms. The block phasor
-  stays float64 and exact, as in the float kernel, so no phase error accumulates.
-* **Wipe-off in int16.** ``wr = xr qr - xi qi``, ``wi = xr qi + xi qr`` (real input:
-  ``xr qr``, ``xr qi``); with ``|x| <= 128`` and ``|q| <= 127`` every value is within
-  ``2 * 128 * 127 = 32512``: exact in int16.
-* **Code as sign flips.** Each replica chip flips the sign of the wiped sample
-  (``(w ^ m) - m`` with ``m = 0`` or ``-1`` from the bit window); no multiplications.
+  stays float64 (exact every ``PHASOR_REFRESH`` blocks, advanced by a float64 rotation in
+  between), so no phase error accumulates.
+* **Integer wipe-off.** ``wr = xr qr - xi qi``, ``wi = xr qi + xi qr`` (real input:
+  ``xr qr``, ``xr qi``); with ``|x| <= 128`` and ``|q| <= 127`` every value is an integer
+  within ``2 * 128 * 127 = 32512``.
+* **Code as sign flips** from **32-bit bit windows** (the low 32 bits of the
+  :func:`~sdr_di.receiver.correlator.bit_windows` words at the run's lowest entry and 32
+  entries on: a run spans at most ``_SPAN = 60`` entries), so the shifts use 16 lanes.
 * **Code index in fixed point.** Within a run the E/P/L table indices are
   ``(e0 + q st) >> 23`` (int32), ``e0 = floor((theta_run + a) 2^23)`` computed in float64 at
   the run's first sample, ``st = round(dchip 2^23)``: a chip boundary is placed within
   ``q / 2^24 + 2^-23`` chip of the float64 one (``q < 256`` the sample's place in its run:
   at most 1.5e-5 chip, 0.45 mm of range, four orders of magnitude below the thermal
   code-phase noise).
-* **int32 sums.** A run's six E/P/L sums are int32 (at most 256 terms of at most 32512:
-  below 2^24), added to the block's int64 sums, then multiplied by the float64 block phasor
-  and divided by ``S`` (float64): the returned sums are in input units x samples, as the
-  float kernel's.
+* **Integer sums, carried in float32 lanes.** A run's six E/P/L sums have at most 256 terms
+  of at most 32512, so every partial sum is an integer below 2^24: float32 holds each exactly
+  whatever the order of the additions, and the sums equal the integer sums bit for bit. They
+  go to the block's int64 sums, which are multiplied by the float64 block phasor and divided
+  by ``S``: the returned sums are in input units x samples, as the float kernel's. (numba
+  types ``int16 * int16`` as int64, and int16/int32 loops measured slower than float32
+  lanes carrying the same integers: ``docs/notes/correlator.md``.)
 
 Loss against the float path (quantized phasor): the rounding adds to each wiped sample an
 error of relative power ``2 / (12 S^2) = 5.2e-6`` (uncorrelated with the code), i.e. an SNR
-loss of about ``2.3e-5 dB``; measured paired runs are in ``docs/`` (benchmark section).
+loss of about ``2.3e-5 dB``; paired runs over 4 seeds: ``docs/notes/correlator.md``.
 """
 
 from __future__ import annotations
@@ -41,7 +47,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-#: Scale of the integer rotation table (int8 range: products with int8 samples fit int16).
+#: Scale of the integer rotation table (products with int8 samples stay within 2^15).
 ROT_SCALE = 127
 #: Fractional bits of the fixed-point code index within a run.
 FRAC_BITS = 23
