@@ -289,11 +289,12 @@ def _run_gnss_sdr(path: Path, work: Path) -> dict | None:
             "n_sat": len(prns)}
 
 
-def _run_pocketsdr(exe: str, path: Path, tscale: float) -> dict:
+def _run_pocketsdr(exe: str, path: Path, tscale: float, work: Path) -> dict:
     """PocketSDR's ``pocket_trk`` on ``path`` (an ``iq_int8`` file with its sidecar: ``-fmt
     CS8``, ``-f`` the sample rate, ``-fo`` the carrier minus the IF), B3I, the sidecar's
     satellites (``-sig B3I -prn``), the file replayed at ``tscale`` times real time (its
-    reader sleeps to keep that pace, so compare CPU, not wall): the process wall and CPU time,
+    reader sleeps to keep that pace, so compare CPU, not wall), run in ``work`` (it writes a
+    ``.pocket_navdata.csv`` there): the process wall and CPU time,
     the exit status, the locked channels of its last status screen and the end of its
     output."""
     import resource
@@ -303,10 +304,12 @@ def _run_pocketsdr(exe: str, path: Path, tscale: float) -> dict:
     fo = (float(meta["carrier_hz"]) - float(meta.get("if_hz", 0.0))) / 1e6
     cmd = [exe, "-sig", "B3I", "-prn", ",".join(map(str, prns)), "-fmt", "CS8",
            "-f", f"{float(meta['sampling_rate_hz']) / 1e6:g}", "-fo", f"{fo:.6f}",
-           "-tscale", f"{tscale:g}", str(path)]
+           "-tscale", f"{tscale:g}", str(Path(path).resolve())]
+    work.mkdir(parents=True, exist_ok=True)
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    res = subprocess.run(cmd, check=False, capture_output=True, text=True, errors="replace")
+    res = subprocess.run(cmd, cwd=work, check=False, capture_output=True, text=True,
+                         errors="replace")
     wall = time.perf_counter() - t0
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     locks = re.findall(r"LOCK:\s*(\d+)/\s*(\d+)", res.stdout)  # status screens: locked/total
@@ -396,7 +399,8 @@ def bench_run(args: argparse.Namespace) -> None:
         if args.pocketsdr:
             for f, b in best.items():
                 for _ in range(args.repeat):
-                    g = _run_pocketsdr(args.pocketsdr, f, args.pocketsdr_tscale)
+                    g = _run_pocketsdr(args.pocketsdr, f, args.pocketsdr_tscale,
+                                       out / "pocketsdr")
                     print(f"  PocketSDR pocket_trk ({g['cmd']}) on the same file: "
                           f"{g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, {g['locked']} "
                           f"channels locked at the end, exit {g['rc']}; "
