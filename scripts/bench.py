@@ -323,6 +323,10 @@ def bench_run(args: argparse.Namespace) -> None:
     """Scalar receiver real-time factor, per-stage shares and peak memory on default-scenario
     files (generated for each duration, or ``--if-file``); issue 17's target 2 per file, with
     GNSS-SDR's time on the same file when ``--gnss-sdr``."""
+    if args.pocketsdr and not (Path(args.pocketsdr).is_file()
+                               and os.access(args.pocketsdr, os.X_OK)):
+        raise SystemExit(f"bench.py: error: --pocketsdr {args.pocketsdr}: not an executable "
+                         "file")
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sdr-di-bench-"))
     try:
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
