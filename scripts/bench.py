@@ -6,7 +6,7 @@ Usage::
     python scripts/bench.py generate [options of scripts/bench_generate.py]
     python scripts/bench.py run [--durations 30] [--bits 8] [--keep] [--if-file F]
         [--repeat N] [--search assisted|cold|both] [--gnss-sdr]
-        [--mode scalar|deep|loose|tight|all] [--filter ekf]
+        [--mode scalar|deep|loose|tight|all] [--filter ekf] [--pocketsdr PATH]
     python scripts/bench.py acquire [options of scripts/bench_acquire.py]
     python scripts/bench.py correlate [options of scripts/bench_correlate.py]
     python scripts/bench.py filters [options of scripts/bench_filters.py]
@@ -31,7 +31,10 @@ assisted search) and the assisted one (``sdr-di run``: the sidecar's satellites 
 Doppler). A closing line per file gives target 2 (best assisted run: x real time against 3x,
 CPU seconds, stage shares); ``--gnss-sdr`` also runs GNSS-SDR 0.0.17 with the pinned
 ``scripts/gnss_sdr_b3i.conf`` on the same file (its process wall and CPU time, the channels
-that started tracking) and prints the wall-time ratio against 0.5.
+that started tracking) and prints the wall-time ratio against 0.5; ``--pocketsdr PATH``
+runs PocketSDR's ``pocket_trk`` (built from its ``app/pocket_trk``, ``make USE_SOAPY=0``) on
+the same file ``--repeat`` times (``-sig B3I -fmt CS8 -tscale 2``: it replays the file at
+twice real time, so its CPU time is the figure) and prints the CPU ratio (issue 29: at most 1).
 
 ``run --mode deep|loose|tight|all`` (issue 13): the same file(s) through ``sdr-di run --mode
 MODE`` (``run_deep``: scalar start-up, hand-over, integration loop, solution files; the
@@ -286,10 +289,44 @@ def _run_gnss_sdr(path: Path, work: Path) -> dict | None:
             "n_sat": len(prns)}
 
 
+def _run_pocketsdr(exe: str, path: Path, tscale: float, work: Path) -> dict:
+    """PocketSDR's ``pocket_trk`` on ``path`` (an ``iq_int8`` file with its sidecar: ``-fmt
+    CS8``, ``-f`` the sample rate, ``-fo`` the carrier minus the IF), B3I, the sidecar's
+    satellites (``-sig B3I -prn``), the file replayed at ``tscale`` times real time (its
+    reader sleeps to keep that pace, so compare CPU, not wall), run in ``work`` (it writes a
+    ``.pocket_navdata.csv`` there): the process wall and CPU time,
+    the exit status, the locked channels of its last status screen and the end of its
+    output."""
+    import resource
+
+    meta = json.loads(Path(path).with_suffix(".json").read_text())
+    prns = [int(s["prn"]) for s in meta["satellites"]]
+    fo = (float(meta["carrier_hz"]) - float(meta.get("if_hz", 0.0))) / 1e6
+    cmd = [exe, "-sig", "B3I", "-prn", ",".join(map(str, prns)), "-fmt", "CS8",
+           "-f", f"{float(meta['sampling_rate_hz']) / 1e6:g}", "-fo", f"{fo:.6f}",
+           "-tscale", f"{tscale:g}", str(Path(path).resolve())]
+    work.mkdir(parents=True, exist_ok=True)
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    res = subprocess.run(cmd, cwd=work, check=False, capture_output=True, text=True,
+                         errors="replace")
+    wall = time.perf_counter() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    locks = re.findall(r"LOCK:\s*(\d+)/\s*(\d+)", res.stdout)  # status screens: locked/total
+    return {"wall_s": wall, "rc": res.returncode, "cmd": " ".join(cmd[:-1]) + " FILE",
+            "locked": f"{locks[-1][0]} of {locks[-1][1]}" if locks else "?",
+            "cpu_s": (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime),
+            "stdout_tail": res.stdout[-4000:], "n_sat": len(prns)}
+
+
 def bench_run(args: argparse.Namespace) -> None:
     """Scalar receiver real-time factor, per-stage shares and peak memory on default-scenario
     files (generated for each duration, or ``--if-file``); issue 17's target 2 per file, with
     GNSS-SDR's time on the same file when ``--gnss-sdr``."""
+    if args.pocketsdr and not (Path(args.pocketsdr).is_file()
+                               and os.access(args.pocketsdr, os.X_OK)):
+        raise SystemExit(f"bench.py: error: --pocketsdr {args.pocketsdr}: not an executable "
+                         "file")
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sdr-di-bench-"))
     try:
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
@@ -363,6 +400,18 @@ def bench_run(args: argparse.Namespace) -> None:
                       f"{g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, {g['tracked']} of "
                       f"{g['n_sat']} channels tracking, exit {g['rc']}; sdr-di / GNSS-SDR wall "
                       f"= {b['wall'] / g['wall_s']:.2f} (target <= {_RUN_TARGET_GNSS_SDR:g})")
+        if args.pocketsdr:
+            for f, b in best.items():
+                for _ in range(args.repeat):
+                    g = _run_pocketsdr(args.pocketsdr, f, args.pocketsdr_tscale,
+                                       out / "pocketsdr")
+                    print(f"  PocketSDR pocket_trk ({g['cmd']}) on the same file: "
+                          f"{g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, {g['locked']} "
+                          f"channels locked at the end, exit {g['rc']}; "
+                          f"sdr-di / pocket_trk CPU = {b['cpu'] / g['cpu_s']:.2f} (issue 29 "
+                          "target <= 1)")
+                if args.pocketsdr_show:
+                    print(g["stdout_tail"])
         if args.mode == "all":
             for f, b in best.items():
                 _print_target4(f, b, mode_best.get(f, {}), args.repeat)
@@ -390,6 +439,13 @@ def main(argv: list[str] | None = None) -> None:
                    help="quantization bits of the generated iq_int8 files (default 8)")
     r.add_argument("--gnss-sdr", action="store_true",
                    help="also time GNSS-SDR (scripts/gnss_sdr_b3i.conf) on each file")
+    r.add_argument("--pocketsdr", default=None, metavar="PATH",
+                   help="also run PocketSDR's pocket_trk (PATH) on the same file, --repeat "
+                   "times (CPU time side by side; issue 29)")
+    r.add_argument("--pocketsdr-tscale", type=float, default=2.0,
+                   help="pocket_trk's -tscale (replay speed, x real time; default 2)")
+    r.add_argument("--pocketsdr-show", action="store_true",
+                   help="print the end of pocket_trk's last status screen")
     r.add_argument("--out", default=None, help="work directory (default: a temp dir)")
     r.add_argument("--keep", action="store_true", help="keep the files")
     r.add_argument("--if-file", default=None,

@@ -16,10 +16,17 @@ first). Kernels:
 * ``table``: :func:`~sdr_di.receiver.correlator.correlate_table`, the public correlator API
   (float replica table, ``complex64``/``float32`` samples, input checks, bit windows packed
   at each call, result object);
-* ``receiver``: the same kernel
+* ``receiver``: the kernel entry
   (:func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_bits`) called as the scalar
   receiver and the deep loop call it: stored 4-bit-in-int8 samples, bit windows packed
-  once, one kernel call for all channels, NCO values given directly.
+  once, one kernel call for all channels, NCO values given directly. On ``int8`` samples it
+  runs the integer kernel (:mod:`~sdr_di.receiver._numba_correlate_int`);
+* ``recv_f32``: the same calls on the float32 kernel
+  (:func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_float`, the reference path,
+  what ``receiver`` ran before the integer kernel).
+
+``ns/s-ch`` is the CPU time per sample and channel [ns] (the three taps E, P, L and the
+wipe-off of one sample for one channel).
 
 ``run(args)`` is the entry point for a later ``scripts/bench.py correlate`` dispatcher; ``args``
 needs the attributes ``channels``, ``fs``, ``ms``, ``seconds``, ``threads`` and ``real``.
@@ -34,7 +41,7 @@ import time
 import numba
 import numpy as np
 
-from sdr_di.receiver._numba_correlate_bits import correlate_epl_bits
+from sdr_di.receiver._numba_correlate_bits import correlate_epl_bits, correlate_epl_float
 from sdr_di.receiver.correlator import (
     CODE_PAD,
     bit_windows,
@@ -62,7 +69,8 @@ def _one_rate(x: np.ndarray, table: np.ndarray, n_int: int, n_intervals: int, fs
 
 
 def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int: int,
-                       n_intervals: int, fs: float, rng: np.random.Generator) -> float:
+                       n_intervals: int, fs: float, rng: np.random.Generator,
+                       kernel=correlate_epl_bits) -> float:
     """The receiver's kernel on the same intervals (all channels in one call, as the bank)."""
     n_ch = bits.shape[0]
     n_comp = 2 if is_complex else 1
@@ -79,9 +87,8 @@ def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int
     t0 = time.perf_counter()
     for j in range(n_intervals):
         off = (j * n_int) % (n_x - n_int + 1)
-        correlate_epl_bits(xs, n_comp, bits, idx, CODE_PAD, 10230,
-                           np.full(n_ch, off, np.int64), nsamp, theta, dchip, phi, dphi,
-                           rot_re, rot_im, idx, 0.5, n_sub, out)
+        kernel(xs, n_comp, bits, idx, CODE_PAD, 10230, np.full(n_ch, off, np.int64), nsamp,
+               theta, dchip, phi, dphi, rot_re, rot_im, idx, 0.5, n_sub, out)
         theta = reduce_code_phase(theta + n_int * dchip, 10230)
         phi = phi + n_int * dphi
         phi -= np.floor(phi)
@@ -107,32 +114,37 @@ def run(args: argparse.Namespace) -> list[dict]:
     print(f"correlator: {n_ch} channels x E/P/L, {'real' if args.real else 'complex'} input, "
           f"fs = {fs / 1e6:g} MHz, {args.ms:g} ms intervals, {args.seconds:g} s of data")
     print(f"{'kernel':>8} {'threads':>7} {'wall s':>8} {'CPU s':>7} {'Msample-ch/s':>13} "
-          f"{'x real time':>12}")
+          f"{'x real time':>12} {'ns/s-ch':>8}")
     rows = []
     old = numba.get_num_threads()
     bits = bit_windows(table)
     xs = x.view(np.float32) if not args.real else x
     xs = np.clip(np.rint(xs * 2.5), -7, 7).astype(np.int8)  # 4-bit values stored in int8
     try:
-        for kernel in ("table", "receiver"):
+        for kernel in ("table", "receiver", "recv_f32"):
             for t in threads:
                 numba.set_num_threads(t)
                 if kernel == "table":
                     def one(n_iv):
                         return _one_rate(x, table, n_int, n_iv, fs, rng)
                 else:
-                    def one(n_iv):
+                    fn = correlate_epl_bits if kernel == "receiver" else correlate_epl_float
+
+                    def one(n_iv, fn=fn):
                         return _one_rate_receiver(xs, not args.real, bits, n_int, n_iv, fs,
-                                                  rng)
+                                                  rng, fn)
                 one(2)  # compile / warm up
                 c0 = time.thread_time() if t == 1 else time.process_time()
                 wall = one(n_intervals)
                 cpu = (time.thread_time() if t == 1 else time.process_time()) - c0
                 sc = n_intervals * n_int * n_ch / wall
                 rt = n_intervals * n_int / fs / wall
+                ns = cpu / (n_intervals * n_int * n_ch) * 1e9
                 rows.append({"kernel": kernel, "threads": t, "wall_s": wall, "cpu_s": cpu,
-                             "sample_channels_per_s": sc, "real_time_factor": rt})
-                print(f"{kernel:>8} {t:7d} {wall:8.3f} {cpu:7.3f} {sc / 1e6:13.1f} {rt:12.3f}")
+                             "sample_channels_per_s": sc, "real_time_factor": rt,
+                             "cpu_ns_per_sample_channel": ns})
+                print(f"{kernel:>8} {t:7d} {wall:8.3f} {cpu:7.3f} {sc / 1e6:13.1f} {rt:12.3f} "
+                      f"{ns:8.3f}")
     finally:
         numba.set_num_threads(old)
     return rows

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from sdr_di.errors import UnknownPrnError
+from sdr_di.receiver import _numba_correlate_bits
 from sdr_di.receiver._numba_correlate_bits import correlate_epl_bits, mean_power
 from sdr_di.receiver.correlator import (
     CARRIER_BLOCK,
@@ -23,6 +24,13 @@ L = 10230
 #: or a wrong rotation entry moves a sum by about one sample's magnitude, ~4e-3 of ``scale``
 #: at n = 50 000: 2000 times this tolerance.
 TOL = 2e-6
+
+
+@pytest.fixture(autouse=True)
+def _float_kernel(monkeypatch):
+    """These tests hold the float32 kernel to float64 references; int8 samples would take the
+    integer kernel, which has its own tests (tests/test_correlator_int.py)."""
+    monkeypatch.setattr(_numba_correlate_bits, "INTEGER_PATH", False)
 
 
 def reference_epl(x, codes, theta0, rate, phi0, fc, n, fs, d, start):

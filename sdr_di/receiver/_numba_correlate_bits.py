@@ -1,9 +1,14 @@
 """Numba kernel of the receiver's multi-channel early/prompt/late correlator.
 
-The one correlator kernel of the package: the scalar receiver's channel bank, acquisition
-refinement, the deep (vector) loop and the public API of :mod:`~sdr_di.receiver.correlator`
-(:func:`~sdr_di.receiver.correlator.correlate_table`, ``correlate``, ``Correlator``) all call
-:func:`correlate_epl_bits`. Plain arrays in and out; the NCO values are given per row.
+The scalar receiver's channel bank, acquisition refinement, the deep (vector) loop and the
+public API of :mod:`~sdr_di.receiver.correlator` (:func:`~sdr_di.receiver.correlator.
+correlate_table`, ``correlate``, ``Correlator``) all call :func:`correlate_epl_bits`, which
+runs the float32 kernel :func:`correlate_epl_float` described here, or, for ``int8``
+samples, its integer twin :func:`~sdr_di.receiver._numba_correlate_int.correlate_epl_int8`
+(same blocks, runs, bit windows and block phasor; int16 wipe-off with a rounded rotation
+table, sign-flip code, int32 sums: its module notes). :data:`INTEGER_PATH` (environment
+``SDR_DI_CORRELATOR=float``) forces the float32 kernel as the reference. Plain arrays in and
+out; the NCO values are given per row.
 
 For row ``r`` and sample ``k = 0 .. n_r - 1`` of its interval (sample ``start_r + k``):
 
@@ -81,9 +86,25 @@ float64 replica tables indexed per sample (1.6-1.9 ns for the sums alone).
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 from numba import njit, prange
+
+from ._numba_correlate_int import correlate_epl_int8, int_kernel_pays
+
+
+def _integer_path_from_env() -> bool:
+    v = os.environ.get("SDR_DI_CORRELATOR", "int").strip().lower()
+    if v not in ("int", "float", ""):
+        raise ValueError(f"SDR_DI_CORRELATOR must be 'int' or 'float', got {v!r}")
+    return v != "float"
+
+
+#: Use the integer kernel (:mod:`~sdr_di.receiver._numba_correlate_int`) for ``int8``
+#: samples. Environment ``SDR_DI_CORRELATOR=float`` (read at import) or setting this to
+#: False forces the float32 kernel for every input (the reference path).
+INTEGER_PATH = _integer_path_from_env()
 
 #: Entries of the padded table one run may span (two 64-bit words, minus a safety margin).
 _SPAN = 124.0
@@ -124,9 +145,27 @@ def _run_sums(lo, hi, br, bi, k, th0, dc, off, ae, ap, al):
     return s1, s2, s3, s4, s5, s6
 
 
+def correlate_epl_bits(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, theta0, dchip,
+                       phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out) -> None:
+    """E/P/L sums of every row into ``out`` (arguments: :func:`correlate_epl_float`).
+
+    Runs the integer kernel :func:`~sdr_di.receiver._numba_correlate_int.correlate_epl_int8`
+    for ``int8`` samples when :data:`INTEGER_PATH` is set (the default) and every row's runs
+    are long enough for it to be the faster one (:func:`~sdr_di.receiver.
+    _numba_correlate_int.int_kernel_pays`: code step at most about 0.9 chip per sample, i.e.
+    B3I sampled at 11 MHz or more), else the float32 kernel :func:`correlate_epl_float`."""
+    if (INTEGER_PATH and xs.dtype == np.int8 and dchip.size
+            and int_kernel_pays(spacing, float(dchip.max()))):
+        correlate_epl_int8(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, theta0,
+                           dchip, phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out)
+    else:
+        correlate_epl_float(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, theta0,
+                            dchip, phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out)
+
+
 @njit(cache=True, nogil=True, parallel=True, fastmath={"reassoc", "contract"},
       boundscheck=False)
-def correlate_epl_bits(
+def correlate_epl_float(
     xs,  # int8/int16/float32/float64 (n * n_comp,): stored samples, I/Q interleaved when n_comp == 2
     n_comp,  # int: 2 (complex, interleaved I, Q) or 1 (real)
     bits,  # uint64 (n_tab, >= L + 2 M + 64): bit windows of the padded tables (module notes)

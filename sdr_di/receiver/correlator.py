@@ -28,6 +28,9 @@ float32 wipe-off products and sums within a block added in float64 (a rounding e
 Kernel: :func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_bits` (replicas as bit
 windows, :func:`bit_windows`), the same kernel the scalar receiver, acquisition and the deep
 loop call on stored samples; complex samples reach it as their float view (no copy).
+``int8`` samples at 11 MHz or more take its integer twin
+(:mod:`~sdr_di.receiver._numba_correlate_int`: the rotation table rounded to integers at
+scale 127, about 2e-5 dB of SNR; ``SDR_DI_CORRELATOR=float`` forces the float32 kernel).
 :class:`Correlator` caches the bit windows of its table per PRN list; :func:`correlate_table`
 packs them at each call (~0.1 ms for 7 channels).
 """
