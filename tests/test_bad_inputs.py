@@ -228,6 +228,18 @@ CASES: list[tuple] = [
     ("run-scalar-assume", ["run", "{d}/set/s.bin", "--assume", "{d}/assume_osc.toml"]),
     ("run-deep-assume-bad", ["run", "{d}/set/s.bin", "--mode", "deep", "--no-progress",
                              "--assume", "{d}/assume_neg_h.toml", "--out", "{d}/o"]),
+    # -- SigMF recordings (issue 28) -----------------------------------------------------------
+    ("run-sigmf-datatype-cu8", ["run", "{d}/sigmf/cu8.sigmf-meta"]),
+    ("acquire-sigmf-datatype-big-endian", ["acquire", "{d}/sigmf/ci16_be.sigmf-data"]),
+    ("run-sigmf-gps-l1-centre", ["run", "{d}/sigmf/l1.sigmf-meta"]),
+    ("acquire-sigmf-b3i-0.7mhz-off", ["acquire", "{d}/sigmf/off.sigmf-meta"]),
+    ("run-sigmf-two-frequencies", ["run", "{d}/sigmf/two.sigmf-meta", "--mode", "deep"]),
+    ("run-sigmf-invalid-meta", ["run", "{d}/sigmf/invalid.sigmf-meta"]),
+    ("acquire-sigmf-no-frequency", ["acquire", "{d}/sigmf/nofreq"]),
+    ("run-sigmf-archive", ["run", "{d}/sigmf/rec.sigmf"]),
+    ("generate-sigmf-iq-int4", [*GD, "--format", "iq_int4", "--sigmf", "--out", "{d}/o"]),
+    ("generate-sigmf-real-if-0.2mhz", [*GD, "--format", "real_int8", "--if", "0.2e6",
+                                       "--sigmf", "--out", "{d}/o"]),
     ("generate-assume", [*GD, "--assume", "{d}/assume_osc.toml", "--out", "{d}/o"]),
     ("generate-oscillator-preset", [*GD, "--scenario", "{d}/osc_preset.toml", "--out",
                                    "{d}/o"]),
@@ -397,6 +409,7 @@ def make_workdir(d: Path, generated: Path) -> None:
         '[study]\nname = "t"\nfilters = ["ekf", "ff-aukf"]\nruns = 1\n[[cells]]\n'
         'name = "baseline"\n[[cells]]\nname = "imu-typo"\n'
         'truth = { "imu.accel_random_walk_mps_sqrthz" = 0.5 }\n')
+    _sigmf_pairs(d / "sigmf")
     for name, text in (("assume_grade", '[imu]\ngrade = "consumer"\n'),
                        ("assume_neg_h", '[oscillator]\npreset = "tcxo"\nh0 = -2e-19\n'),
                        ("assume_key", "[initial_errors]\nheading_deg = 20\n"),
@@ -420,6 +433,30 @@ def make_workdir(d: Path, generated: Path) -> None:
                                ("res_types", "result.json", '{"status": 5, "tables": 3}')):
         (d / folder).mkdir()
         (d / folder / name).write_text(text)
+
+
+def _sigmf_pairs(d: Path) -> None:
+    """SigMF pairs (metadata written as JSON here, 2000 bytes of data) that sdr-di refuses."""
+    from sdr_di.constants import F_B3I
+
+    d.mkdir()
+    (d / "rec.sigmf").write_bytes(b"\x00" * 512)  # an archive (a tar file): not read
+    for name, datatype, caps in (
+            ("cu8", "cu8", [{"core:frequency": F_B3I}]),
+            ("ci16_be", "ci16_be", [{"core:frequency": F_B3I}]),
+            ("l1", "ci8", [{"core:frequency": 1575.42e6}]),
+            ("off", "ci8", [{"core:frequency": F_B3I + 0.7e6}]),  # IF -0.7 MHz at 2.5 MHz
+            ("two", "ci8", [{"core:frequency": F_B3I},
+                            {"core:sample_start": 500, "core:frequency": F_B3I + 1e5}]),
+            ("nofreq", "ci8", [{"core:datetime": "2020-01-01T00:00:00Z"}]),
+            ("invalid", "ci8", [{"core:frequency": F_B3I}])):
+        glob = {"core:datatype": datatype, "core:sample_rate": 2.5e6, "core:version": "1.2.0"}
+        if name == "invalid":
+            glob["core:sample_rate"] = "fast"
+        caps = [{"core:sample_start": 0, **c} for c in caps]
+        (d / f"{name}.sigmf-meta").write_text(json.dumps(
+            {"global": glob, "captures": caps, "annotations": []}))
+        (d / f"{name}.sigmf-data").write_bytes(bytes(range(250)) * 8)
 
 
 def _snapshot(d: Path) -> set[str]:
