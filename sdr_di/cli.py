@@ -846,14 +846,20 @@ def main(argv: list[str] | None = None) -> int:
     shown = warnings.showwarning
     warnings.showwarning = _show_warning
     try:
+        argv = list(sys.argv[1:] if argv is None else argv)
+        if argv[:1] in (["run"], ["generate"]) and not {"--no-progress", "-h", "--help"} & {
+                a.split("=")[0] for a in argv}:  # before build_parser: it imports numba
+            _show_status("sdr-di: loading the signal-processing kernels ...")
         parser = build_parser()
-        argv = attach_negative_values(list(sys.argv[1:] if argv is None else argv))
+        argv = attach_negative_values(argv)
         args = parser.parse_args(argv)
         return args.func(args)
     except SdrDiError as exc:
+        _clear_status()
         print(f"sdr-di: error: {_one_line(str(exc))}", file=sys.stderr)
         return getattr(exc, "exit_status", 2)
     except KeyboardInterrupt:
+        _clear_status()
         _quiet_after_interrupt()
         print("sdr-di: interrupted", file=sys.stderr)
         return 130
@@ -861,9 +867,33 @@ def main(argv: list[str] | None = None) -> int:
         warnings.showwarning = shown
 
 
+#: A status line is on the terminal, to be overwritten (by the first progress bar) or cleared.
+_status_shown = False
+
+
+def _show_status(text: str) -> None:
+    """``text`` on stderr at once, without a newline, when stderr is a terminal: the first
+    thing a user sees while the numba kernels load (issue 28 item 4); the first progress bar
+    (``\\r``, full width) overwrites it."""
+    global _status_shown
+    if sys.stderr.isatty():
+        sys.stderr.write(text + "\r")
+        sys.stderr.flush()
+        _status_shown = True
+
+
+def _clear_status() -> None:
+    """Clear the status line of :func:`_show_status` before a message is printed over it."""
+    global _status_shown
+    if _status_shown:
+        sys.stderr.write("\r\033[K")
+        _status_shown = False
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """Every warning the CLI shows as one line ``sdr-di: warning: ...`` on stderr (no source
     file, line number or quoted code: they point into sdr-di, not at what the user gave)."""
+    _clear_status()
     print(f"sdr-di: warning: {_one_line(str(message))}", file=file or sys.stderr)
 
 
