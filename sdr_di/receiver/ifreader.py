@@ -80,6 +80,7 @@ naming the file)
 
 from __future__ import annotations
 
+import collections
 import functools
 import math
 import os
@@ -234,6 +235,10 @@ class IfSource:
         self.read_ahead = True
         self._pool = None
         self._ahead: tuple | None = None
+        # the end of the last read, and the overlaps the caller's last 8 reads asked for
+        # again (samples): the read-ahead starts twice the largest before the end
+        self._prev_end: int | None = None
+        self._overlaps: collections.deque[int] = collections.deque(maxlen=8)
 
         try:
             size = self.path.stat().st_size
@@ -443,9 +448,11 @@ class IfSource:
         Notes
         -----
         **Read-ahead** (:attr:`read_ahead`, default True): after each call, a background
-        thread reads the next ``1.5 n`` samples from ``n / 2`` before this call's end, the
-        range the receivers' sequential chunk reads ask for next (they re-read an overlap of
-        up to two coherent blocks). A later call inside that range is served from it, so
+        thread reads the next ``n + b`` samples from ``b`` before this call's end, the
+        range the receivers' sequential chunk reads ask for next: they re-read an overlap of
+        up to two coherent blocks, and ``b`` is twice the largest overlap of the last 8 calls
+        (``n / 2`` at most, and before any overlap was seen), so the file is read about once
+        rather than 1.5 times. A later call inside that range is served from it, so
         the file read overlaps the caller's correlation (the read releases the GIL, as do
         the correlator kernels); any other call reads synchronously and drops it. The values
         are the same either way.
@@ -466,9 +473,14 @@ class IfSource:
 
     def _after_read(self, start_sample: int, n: int, n_comp: int) -> None:
         """Schedule the read-ahead after a read of ``[start_sample, start_sample + n)``."""
-        if self.read_ahead and n > 0 and start_sample + n < self._n:
-            a0 = start_sample + n - n // 2
-            self._schedule_ahead(a0, min(n + n // 2, self._n - a0), n_comp)
+        end = start_sample + n
+        if self._prev_end is not None and start_sample <= self._prev_end:
+            self._overlaps.append(self._prev_end - start_sample)
+        self._prev_end = end
+        if self.read_ahead and n > 0 and end < self._n:
+            back = min(n // 2, 2 * max(self._overlaps)) if self._overlaps else n // 2
+            a0 = end - back
+            self._schedule_ahead(a0, min(n + back, self._n - a0), n_comp)
 
     def read_stored_power(self, start_sample: int, n: int) -> tuple[np.ndarray, int, float]:
         """:meth:`read_stored` and the mean power per sample of the values it returns
