@@ -44,8 +44,14 @@ def _check_figures(figures) -> dict:
     return out
 
 
-def execute_run(experiment: Experiment, params: dict, seed: int, index: int) -> dict:
+def execute_run(experiment: Experiment, params: dict, seed: int, index: int,
+                tmp_root: Path | None = None) -> dict:
     """Run ``experiment`` once with ``seed``; never raises for an error inside the run.
+
+    The run works in a temporary folder under ``tmp_root`` (default: the system's temporary
+    folder), removed when the run ends. A study passes a folder of its own output set
+    (its file cache), which it removes when it completes, so that a worker killed in the
+    middle of a run (cluster shut down, Ctrl-C) leaves nothing in the system's folder.
 
     Returns
     -------
@@ -56,7 +62,7 @@ def execute_run(experiment: Experiment, params: dict, seed: int, index: int) -> 
     """
     t0 = time.perf_counter()
     rec: dict = {"index": int(index), "seed": int(seed), "host": socket.gethostname()}
-    with tempfile.TemporaryDirectory(prefix="sdr-di-run-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="sdr-di-run-", dir=tmp_root) as tmp:
         try:
             rec["figures"] = _check_figures(experiment.run(dict(params), int(seed), Path(tmp)))
             rec["status"] = "ok"

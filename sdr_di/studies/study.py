@@ -63,10 +63,19 @@ __all__ = ["StudyResult", "execute_cell_run", "run_study", "summarize_study"]
 
 
 def execute_cell_run(exp, params: dict, seed: int, index: int, cache_dir: str | None) -> dict:
-    """:func:`~.execute.execute_run` with the study's file cache set for this task."""
+    """:func:`~.execute.execute_run` with the study's file cache set for this task, and its
+    temporary folder in ``cache_dir/tmp`` (removed with the cache when the study completes;
+    the system's temporary folder where ``cache_dir`` cannot be made on this worker)."""
     token = FILE_CACHE.set(Path(cache_dir) if cache_dir else None)
+    tmp_root = None
+    if cache_dir:
+        try:
+            tmp_root = Path(cache_dir) / "tmp"
+            tmp_root.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            tmp_root = None
     try:
-        return execute_run(exp, params, seed, index)
+        return execute_run(exp, params, seed, index, tmp_root)
     finally:
         FILE_CACHE.reset(token)
 
