@@ -346,36 +346,24 @@ def dll_code_noise_chips(cn0_dbhz: float, coherent_s: float, dll_bw_hz: float,
     return math.sqrt(k * var_d / (2.0 - k))
 
 
-#: Mean age [s] of a scalar channel's reported Doppler (the carrier loop's frequency
-#: integrator, held over a 10 ms coherent block) at an output epoch, measured against the
-#: generator's truth Doppler (default scenario, 2.5 MHz, 40 dB-Hz, seed 0, 7 D1 channels,
-#: 1960 channel-epochs): regression of the Doppler error on the truth Doppler's rate and
-#: its second derivative gives 2.0 ms (2-20 s) and 2.3 ms (circling, 20-30 s).
-PLL_RATE_LAG_S = 2.0e-3
 
-
-def pll_rate_dynamic_error(pll_bw_hz: float) -> tuple[float, float]:
+def pll_rate_dynamic_error(pll_bw_hz: float) -> float:
     """Dynamic error of the Doppler a scalar channel reports (its 3rd-order loop's frequency
-    integrator ``vel_hz``): ``f_reported ~ f(t) - lag f'(t) - k f''(t)``.
+    integrator ``vel_hz``, carried to the observation's sample with the loop's rate):
+    ``f_reported ~ f(t) - k f''(t)``, returns ``k = b3 / w0^2`` [s^2].
 
-    ``k = b3 / w0^2``: under a constant frequency acceleration ``f''`` the loop settles at the
-    phase error ``f'' / w0^3`` [cycles], which its proportional path ``b3 w0`` adds to the NCO
-    frequency and which is therefore missing from ``vel_hz``. ``lag``: :data:`PLL_RATE_LAG_S`
-    (measured; the integrator's age within the coherent block).
+    Under a constant frequency acceleration ``f''`` [Hz/s^2] the loop settles at the phase
+    error ``f'' / w0^3`` [cycles]; its proportional path ``b3 w0`` adds that to the NCO
+    frequency, so it is missing from ``vel_hz``. 6.6e-3 s^2 at 15 Hz (1.5 cm/s at a
+    line-of-sight jerk of 2.5 m/s^3, the default scenario's circling); measured against the
+    generator's truth Doppler (seed 0, 2.5 MHz, 40 dB-Hz): 6.1e-3 and 6.9e-3 s^2.
 
     Parameters
     ----------
     pll_bw_hz : float
         PLL noise bandwidth [Hz] (> 0).
-
-    Returns
-    -------
-    lag_s : float
-        Time lag [s].
-    k_s2 : float
-        Second-derivative coefficient [s^2] (6.6e-3 s^2 at 15 Hz; measured 6.1e-3 and 6.9e-3).
     """
     if not pll_bw_hz > 0:
         raise ValueError(f"pll_rate_dynamic_error needs pll_bw_hz > 0, got {pll_bw_hz!r}")
     w0 = pll_natural_frequency(pll_bw_hz)
-    return PLL_RATE_LAG_S, PLL3_B3 / (w0 * w0)
+    return PLL3_B3 / (w0 * w0)
