@@ -17,6 +17,19 @@ instant (over 20 ms, 0.2 mm of position and well below 1 mm/s of velocity at 3 m
 the measurement is applied at the interval's end, where the filter's error state is (it
 changes by far less than the measurement noise in 20 ms).
 
+Rates under dynamics (issue 25): a scalar channel's Doppler is its 3rd-order PLL's
+frequency integrator, carried to the observation's sample with the loop's rate
+(:meth:`~sdr_di.receiver.channel.Channel.observation_at`); under a line-of-sight jerk it
+misses the loop's settled phase error times its proportional gain, ``f - k f''`` with
+``k = b3 / w0^2`` (6.6e-3 s^2 at 15 Hz, :func:`~sdr_di.receiver.loops.
+pll_rate_dynamic_error`; 1.5 cm/s at the circling's 2.5 m/s^3). The same on every channel
+apart from the line of sight, so the filter cannot see it in its innovations; it made the
+velocity NEES 7 (tight) and 6.5 (loose) at 40 dB-Hz. Both sources compare the rates (tight)
+or the fix's velocity (loose) with the INS velocity modelled through the loop,
+``v_n - k j_n`` (:meth:`ScalarEpochSource.loop_velocity`), the jerk from the INS's own
+accelerations over the last 0.2 s (the per-interval velocity change, which the filter's
+feedback does not step).
+
 Screening and innovation gate (loose and tight; deep has its own, in its pre-filters): the
 scalar receiver keeps a channel in its observables until its lock detector declares the
 loss, a few hundred ms after the signal is gone; over those epochs the channel's Doppler,
@@ -47,6 +60,7 @@ epochs, when ``z`` is None and the filter only predicts.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
 import math
@@ -57,11 +71,16 @@ import numpy as np
 
 from ..constants import C_LIGHT, SECONDS_PER_WEEK
 from ..errors import SdrDiError
+from ..receiver.loops import pll_rate_dynamic_error
 from ..receiver.observables import Observables
 from ..receiver.pvt import PvtEngine, PvtSolution, SatelliteStates, satellite_states
 from .loop import IntegrationLoop, Interval, Measurements
 
 __all__ = ["GnssEpoch", "GnssEpochRecorder", "ScalarEpochSource"]
+
+#: Window [s] and length [intervals] of the INS acceleration history for the loops' rate model.
+LOOP_ACC_WINDOW_S = 0.2
+LOOP_ACC_INTERVALS = 16
 
 
 @functools.lru_cache(maxsize=64)
@@ -243,6 +262,8 @@ class ScalarEpochSource:
         self.n_screened = 0              # channel-epochs (tight) / fixes (loose) screened out
         self.n_gated = 0                 # channel-epochs (tight) / fixes (loose) gated out
         self.navigation: dict = {"ephemerides": {}, "ionosphere": []}
+        #: INS acceleration of the latest intervals: (mid time [s, IMU], a_n [m/s^2]).
+        self._acc: collections.deque = collections.deque(maxlen=LOOP_ACC_INTERVALS)
 
     def detach_epochs(self) -> tuple:
         """Take the epoch list and its wait away (to pickle the source); returns them for
@@ -280,6 +301,22 @@ class ScalarEpochSource:
         a = min(max((t_imu - t0) / (t1 - t0), 0.0), 1.0)
         n0, n1 = iv.nav0, iv.nav1
         return n0.llh + a * (n1.llh - n0.llh), n0.v_n + a * (n1.v_n - n0.v_n)
+
+    def loop_velocity(self, v_n: np.ndarray, t_imu: float, pll_bw_hz: float) -> np.ndarray:
+        """The velocity [m/s, ENU] the scalar loops' rates stand for at IMU time ``t_imu``:
+        ``v_n - k j_n`` (module notes, *Rates under dynamics*; ``k``:
+        :func:`~sdr_di.receiver.loops.pll_rate_dynamic_error`), the jerk ``j_n`` the slope of
+        a straight-line fit to the INS's interval accelerations over the last
+        ``LOOP_ACC_WINDOW_S``; ``v_n`` unchanged with fewer than 3 intervals."""
+        k = pll_rate_dynamic_error(pll_bw_hz)
+        rows = [(t, a) for t, a in self._acc if t_imu - LOOP_ACC_WINDOW_S <= t <= t_imu + 0.05]
+        if len(rows) < 3:
+            return v_n
+        dt = np.array([t for t, _ in rows]) - t_imu
+        A = np.array([a for _, a in rows])
+        X = np.c_[np.ones(dt.size), dt]
+        (_, j), *_ = np.linalg.lstsq(X, A, rcond=None)
+        return v_n - k * j
 
     def _take_epoch(self, loop: IntegrationLoop, iv: Interval) -> GnssEpoch | None:
         """The latest epoch whose BDT falls in the interval's IMU span; earlier ones are
@@ -355,6 +392,10 @@ class ScalarEpochSource:
         """The interval's measurement (None ``z`` between epochs)."""
         ta = time.perf_counter()
         wait0 = self.profile.get("epoch_wait", 0.0)
+        if iv.nav0 is not None and iv.nav1 is not None:
+            t0, t1 = self.imu_t[iv.i0], self.imu_t[iv.i1]
+            if t1 > t0:
+                self._acc.append((0.5 * (t0 + t1), (iv.nav1.v_n - iv.nav0.v_n) / (t1 - t0)))
         ep = self._take_epoch(loop, iv)
         m = None
         if ep is not None:

@@ -132,7 +132,9 @@ class LooseFixSource(ScalarEpochSource):
             self.n_screened += 1
             return Measurements(z=None, R=None, geometry=(),
                                 used=np.zeros(self.n_channels, bool))
-        llh, v_n = self.ins_at(iv, self.imu_time(sol.week, sol.sow))
+        t_imu = self.imu_time(sol.week, sol.sow)
+        llh, v_n = self.ins_at(iv, t_imu)
+        v_n = self.loop_velocity(v_n, t_imu, self.tracking_config.track_pll_bw_hz)
         z = loose_measurement(llh, v_n, sol.llh, sol.v_n)
         col = {int(p): i for i, p in enumerate(ep.obs.prn)}
         cn0 = np.array([ep.obs.cn0_dbhz[col[int(p)]] for p in sol.prns], float)

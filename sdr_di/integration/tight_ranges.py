@@ -134,7 +134,10 @@ class TightRangeSource(ScalarEpochSource):
         llh, v_n = self.ins_at(iv, self.imu_time(week, sow))
         r = llh_to_ecef(*llh)
         v = C_e_n(llh[0], llh[1]).T @ v_n
-        P, D, U, el = modelled_observables(sat, idx, r, v, b, d, sow, ep.iono, cfg)
+        P, _, U, el = modelled_observables(sat, idx, r, v, b, d, sow, ep.iono, cfg)
+        v_loop = C_e_n(llh[0], llh[1]).T @ self.loop_velocity(
+            v_n, self.imu_time(week, sow), self.tracking_config.track_pll_bw_hz)
+        D = modelled_observables(sat, idx, r, v_loop, b, d, sow, ep.iono, cfg)[1]
         keep = el >= np.radians(cfg.elevation_mask_deg)
         if not keep.any():
             return none

@@ -336,7 +336,11 @@ class Channel:
         dphi = (self.if_hz + fd) / fs
         ddop = fd / fs
         f_est = self.carrier.vel_hz if self.state != ChannelState.LOST else fd
+        f_rate = self.carrier.acc_hz_s if self.state != ChannelState.LOST else 0.0
         start = self.next_start
+        # the loop's frequency integrator holds the Doppler at the middle of the block it
+        # steers (module notes); the observations extrapolate from there with its rate
+        f_mid = start + 0.5 * m * _LF * fs / rate
         th = self.theta
         ph = self.phi
         dph = self.dphase
@@ -357,7 +361,7 @@ class Channel:
             block.append(row)
             block.append((start, n if n < NOISE_SAMPLES else NOISE_SAMPLES,
                           noise_code_phase(th, ep), dchip, ph, dphi))
-            hist[ep % _HIST] = (start, th, rate, dph, fd, ep, f_est)
+            hist[ep % _HIST] = (start, th, rate, dph, fd, ep, f_est, f_rate, f_mid)
             th = th + n * dchip - _LF
             if th < 0.0:
                 th = 0.0
@@ -779,7 +783,7 @@ class Channel:
         h = self._hist[self.epoch % _HIST]
         if h is None:
             return None
-        start, th, rate, _, _, ep, _ = h
+        start, th, rate, _, _, ep, *_ = h
         return start + ((epoch - ep) * _LF - th) * self.fs / rate
 
     def _synced_subframe(self) -> None:
@@ -916,7 +920,8 @@ class Channel:
                 break
         if h is None:
             raise ValueError(f"PRN {self.prn}: sample {s} is older than the NCO history")
-        start, th, rate, dph, fd, ep, f_est = h
+        start, th, rate, dph, fd, ep, f_est, f_rate, f_mid = h
+        f_est += f_rate * (s - f_mid) / self.fs
         chips = th + (s - start) * rate / self.fs
         wraps = math.floor(chips / _LF)
         code_phase = chips - wraps * _LF

@@ -97,7 +97,12 @@ class ChannelObservation:
     doppler_hz : float
         Carrier Doppler estimate [Hz]: the carrier loop's frequency integrator (the NCO
         frequency minus the IF, without the proportional phase-correction term that makes
-        the NCO frequency itself jitter by ~0.5 Hz at 40 dB-Hz).
+        the NCO frequency itself jitter by ~0.5 Hz at 40 dB-Hz), which holds the Doppler at
+        the middle of the coherent block it steers, carried to ``sample_index`` with the
+        loop's frequency-rate integrator (held as it was, it would be off by the rate times
+        up to half a block: 0.045 m/s at 9 m/s^2 and 5 ms). Left in it: the third-order
+        loop's dynamic-stress error ``B3 / w0^2`` times the line-of-sight jerk (0.0066 s^2
+        at 15 Hz: 0.02 m/s in the default scenario's circling), docs/coupling.md.
     carrier_phase_cycles : float
         Accumulated carrier phase (integral of the Doppler) [cycles].
     cn0_dbhz : float
