@@ -338,13 +338,14 @@ def test_deep_ekf_position_is_unbiased(gen26, capsys):
     m = summ["metrics"]
     assert m["pos_m_rmse"] < 0.3, m
     assert m["vel_mps_rmse"] < 0.02, m
-    # consistency (issue 25): the code-block NIS per degree of freedom of a deep EKF run
-    # within [0.8, 1.25] (measured 1.005 on a 24 s file); the rate block is being
-    # calibrated (0.19 measured), so it is only checked to be there. Formal 1-sigma columns
-    # at the end of the rows.
+    # consistency (issue 25): the NIS per degree of freedom of both blocks of a deep EKF
+    # run within [0.8, 1.25], the issue's band (8-seed means, docs/notes/consistency.md:
+    # code 1.04, rate 0.90 at 40 dB-Hz; the rate block was 0.18-0.19 with the pre-filters'
+    # design covariance as R). Formal 1-sigma columns at the end of the rows.
     c = summ["consistency"]
     assert set(c) == {"band_rule", "nis_code", "nis_rate", "nees_pos", "nees_vel", "nees_att"}
     assert 0.8 <= c["nis_code"]["value"] <= 1.25, c["nis_code"]
+    assert 0.8 <= c["nis_rate"]["value"] <= 1.25, c["nis_rate"]
     assert c["nis_rate"]["n"] == c["nis_code"]["n"] > 100
     assert c["nees_pos"]["n"] == m["n"]
     head = (out / "default_deep.csv").read_text().splitlines()[1].split(",")
