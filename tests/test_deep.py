@@ -501,3 +501,34 @@ def test_iono_wait_option_reaches_the_handover_rule(gen26, tmp_path, monkeypatch
             main(["run", str(gen26 / "default.bin"), "--mode", mode, "--no-progress",
                   "--out", str(tmp_path / "o"), *extra])
         assert seen[-1].iono_wait_s == want and seen[-1].mode == mode
+
+
+@pytest.mark.slow
+def test_deep_run_from_a_kept_start_up_equals_a_run_from_sample_zero(gen26):
+    """A study's filters on one file share the scalar start-up (``DeepStart``): a run
+    continued from the state kept at the hand-over gives the same solution as the run that
+    kept it, to the bit (so that run's vector loop did not touch the kept copy), and a start
+    is refused by a run on another span of the file."""
+    from sdr_di.integration.receiver import DeepStart
+    from sdr_di.io.imu_files import read_imu, read_truth
+    from sdr_di.receiver.run_scalar import open_source
+
+    src = open_source(gen26 / "default.bin")
+    imu = read_imu(gen26 / "default_imu.csv")
+    truth = read_truth(gen26 / "default_truth.csv")[0]
+    nav = load_nav(NAV)
+    meta = json.loads((gen26 / "default.json").read_text())
+    prns = [int(s["prn"]) for s in meta["satellites"]]
+    first = IntegratedReceiver(IntegrationConfig(filter="ekf"))
+    a = first.run(src, imu, prns=prns, nav=nav, truth=truth, keep_start=True)
+    start = first.deep_start
+    assert isinstance(start, DeepStart) and start.scalar_s > 0
+    again = IntegratedReceiver(IntegrationConfig(filter="ekf"))
+    b = again.run(src, imu, prns=prns, nav=nav, truth=truth, start=start)
+    assert again.profile["scalar"] < 0.5 * first.profile["scalar"]
+    assert b.handover_s == a.handover_s and b.prns == a.prns
+    for name in ("t", "llh", "v_n", "att", "pos_err", "sd", "nees", "cn0_dbhz", "used"):
+        assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
+    with pytest.raises(ValueError, match="start-up state"):
+        IntegratedReceiver(IntegrationConfig(filter="ekf")).run(
+            src, imu, prns=prns, nav=nav, truth=truth, start=start, duration_s=20.0)

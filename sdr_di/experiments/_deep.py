@@ -217,7 +217,8 @@ class Inputs:
     nav: Any
     prns: list[int]
     paths: dict
-
+    #: deep start-up states at the hand-over, by hand-over rule (:func:`run_deep_variant`)
+    deep_starts: dict = dataclasses.field(default_factory=dict)
 
 
 #: Folder of the generated-file cache of the current task (``None``: generate into a private
@@ -376,6 +377,12 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     configuration as ``--assume`` is. ``config`` are further
     :class:`~sdr_di.integration.receiver.IntegrationConfig` fields.
 
+    Deep mode runs the scalar start-up once per ``inputs`` and hand-over rule: the first
+    run keeps its state at the hand-over (``inputs.deep_starts``) and the next ones continue
+    from a copy of it, with the same results as their own start-up would give
+    (:class:`~sdr_di.integration.receiver.DeepStart`); a study's filters on one file share
+    it.
+
     Exceptions of the package (:class:`~sdr_di.errors.SdrDiError`) and numerical failures
     (``ValueError``, ``FloatingPointError``, ``numpy.linalg.LinAlgError``) are returned as
     ``error`` text, not raised: a filter that fails is a result of the experiment.
@@ -394,12 +401,20 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
 
             cfg = apply_to_deep(cfg, a)
         rx = IntegratedReceiver(cfg, scalar=scalar)
-        res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
-                     truth=inputs.truth)
+        rule = (cfg.handover_wait_s, cfg.iono_wait_s) if cfg.mode == "deep" else None
+        start = inputs.deep_starts.get(rule)
+        try:
+            res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
+                         truth=inputs.truth, start=start,
+                         keep_start=rule is not None and start is None)
+        finally:          # kept also when this filter fails after the hand-over
+            if rx.deep_start is not None:
+                inputs.deep_starts[rule] = rx.deep_start
     except (SdrDiError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return DeepRun(filter_name, None, f"{type(exc).__name__}: {exc}", -1)
     k_h = round(res.handover_s * inputs.source.sampling_rate_hz)
-    after = sum(1 for s in scalar.acquisition_samples if s >= k_h)
+    # the start-up receiver that ran this run's hand-over (a copy of it when resumed)
+    after = sum(1 for s in rx.scalar.acquisition_samples if s >= k_h)
     return DeepRun(filter_name, res, None, after)
 
 

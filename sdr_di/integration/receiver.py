@@ -100,6 +100,7 @@ Decisions
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 import warnings
@@ -133,8 +134,44 @@ from .filter_setup import check_filter, make_integration_filter
 from .handover import (HandoverError, handover_channels, handover_span_s,
                        offer_subframe_klobuchar)
 
-__all__ = ["MODES", "HandoverError", "IntegratedReceiver", "IntegrationConfig",
+__all__ = ["MODES", "DeepStart", "HandoverError", "IntegratedReceiver", "IntegrationConfig",
            "IntegrationResult", "check_imu_span"]
+
+
+@dataclasses.dataclass
+class DeepStart:
+    """The scalar start-up's state at the deep hand-over, kept to run other filters from it.
+
+    Deep mode's start-up (acquisition, scalar loops, decoding, the fixes up to the
+    hand-over) does not depend on the integration filter, its rate or its assumptions: only
+    on the IF data, the PRNs searched, the assistance data, the span processed and the
+    hand-over rule (``handover_wait_s``, ``iono_wait_s``). A study runs several filters on
+    one file; :meth:`IntegratedReceiver.run` with ``keep_start=True`` keeps a copy of the
+    state at the hand-over (:attr:`IntegratedReceiver.deep_start`) and ``start=`` continues
+    another run from a fresh copy of it, with the same results as a run from sample 0 (the
+    start-up is deterministic; tested in ``tests/test_deep.py``). ``key`` holds what
+    the start-up depended on; a start given to a run that differs in any of it is refused.
+
+    Attributes
+    ----------
+    key : tuple
+        IF path, samples processed, PRNs, assistance, hand-over rule.
+    nav : object
+        The assistance navigation data the start-up took (compared by identity).
+    state : tuple
+        ``(scalar receiver, PVT engine, navigation data in force, hand-over record)``.
+    scalar_s : float
+        Wall time of the start-up that made it [s].
+    """
+
+    key: tuple
+    nav: object
+    state: tuple
+    scalar_s: float
+
+    def copy_for(self, source: IfSource) -> tuple:
+        """A fresh deep copy of :attr:`state` (the source itself is shared, not copied)."""
+        return copy.deepcopy(self.state, memo={id(source): source})
 
 
 @dataclasses.dataclass
@@ -263,12 +300,15 @@ class IntegratedReceiver:
         self.config = config or IntegrationConfig()
         self.scalar = scalar or ScalarReceiver(log=False)
         self.profile: dict = {}
+        #: the start-up state kept by :meth:`run` with ``keep_start=True``
+        self.deep_start: DeepStart | None = None
 
     # ------------------------------------------------------------------------------------
     def run(self, source: IfSource, imu, *, prns=None, nav=None, truth=None,
             progress: Callable[[float, int, int], None] | None = None,
             duration_s: float | None = None,
-            assist: dict[int, float | None] | None = None) -> IntegrationResult:
+            assist: dict[int, float | None] | None = None,
+            start: DeepStart | None = None, keep_start: bool = False) -> IntegrationResult:
         """Run the deep receiver over ``source`` with the IMU record ``imu``.
 
         Parameters
@@ -294,6 +334,12 @@ class IntegratedReceiver:
             :meth:`~sdr_di.receiver.scalar.ScalarReceiver.run` takes it (the sidecar's list
             in ``sdr-di run``, the same search as scalar mode's); None: a cold search of
             ``prns``.
+        start : DeepStart, optional
+            Deep mode: continue from this start-up state (made by an earlier run on the
+            same file with ``keep_start=True``) instead of running the start-up.
+        keep_start : bool
+            Deep mode: keep a copy of the start-up state at the hand-over in
+            :attr:`deep_start` (None when no hand-over was reached).
 
         Raises
         ------
@@ -303,6 +349,9 @@ class IntegratedReceiver:
             Unknown filter name or option, non-positive-definite ``P0``.
         HandoverError
             No satellite found or no hand-over state reached.
+        ValueError
+            ``start`` from a start-up that differs from this run's (:class:`DeepStart`), or
+            given outside deep mode.
         """
         cfg = self.config
         t_all = time.perf_counter()
@@ -319,6 +368,23 @@ class IntegratedReceiver:
         if cfg.align == "truth" and truth is None:
             raise ImuDataError("align='truth' needs the reference (truth) file; use "
                                "align='gnss' without one")
+
+        key = (str(source.path), source.n_samples, stop,
+               None if prns is None else tuple(prns),
+               None if assist is None else tuple(sorted(assist.items())),
+               cfg.handover_wait_s, cfg.iono_wait_s)
+        self.deep_start = None
+        if start is not None:
+            if cfg.mode != "deep" or start.key != key or start.nav is not nav:
+                raise ValueError("start: the start-up state was made on other data or with "
+                                 "another hand-over rule (DeepStart.key), or the mode is "
+                                 "not deep")
+            t0 = time.perf_counter()
+            rx, engine, navdata, hand = start.copy_for(source)
+            self.scalar = rx                       # its records are this run's from here
+            t_scalar = time.perf_counter() - t0   # this run's own work: the copy
+            return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
+                                     hand, truth, progress, t_scalar, t_all)
 
         # ---- scalar start-up until hand-over
         rx = self.scalar
@@ -429,6 +495,9 @@ class IntegratedReceiver:
                  "ephemeris and a valid fix") + short)
         if cfg.mode != "deep":
             return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
+        if keep_start:
+            self.deep_start = DeepStart(key, nav, (rx, engine, navdata, hand), t_scalar)
+            self.deep_start = DeepStart(key, nav, self.deep_start.copy_for(source), t_scalar)
         return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
                                  hand, truth, progress, t_scalar, t_all)
 
