@@ -5,6 +5,7 @@ Usage::
 
     python scripts/check_consistency.py [--modes deep tight loose] [--cn0 40 30]
                                         [--filters ekf ukf] [--seeds 0 1] [--fs 2.5e6]
+                                        [--filter-rates 50 10]
                                         [--duration 30] [--t-step 15] [--t0 17] [--csv FILE]
 
 For every seed and C/N0 the default scenario (``signals/default.toml``; the seed draws the
@@ -21,7 +22,11 @@ run's :meth:`~sdr_di.integration.receiver.IntegrationResult.consistency` (the su
 per degree of freedom of position, velocity and attitude, from ``--t0`` s of the file
 (default: 2 s after the step) to its end.
 
-Printed: one row per mode x C/N0 x filter with the mean over the seeds that ran and the
+``--filter-rates`` (default 50 Hz) adds the integration filter's rate as a dimension of the
+grid. Deep runs of one file share the scalar start-up
+(:class:`~sdr_di.integration.receiver.DeepStart`).
+
+Printed: one row per mode x C/N0 x filter (x filter rate) with the mean over the seeds that ran and the
 seed count (``n``); a run that fails (no hand-over at a low C/N0, a diverged filter) is
 counted in ``failed`` and named on stderr. ``--csv`` also writes one row per run.
 Expected value of every figure: 1 (a consistent filter).
@@ -31,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import math
 import sys
 import time
@@ -59,26 +65,34 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
                                         "end_s": args.duration + 1.0,
                                         "attenuation_db": 40.0 - cn0}])
             with generated_inputs(sc) as inp:
-                for mode in args.modes:
-                    for f in args.filters:
-                        rec = {"mode": mode, "cn0_dbhz": cn0, "filter": f, "seed": seed}
-                        t0 = time.perf_counter()
-                        try:
-                            res = IntegratedReceiver(IntegrationConfig(mode=mode, filter=f)).run(
-                                inp.source, inp.imu, prns=inp.prns, nav=inp.nav,
-                                truth=inp.truth)
-                            rec.update(flat(res.consistency(args.t0, None)))
-                            rec["pos_m_rmse"] = res.metrics(args.t0, None)["pos_m_rmse"]
-                            rec["error"] = ""
-                        except Exception as exc:  # noqa: BLE001 - a failed cell, named
-                            rec["error"] = f"{type(exc).__name__}: {exc}"
-                            print(f"sdr-di: warning: {mode} {f} {cn0:g} dB-Hz seed {seed}: "
-                                  f"{rec['error']}", file=sys.stderr)
-                        rec["wall_s"] = time.perf_counter() - t0
-                        print(f"{mode:5s} {cn0:4.0f} dB-Hz {f:8s} seed {seed}: "
-                              + " ".join(f"{k} {rec[k]:.3g}" for k in FIGURES if k in rec)
-                              + f" ({rec['wall_s']:.0f} s)", file=sys.stderr, flush=True)
-                        recs.append(rec)
+                for mode, f, rate in itertools.product(args.modes, args.filters,
+                                                       args.filter_rates):
+                    rec = {"mode": mode, "cn0_dbhz": cn0, "filter": f, "seed": seed,
+                           "filter_rate_hz": rate}
+                    t0 = time.perf_counter()
+                    try:
+                        rx = IntegratedReceiver(IntegrationConfig(
+                            mode=mode, filter=f, filter_rate_hz=rate))
+                        start = inp.deep_starts.get("deep") if mode == "deep" else None
+                        res = rx.run(inp.source, inp.imu, prns=inp.prns, nav=inp.nav,
+                                     truth=inp.truth, start=start,
+                                     keep_start=mode == "deep" and start is None)
+                        if rx.deep_start is not None:
+                            inp.deep_starts["deep"] = rx.deep_start
+                        rec.update(flat(res.consistency(args.t0, None)))
+                        met = res.metrics(args.t0, None)
+                        rec["pos_m_rmse"] = met["pos_m_rmse"]
+                        rec["vel_mps_rmse"] = met["vel_mps_rmse"]
+                        rec["error"] = ""
+                    except Exception as exc:  # noqa: BLE001 - a failed cell, named
+                        rec["error"] = f"{type(exc).__name__}: {exc}"
+                        print(f"sdr-di: warning: {mode} {f} {cn0:g} dB-Hz seed {seed}: "
+                              f"{rec['error']}", file=sys.stderr)
+                    rec["wall_s"] = time.perf_counter() - t0
+                    print(f"{mode:5s} {cn0:4.0f} dB-Hz {f:8s} {rate:g} Hz seed {seed}: "
+                          + " ".join(f"{k} {rec[k]:.3g}" for k in FIGURES if k in rec)
+                          + f" ({rec['wall_s']:.0f} s)", file=sys.stderr, flush=True)
+                    recs.append(rec)
     return recs
 
 
@@ -87,13 +101,15 @@ def table(recs: list[dict], args: argparse.Namespace) -> str:
     lines = [f"{args.duration:g} s at {args.fs / 1e6:g} MHz, default scenario, 40 dB-Hz "
              f"then the level from {args.t_step:g} s; window {args.t0:g} s to the end; mean "
              "over the seeds that ran (n); expected value 1.", "",
-             "| mode | C/N0 [dB-Hz] | filter | n | failed | NIS block 1 | NIS block 2 | "
-             "NEES pos | NEES vel | NEES att |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| mode | C/N0 [dB-Hz] | filter | rate [Hz] | n | failed | NIS block 1 | "
+             "NIS block 2 | NEES pos | NEES vel | NEES att |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for mode in args.modes:
         b1, b2 = NIS_BLOCKS[mode]
         for cn0 in args.cn0:
-            for f in args.filters:
-                rs = [r for r in recs if (r["mode"], r["cn0_dbhz"], r["filter"]) == (mode, cn0, f)]
+            for f, rate in itertools.product(args.filters, args.filter_rates):
+                rs = [r for r in recs if (r["mode"], r["cn0_dbhz"], r["filter"],
+                                          r["filter_rate_hz"]) == (mode, cn0, f, rate)]
                 ok = [r for r in rs if not r["error"]]
 
                 def m(key):
@@ -101,7 +117,7 @@ def table(recs: list[dict], args: argparse.Namespace) -> str:
                     v = v[np.isfinite(v)]
                     return f"{v.mean():.3g}" if v.size else "-"
 
-                lines.append(f"| {mode} | {cn0:g} | {f} | {len(ok)} | {len(rs) - len(ok)} | "
+                lines.append(f"| {mode} | {cn0:g} | {f} | {rate:g} | {len(ok)} | {len(rs) - len(ok)} | "
                              f"{b1} {m('nis_' + b1)} | {b2} {m('nis_' + b2)} | "
                              f"{m('nees_pos')} | {m('nees_vel')} | {m('nees_att')} |")
     return "\n".join(lines) + "\n"
@@ -115,6 +131,8 @@ def main(argv=None) -> int:
                    help="C/N0 after the step [dB-Hz], each <= 40")
     p.add_argument("--filters", nargs="+", default=["ekf", "ukf"])
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+    p.add_argument("--filter-rates", nargs="+", type=float, default=[50.0],
+                   help="integration filter rates [Hz] (default 50)")
     p.add_argument("--fs", type=float, default=2.5e6)
     p.add_argument("--duration", type=float, default=30.0)
     p.add_argument("--t-step", type=float, default=15.0,
@@ -130,8 +148,8 @@ def main(argv=None) -> int:
     recs = run_grid(args)
     print(table(recs, args))
     if args.csv:
-        keys = ["mode", "cn0_dbhz", "filter", "seed", *FIGURES, "pos_m_rmse", "wall_s",
-                "error"]
+        keys = ["mode", "cn0_dbhz", "filter", "filter_rate_hz", "seed", *FIGURES, "pos_m_rmse",
+                "vel_mps_rmse", "wall_s", "error"]
         with open(args.csv, "w", newline="") as fh:
             w = csv.DictWriter(fh, keys, restval="")
             w.writeheader()

@@ -165,13 +165,18 @@ def test_check_consistency_script_table_means_over_seeds():
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     args = argparse.Namespace(modes=["deep", "loose"], cn0=[30.0], filters=["ekf"],
-                              duration=30.0, fs=2.5e6, t_step=15.0, t0=17.0)
-    recs = [{"mode": "deep", "cn0_dbhz": 30.0, "filter": "ekf", "seed": s, "error": "",
-             "nis_code": v, "nis_rate": 2 * v, "nees_pos": 1.0, "nees_vel": 1.0,
-             "nees_att": 1.0} for s, v in ((0, 0.5), (1, 1.5))]
-    recs.append({"mode": "deep", "cn0_dbhz": 30.0, "filter": "ekf", "seed": 2,
-                 "error": "HandoverError: x"})
+                              filter_rates=[50.0, 10.0], duration=30.0, fs=2.5e6,
+                              t_step=15.0, t0=17.0)
+    recs = [{"mode": "deep", "cn0_dbhz": 30.0, "filter": "ekf", "filter_rate_hz": 50.0,
+             "seed": s, "error": "", "nis_code": v, "nis_rate": 2 * v, "nees_pos": 1.0,
+             "nees_vel": 1.0, "nees_att": 1.0} for s, v in ((0, 0.5), (1, 1.5))]
+    recs.append({"mode": "deep", "cn0_dbhz": 30.0, "filter": "ekf", "filter_rate_hz": 50.0,
+                 "seed": 2, "error": "HandoverError: x"})
+    recs.append({"mode": "deep", "cn0_dbhz": 30.0, "filter": "ekf", "filter_rate_hz": 10.0,
+                 "seed": 0, "error": "", "nis_code": 3.0, "nis_rate": 3.0, "nees_pos": 1.0,
+                 "nees_vel": 1.0, "nees_att": 1.0})
     text = mod.table(recs, args)
-    row = next(ln for ln in text.splitlines() if ln.startswith("| deep"))
-    assert row.split("|")[4:8] == [" 2 ", " 1 ", " code 1 ", " rate 2 "]
-    assert "| loose | 30 | ekf | 0 | 0 | vel - | pos - |" in text
+    rows = [ln for ln in text.splitlines() if ln.startswith("| deep")]
+    assert rows[0].split("|")[4:9] == [" 50 ", " 2 ", " 1 ", " code 1 ", " rate 2 "]
+    assert rows[1].split("|")[4:9] == [" 10 ", " 1 ", " 0 ", " code 3 ", " rate 3 "]
+    assert "| loose | 30 | ekf | 50 | 0 | 0 | vel - | pos - |" in text
