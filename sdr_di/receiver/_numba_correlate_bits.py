@@ -91,6 +91,8 @@ import os
 import numpy as np
 from numba import njit, prange
 
+from ._numba_correlate_blocks import add_task_parts, code_wrap_split, rotate_block
+
 from ._numba_correlate_int import correlate_epl_int8, int_kernel_pays
 
 
@@ -223,28 +225,9 @@ def correlate_epl_float(
             ph -= math.floor(ph)
             cr = math.cos(two_pi * ph)
             ci = -math.sin(two_pi * ph)
-            if n_comp == 2:
-                a = xs[2 * xo:2 * (xo + m_end)]
-                for m in range(m_end):
-                    xr = np.float32(a[2 * m])
-                    xi = np.float32(a[2 * m + 1])
-                    buf_r[m] = xr * rr[m] - xi * ri[m]
-                    buf_i[m] = xr * ri[m] + xi * rr[m]
-            else:
-                a = xs[xo:xo + m_end]
-                for m in range(m_end):
-                    xr = np.float32(a[m])
-                    buf_r[m] = xr * rr[m]
-                    buf_i[m] = xr * ri[m]
+            rotate_block(xs, n_comp, xo, m_end, rr, ri, buf_r, buf_i)
             # code phase at the block start in [w L, (w + 1) L); split at (w + 1) L
-            tb = th0 + k0 * dc
-            off = math.floor(tb / lf) * lf
-            lim = off + lf
-            mw = min(max(math.ceil((lim - tb) / dc), 0), m_end)
-            while mw > 0 and th0 + (k0 + mw - 1) * dc >= lim:
-                mw -= 1
-            while mw < m_end and th0 + (k0 + mw) * dc < lim:
-                mw += 1
+            off, lim, mw = code_wrap_split(th0, k0, dc, lf, m_end)
             # pass 2: E/P/L sums in runs of at most `run` samples, each within one segment
             g1 = 0.0
             g2 = 0.0
@@ -282,15 +265,7 @@ def correlate_epl_float(
             acc[5] += cr * g6 + ci * g5
         for j in range(6):
             part[t, j] = acc[j]
-    for c in range(n_rows):
-        for j in range(3):
-            out[c, j, 0] = 0.0
-            out[c, j, 1] = 0.0
-        for s in range(n_sub):
-            t = c * n_sub + s
-            for j in range(3):
-                out[c, j, 0] += part[t, 2 * j]
-                out[c, j, 1] += part[t, 2 * j + 1]
+    add_task_parts(part, n_sub, out)
 
 
 @njit(cache=True, boundscheck=False)

@@ -47,6 +47,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ._numba_correlate_blocks import add_task_parts, code_wrap_split, rotate_block
+
 #: Scale of the integer rotation table (products with int8 samples stay within 2^15).
 ROT_SCALE = 127
 #: Fractional bits of the fixed-point code index within a run.
@@ -177,27 +179,8 @@ def correlate_epl_int8(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, t
                 ci = -math.sin(two_pi * ph)
             else:
                 cr, ci = cr * sr - ci * si, cr * si + ci * sr
-            if n_comp == 2:
-                a = xs[2 * xo:2 * (xo + m_end)]
-                for m in range(m_end):
-                    xr = np.float32(a[2 * m])
-                    xi = np.float32(a[2 * m + 1])
-                    buf_r[m] = xr * qr[m] - xi * qi[m]
-                    buf_i[m] = xr * qi[m] + xi * qr[m]
-            else:
-                a = xs[xo:xo + m_end]
-                for m in range(m_end):
-                    xr = np.float32(a[m])
-                    buf_r[m] = xr * qr[m]
-                    buf_i[m] = xr * qi[m]
-            tb = th0 + k0 * dc
-            off = math.floor(tb / lf) * lf
-            lim = off + lf
-            mw = min(max(math.ceil((lim - tb) / dc), 0), m_end)
-            while mw > 0 and th0 + (k0 + mw - 1) * dc >= lim:
-                mw -= 1
-            while mw < m_end and th0 + (k0 + mw) * dc < lim:
-                mw += 1
+            rotate_block(xs, n_comp, xo, m_end, qr, qi, buf_r, buf_i)
+            off, lim, mw = code_wrap_split(th0, k0, dc, lf, m_end)
             g1 = 0
             g2 = 0
             g3 = 0
@@ -234,12 +217,4 @@ def correlate_epl_int8(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, t
             acc[5] += cr * float(g6) + ci * float(g5)
         for j in range(6):
             part[t, j] = acc[j] * inv_s
-    for c in range(n_rows):
-        for j in range(3):
-            out[c, j, 0] = 0.0
-            out[c, j, 1] = 0.0
-        for s in range(n_sub):
-            t = c * n_sub + s
-            for j in range(3):
-                out[c, j, 0] += part[t, 2 * j]
-                out[c, j, 1] += part[t, 2 * j + 1]
+    add_task_parts(part, n_sub, out)

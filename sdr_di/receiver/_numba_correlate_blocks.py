@@ -1,0 +1,72 @@
+"""Block stages shared by the E/P/L correlator kernels (float32 and integer).
+
+Both kernels (:func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_float`,
+:func:`~sdr_di.receiver._numba_correlate_int.correlate_epl_int8`) cut a row's samples into
+blocks of ``B`` samples and, per block, wipe the carrier off with a rotation table, split the
+block where the code phase wraps, and sum the code runs; per task they add the block sums
+into partial sums that are then added per row. The stages they share are here, inlined into
+each kernel at numba's IR level (``inline="always"``). An inlined function keeps its own
+fast-math flags, so these carry the kernels' (``reassoc``, ``contract``): without them the
+float32 wipe-off was not contracted as in the kernel, and its sums differed in the last
+bits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(inline="always", fastmath={"reassoc", "contract"}, boundscheck=False)
+def rotate_block(xs, n_comp, xo, m_end, rr, ri, buf_r, buf_i):
+    """Carrier wipe-off of one block: ``buf[m] = x[xo + m] * (rr[m] + j ri[m])``,
+    ``m < m_end``, in float32 (``rr``, ``ri`` the row's rotation table ``exp(-j 2 pi m
+    dphi)`` or its integer rounding; ``xs`` I/Q interleaved when ``n_comp == 2``, real
+    otherwise)."""
+    if n_comp == 2:
+        a = xs[2 * xo:2 * (xo + m_end)]
+        for m in range(m_end):
+            xr = np.float32(a[2 * m])
+            xi = np.float32(a[2 * m + 1])
+            buf_r[m] = xr * rr[m] - xi * ri[m]
+            buf_i[m] = xr * ri[m] + xi * rr[m]
+    else:
+        a = xs[xo:xo + m_end]
+        for m in range(m_end):
+            xr = np.float32(a[m])
+            buf_r[m] = xr * rr[m]
+            buf_i[m] = xr * ri[m]
+
+
+@njit(inline="always", fastmath={"reassoc", "contract"})
+def code_wrap_split(th0, k0, dc, lf, m_end):
+    """``(off, lim, mw)`` of the block starting at sample ``k0`` of a row (code phase
+    ``th0 + k dc`` [chips], code period ``lf`` chips): the block's code phase starts in
+    ``[off, lim)``, ``lim = off + lf``, and its first ``mw`` samples lie below ``lim`` (the
+    rest wrap into the next period), exactly as the float64 phase of each sample says."""
+    tb = th0 + k0 * dc
+    off = math.floor(tb / lf) * lf
+    lim = off + lf
+    mw = min(max(math.ceil((lim - tb) / dc), 0), m_end)
+    while mw > 0 and th0 + (k0 + mw - 1) * dc >= lim:
+        mw -= 1
+    while mw < m_end and th0 + (k0 + mw) * dc < lim:
+        mw += 1
+    return off, lim, mw
+
+
+@njit(inline="always", fastmath={"reassoc", "contract"})
+def add_task_parts(part, n_sub, out):
+    """``out[c] = [[E.re, E.im], [P.re, P.im], [L.re, L.im]]``: the sum over row ``c``'s
+    ``n_sub`` tasks of their partial sums ``part[c n_sub + s] = (E.re, E.im, P.re, ...)``."""
+    for c in range(out.shape[0]):
+        for j in range(3):
+            out[c, j, 0] = 0.0
+            out[c, j, 1] = 0.0
+        for s in range(n_sub):
+            t = c * n_sub + s
+            for j in range(3):
+                out[c, j, 0] += part[t, 2 * j]
+                out[c, j, 1] += part[t, 2 * j + 1]
