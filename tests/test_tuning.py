@@ -221,3 +221,14 @@ def test_per_cell_tuning_picks_each_cells_optimum(tmp_path):
         ("a", "q_scale=2.0 r_scale=1.0"), ("b", "q_scale=8 r_scale=1.0")}
     with pytest.raises(StudyError, match="per_cell = true tunes every cell"):
         parse_study(_spec(per_cell=True, cells=["a"]))
+
+
+def test_ratio_bounds_of_a_two_seed_interval_do_not_overflow():
+    """A Holm-corrected interval over 2 training seeds has log bounds near +-1000: the
+    ratio bounds in cells.csv are inf and 0, not an OverflowError (the paper004 training
+    stage stopped on it)."""
+    from sdr_di.studies.study import ratio_of_log
+
+    assert ratio_of_log(1000.0) == math.inf and ratio_of_log(-1000.0) == 0.0
+    assert ratio_of_log(math.log(2.0)) == pytest.approx(2.0)
+    assert math.isnan(ratio_of_log(math.nan))

@@ -332,6 +332,14 @@ def _col(q: str) -> str:
     return f"{q}_rmse_{QUANTITY_KEYS[q][1].replace('/', 'p')}"
 
 
+def ratio_of_log(log_ratio: float) -> float:
+    """``exp(log_ratio)``: inf beyond the float range (a Holm-corrected interval over 2 seeds
+    reaches log bounds of +-1000), NaN for NaN."""
+    if math.isnan(log_ratio):
+        return math.nan
+    return math.inf if log_ratio > 709.0 else math.exp(log_ratio)
+
+
 def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> StudyResult:
     """Per-run rows, paired comparisons (Holm over the family) and per-cell rows; writes
     ``runs.csv``, ``comparisons.csv`` and ``cells.csv`` into ``out``."""
@@ -387,10 +395,8 @@ def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> Stu
                 row[f"d_{q}_ci_low"] = c.d_ci_low if c else math.nan
                 row[f"d_{q}_ci_high"] = c.d_ci_high if c else math.nan
                 row[f"{q}_ratio"] = c.ratio if c else math.nan
-                row[f"{q}_ratio_ci_low"] = math.exp(c.log_ci_low) if c and math.isfinite(
-                    c.log_ci_low) else math.nan
-                row[f"{q}_ratio_ci_high"] = math.exp(c.log_ci_high) if c and math.isfinite(
-                    c.log_ci_high) else math.nan
+                row[f"{q}_ratio_ci_low"] = ratio_of_log(c.log_ci_low) if c else math.nan
+                row[f"{q}_ratio_ci_high"] = ratio_of_log(c.log_ci_high) if c else math.nan
                 row[f"{q}_wins"] = c.wins if c else ""
                 row[f"{q}_sign_p"] = c.sign_p if c else math.nan
                 row[f"{q}_sign_p_holm"] = c.sign_p_holm if c else math.nan
