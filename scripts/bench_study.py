@@ -97,7 +97,9 @@ def run(args: argparse.Namespace) -> None:
             load0 = os.getloadavg()[0]
             before = resource.getrusage(resource.RUSAGE_CHILDREN)
             t0 = time.perf_counter()
-            exe = shutil.which("sdr-di") or "sdr-di"
+            # the interpreter's own entry point (the venv need not be on PATH)
+            exe = Path(sys.executable).with_name("sdr-di")
+            exe = str(exe) if exe.exists() else shutil.which("sdr-di") or "sdr-di"
             proc = subprocess.run([exe, "study", path, "--out",
                                    str(out), "--runs", str(args.runs), "--workers", str(w),
                                    "--no-report"], check=False, capture_output=True,
