@@ -495,9 +495,9 @@ class IntegratedReceiver:
                  "ephemeris and a valid fix") + short)
         if cfg.mode != "deep":
             return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
-        if keep_start:
-            self.deep_start = DeepStart(key, nav, (rx, engine, navdata, hand), t_scalar)
-            self.deep_start = DeepStart(key, nav, self.deep_start.copy_for(source), t_scalar)
+        if keep_start:            # a copy: the vector loop below changes these objects
+            state = copy.deepcopy((rx, engine, navdata, hand), memo={id(source): source})
+            self.deep_start = DeepStart(key, nav, state, t_scalar)
         return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
                                  hand, truth, progress, t_scalar, t_all)
 

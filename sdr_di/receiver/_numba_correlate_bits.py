@@ -92,7 +92,6 @@ import numpy as np
 from numba import njit, prange
 
 from ._numba_correlate_blocks import add_task_parts, code_wrap_split, rotate_block
-
 from ._numba_correlate_int import correlate_epl_int8, int_kernel_pays
 
 
