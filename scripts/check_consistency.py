@@ -13,7 +13,7 @@ IMU errors and the signal noise; truth IMU and oscillator equal to the assumed o
 generated once at ``--fs`` for ``--duration`` s
 (:class:`~sdr_di.experiments._deep.generated_inputs`, the experiments' generator and file
 cache), and every mode x filter runs on those files with ``IntegrationConfig(mode=..., filter=...)``
-(the run of ``sdr-di run``). As in the weak-signal experiment, every satellite is at 40
+(the run of ``sdr-di run``, through the experiments' ``run_deep_variant``). As in the weak-signal experiment, every satellite is at 40
 dB-Hz until ``--t-step`` s (the start-up needs a strong signal: at 30 dB-Hz the default
 scenario never hands over) and at ``--cn0`` from then to the end (an attenuation window of
 the scenario schema, :func:`~sdr_di.experiments._deep.with_outages`). The figures are the
@@ -43,7 +43,6 @@ import time
 
 import numpy as np
 
-from sdr_di.integration.receiver import IntegratedReceiver, IntegrationConfig
 from sdr_di.integration.consistency import CONSISTENCY_KEYS, NIS_BLOCKS, flat
 
 #: Figure columns of the table (a mode has two of the NIS ones).
@@ -52,7 +51,7 @@ FIGURES = CONSISTENCY_KEYS
 
 def run_grid(args: argparse.Namespace) -> list[dict]:
     """One record per seed x C/N0 x mode x filter: the consistency figures or an error."""
-    from sdr_di.experiments._deep import generated_inputs, with_outages
+    from sdr_di.experiments._deep import generated_inputs, run_deep_variant, with_outages
     from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
 
     recs = []
@@ -71,23 +70,18 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
                            "filter_rate_hz": rate}
                     t0 = time.perf_counter()
                     try:
-                        rx = IntegratedReceiver(IntegrationConfig(
-                            mode=mode, filter=f, filter_rate_hz=rate))
-                        start = inp.deep_starts.get("deep") if mode == "deep" else None
-                        res = rx.run(inp.source, inp.imu, prns=inp.prns, nav=inp.nav,
-                                     truth=inp.truth, start=start,
-                                     keep_start=mode == "deep" and start is None)
-                        if rx.deep_start is not None:
-                            inp.deep_starts["deep"] = rx.deep_start
-                        rec.update(flat(res.consistency(args.t0, None)))
-                        met = res.metrics(args.t0, None)
-                        rec["pos_m_rmse"] = met["pos_m_rmse"]
-                        rec["vel_mps_rmse"] = met["vel_mps_rmse"]
-                        rec["error"] = ""
+                        dr = run_deep_variant(inp, f, mode=mode, filter_rate_hz=rate)
+                        rec["error"] = dr.error or ""
                     except Exception as exc:  # noqa: BLE001 - a failed cell, named
                         rec["error"] = f"{type(exc).__name__}: {exc}"
+                    if rec["error"]:
                         print(f"sdr-di: warning: {mode} {f} {cn0:g} dB-Hz seed {seed}: "
                               f"{rec['error']}", file=sys.stderr)
+                    else:
+                        rec.update(flat(dr.result.consistency(args.t0, None)))
+                        met = dr.result.metrics(args.t0, None)
+                        rec["pos_m_rmse"] = met["pos_m_rmse"]
+                        rec["vel_mps_rmse"] = met["vel_mps_rmse"]
                     rec["wall_s"] = time.perf_counter() - t0
                     print(f"{mode:5s} {cn0:4.0f} dB-Hz {f:8s} {rate:g} Hz seed {seed}: "
                           + " ".join(f"{k} {rec[k]:.3g}" for k in FIGURES if k in rec)

@@ -227,7 +227,7 @@ def test_ratio_bounds_of_a_two_seed_interval_do_not_overflow():
     """A Holm-corrected interval over 2 training seeds has log bounds near +-1000: the
     ratio bounds in cells.csv are inf and 0, not an OverflowError (the paper004 training
     stage stopped on it)."""
-    from sdr_di.studies.study import ratio_of_log
+    from sdr_di.studies.paired import ratio_of_log
 
     assert ratio_of_log(1000.0) == math.inf and ratio_of_log(-1000.0) == 0.0
     assert ratio_of_log(math.log(2.0)) == pytest.approx(2.0)

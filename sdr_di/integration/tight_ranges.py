@@ -133,11 +133,11 @@ class TightRangeSource(ScalarEpochSource):
         week, sow = self.bdt_of(ep, b)
         llh, v_n = self.ins_at(iv, self.imu_time(week, sow))
         r = llh_to_ecef(*llh)
-        v = C_e_n(llh[0], llh[1]).T @ v_n
-        P, _, U, el = modelled_observables(sat, idx, r, v, b, d, sow, ep.iono, cfg)
+        # the rates are modelled with the velocity the loops' rates stand for (module
+        # gnss_epochs, *Rates under dynamics*); P, U and el do not depend on the velocity
         v_loop = C_e_n(llh[0], llh[1]).T @ self.loop_velocity(
             v_n, self.imu_time(week, sow), self.tracking_config.track_pll_bw_hz)
-        D = modelled_observables(sat, idx, r, v_loop, b, d, sow, ep.iono, cfg)[1]
+        P, D, U, el = modelled_observables(sat, idx, r, v_loop, b, d, sow, ep.iono, cfg)
         keep = el >= np.radians(cfg.elevation_mask_deg)
         if not keep.any():
             return none

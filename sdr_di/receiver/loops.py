@@ -346,7 +346,6 @@ def dll_code_noise_chips(cn0_dbhz: float, coherent_s: float, dll_bw_hz: float,
     return math.sqrt(k * var_d / (2.0 - k))
 
 
-
 def pll_rate_dynamic_error(pll_bw_hz: float) -> float:
     """Dynamic error of the Doppler a scalar channel reports (its 3rd-order loop's frequency
     integrator ``vel_hz``, carried to the observation's sample with the loop's rate):

@@ -77,6 +77,14 @@ def t_interval(x: np.ndarray, level: float) -> tuple[float, float, float, float]
     return mean, mean - half, mean + half, p
 
 
+def ratio_of_log(log_ratio: float) -> float:
+    """``exp(log_ratio)``: inf beyond the float range (a Holm-corrected interval over 2 seeds
+    reaches log bounds of +-1000), NaN for NaN."""
+    if math.isnan(log_ratio):
+        return math.nan
+    return math.inf if log_ratio > 709.0 else math.exp(log_ratio)
+
+
 @dataclasses.dataclass
 class Comparison:
     """Filter ``filter`` against ``against`` on one cell and quantity (module notes).

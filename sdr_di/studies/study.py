@@ -52,7 +52,7 @@ from .execute import (
     write_json,
     write_run_record,
 )
-from .paired import Comparison, claim_verdict, compare_pair, holm
+from .paired import Comparison, claim_verdict, compare_pair, holm, ratio_of_log
 from ..experiments.registry import get_experiment
 from .spec import QUANTITY_KEYS, StudySpec, spec_summary
 from .tables import write_table
@@ -330,14 +330,6 @@ def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
 
 def _col(q: str) -> str:
     return f"{q}_rmse_{QUANTITY_KEYS[q][1].replace('/', 'p')}"
-
-
-def ratio_of_log(log_ratio: float) -> float:
-    """``exp(log_ratio)``: inf beyond the float range (a Holm-corrected interval over 2 seeds
-    reaches log bounds of +-1000), NaN for NaN."""
-    if math.isnan(log_ratio):
-        return math.nan
-    return math.inf if log_ratio > 709.0 else math.exp(log_ratio)
 
 
 def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> StudyResult:
