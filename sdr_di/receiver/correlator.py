@@ -47,6 +47,7 @@ import numpy as np
 from ..constants import CODE_LENGTH_B3I
 from ..errors import UnknownPrnError
 from ._numba_correlate_bits import correlate_epl_bits, pack_bit_windows
+from ._numba_correlate_blocks import rotation_tables
 
 __all__ = ["CODE_PAD", "CorrelationResult", "Correlator", "bit_windows", "check_prn",
            "correlate", "correlate_table", "padded_replicas"]
@@ -182,11 +183,12 @@ def carrier_rotation(dphi) -> tuple[np.ndarray, np.ndarray]:
     for ``m = 0 .. CARRIER_BLOCK - 1``, one row per carrier step ``dphi`` [cycles/sample]
     (float32 (n, CARRIER_BLOCK) each, the kernels' product precision: computed in float64,
     the phase reduced to one cycle before the trig, then rounded)."""
-    a = np.multiply.outer(np.asarray(dphi, dtype=np.float64),
-                          np.arange(CARRIER_BLOCK, dtype=np.float64))
-    a -= np.floor(a)
-    a *= 2.0 * math.pi
-    return np.cos(a).astype(np.float32), (-np.sin(a)).astype(np.float32)
+    d = np.asarray(dphi, dtype=np.float64)
+    shape = d.shape + (CARRIER_BLOCK,)
+    rot_re = np.empty((d.size, CARRIER_BLOCK), np.float32)
+    rot_im = np.empty((d.size, CARRIER_BLOCK), np.float32)
+    rotation_tables(np.ascontiguousarray(d.reshape(-1)), rot_re, rot_im)
+    return rot_re.reshape(shape), rot_im.reshape(shape)
 
 
 def reduce_code_phase(theta, code_len: int) -> np.ndarray:

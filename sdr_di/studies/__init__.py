@@ -21,11 +21,30 @@ CLI
 The experiments themselves (what one run does) are :mod:`sdr_di.experiments`.
 """
 
-from .campaign import CampaignResult, run_campaign, run_seed
-from .campaign_report import render_report
-from .single_run import RunResult, run_experiment
-from .spec import StudySpec, load_study, parse_study
-from .study import run_study
+import importlib
+
+#: Public names and the module each lives in: imported on first use (PEP 562), so the CLI's
+#: parser (``studies.commands``) does not pull in scipy.stats and the experiments for
+#: ``sdr-di generate`` or ``sdr-di run``.
+_EXPORTS = {
+    "CampaignResult": "campaign",
+    "run_campaign": "campaign",
+    "run_seed": "campaign",
+    "render_report": "campaign_report",
+    "RunResult": "single_run",
+    "run_experiment": "single_run",
+    "StudySpec": "spec",
+    "load_study": "spec",
+    "parse_study": "spec",
+    "run_study": "study",
+}
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "CampaignResult",
