@@ -297,6 +297,14 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
         return real(inputs, filter_name, **kw)
 
     monkeypatch.setattr(variants, "run_deep_variant", flaky)
+    real_shared = _deep.shared_start
+    hits = []
+
+    def counted(inputs, rule):
+        hits.append(real_shared(inputs, rule))
+        return hits[-1]
+
+    monkeypatch.setattr(_deep, "shared_start", counted)
     res = run_study(spec, out, runs=2, workers=0)
     assert res.n_run == 1 + 4           # the tuning task (baseline, training seed), then 4
     tuning = _csv(out / "tuning.csv")
@@ -329,8 +337,11 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
         assert float(cells[("baseline", "ekf")][k]) > 0, k
     assert all(math.isnan(float(r["nis_pos"])) for r in runs)
     assert math.isfinite(float(cells[("baseline", "ff-aukf")]["d_pos_ci_low"]))
-    # both cells of a seed ran on one IF file (2 evaluation seeds, 1 training seed)
+    # both cells of a seed ran on one IF file (2 evaluation seeds, 1 training seed), and the
+    # second cell's task continued from the first's deep start-up (the tuning task and the
+    # first cell of each seed ran their own)
     assert len(set(shared)) == 3
+    assert [h is not None for h in hits] == [False, False, True, False, True]
     assert not (out / "cache").exists()
     assert "injected" in (out / "report.html").read_text()
     again = run_study(spec, out, runs=2, workers=0)

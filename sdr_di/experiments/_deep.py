@@ -219,6 +219,9 @@ class Inputs:
     paths: dict
     #: deep start-up states at the hand-over, by hand-over rule (:func:`run_deep_variant`)
     deep_starts: dict = dataclasses.field(default_factory=dict)
+    #: the ephemeris file ``nav`` was read from (identifies the assistance data of a start-up
+    #: shared between tasks: :func:`shared_start`)
+    nav_path: Path | None = None
 
 
 #: Folder of the generated-file cache of the current task (``None``: generate into a private
@@ -300,6 +303,55 @@ def _cached_files(sc: Scenario, cache: Path) -> dict:
     return paths
 
 
+#: Deep start-ups kept between the tasks of this process (:func:`shared_start`): at most
+#: this many, the latest.
+SHARED_STARTS = 2
+_shared: list[tuple[tuple, Any]] = []
+
+
+def _file_identity(inputs: Inputs) -> tuple | None:
+    """What a deep start-up read besides its own key (:class:`~sdr_di.integration.receiver.
+    DeepStart`): the IF file and the assistance ephemeris file, by path, size and
+    modification time; None when the run's files are not in a :data:`FILE_CACHE` (private
+    files, deleted after the run: nothing to share)."""
+    if FILE_CACHE.get() is None or inputs.nav_path is None:
+        return None
+    try:
+        return tuple((str(Path(p).resolve()), st.st_size, st.st_mtime_ns)
+                     for p in (inputs.paths["if"], inputs.nav_path)
+                     for st in (os.stat(p),))
+    except (OSError, KeyError):
+        return None
+
+
+def shared_start(inputs: Inputs, rule: tuple) -> Any:
+    """A deep start-up made by an earlier task of this process on the same IF and ephemeris
+    files with hand-over rule ``rule``, or None.
+
+    The cells of a study that differ only in the IMU (truth IMU errors, the filter's
+    assumptions) share their IF file (:func:`file_keys`), and the deep start-up does not
+    read the IMU, so consecutive tasks of one seed run it once. On a hit, ``inputs.nav``
+    becomes the start-up's navigation data (read from the same file) so that the run takes
+    the same object the start-up did; the start-up's own key (samples, PRNs, span, rule)
+    is still checked by the receiver."""
+    ident = _file_identity(inputs)
+    if ident is None:
+        return None
+    for (k_ident, k_rule), start in reversed(_shared):
+        if k_ident == ident and k_rule == rule:
+            inputs.nav = start.nav
+            return start
+    return None
+
+
+def _keep_shared(inputs: Inputs, rule: tuple, start: Any) -> None:
+    ident = _file_identity(inputs)
+    if ident is None or SHARED_STARTS < 1:
+        return
+    _shared[:] = [e for e in _shared if e[0] != (ident, rule)][-(SHARED_STARTS - 1):]
+    _shared.append(((ident, rule), start))
+
+
 class generated_inputs:
     """Context manager: generate ``sc`` (or take it from the task's :data:`FILE_CACHE`),
     yield :class:`Inputs`; a private temporary folder is deleted on exit."""
@@ -331,7 +383,8 @@ class generated_inputs:
         prns = [int(s["prn"]) for s in meta["satellites"]]
         return Inputs(source=open_source(paths["if"]), imu=read_imu(paths["imu"]),
                       truth=read_truth(paths["truth"])[0],
-                      nav=load_nav(self.sc.satellites.ephemeris), prns=prns, paths=paths)
+                      nav=load_nav(self.sc.satellites.ephemeris), prns=prns, paths=paths,
+                      nav_path=Path(self.sc.satellites.ephemeris))
 
     def __exit__(self, *exc) -> None:
         if self._tmp is not None:
@@ -381,13 +434,15 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     run keeps its state at the hand-over (``inputs.deep_starts``) and the next ones continue
     from a copy of it, with the same results as their own start-up would give
     (:class:`~sdr_di.integration.receiver.DeepStart`); a study's filters on one file share
-    it.
+    it, and so do the next tasks of this process on the same files (:func:`shared_start`:
+    a study's cells that differ only in the IMU).
 
     Exceptions of the package (:class:`~sdr_di.errors.SdrDiError`) and numerical failures
     (``ValueError``, ``FloatingPointError``, ``numpy.linalg.LinAlgError``) are returned as
     ``error`` text, not raised: a filter that fails is a result of the experiment.
     """
-    from ..integration.receiver import IntegrationConfig, IntegratedReceiver
+    from ..integration.receiver import (IntegrationConfig, IntegratedReceiver,
+                                        StartMismatchError)
     from ..errors import SdrDiError
 
     if mode != "deep":
@@ -400,16 +455,31 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
             from ..integration.assumptions import apply_to_deep
 
             cfg = apply_to_deep(cfg, a)
-        rx = IntegratedReceiver(cfg, scalar=scalar)
         rule = (cfg.handover_wait_s, cfg.iono_wait_s) if cfg.mode == "deep" else None
         start = inputs.deep_starts.get(rule)
+        other_task = start is None and rule is not None
+        if other_task:
+            start = shared_start(inputs, rule)
+        rx = IntegratedReceiver(cfg, scalar=scalar)
         try:
-            res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
-                         truth=inputs.truth, start=start,
-                         keep_start=rule is not None and start is None)
+            try:
+                res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
+                             truth=inputs.truth, start=start,
+                             keep_start=rule is not None and start is None)
+            except StartMismatchError:
+                if not (other_task and start is not None):
+                    raise
+                # another task's start-up on these files, but a different span or PRNs:
+                # this run makes its own
+                rx = IntegratedReceiver(cfg, scalar=CountingScalarReceiver(log=False))
+                res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
+                             truth=inputs.truth, keep_start=True)
         finally:          # kept also when this filter fails after the hand-over
             if rx.deep_start is not None:
                 inputs.deep_starts[rule] = rx.deep_start
+                _keep_shared(inputs, rule, rx.deep_start)
+            elif other_task and start is not None:
+                inputs.deep_starts[rule] = start
     except (SdrDiError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return DeepRun(filter_name, None, f"{type(exc).__name__}: {exc}", -1)
     k_h = round(res.handover_s * inputs.source.sampling_rate_hz)

@@ -135,7 +135,12 @@ from .handover import (HandoverError, handover_channels, handover_span_s,
                        offer_subframe_klobuchar)
 
 __all__ = ["MODES", "DeepStart", "HandoverError", "IntegratedReceiver", "IntegrationConfig",
-           "IntegrationResult", "check_imu_span"]
+           "IntegrationResult", "StartMismatchError", "check_imu_span"]
+
+
+class StartMismatchError(ValueError):
+    """A :class:`DeepStart` given to :meth:`IntegratedReceiver.run` was made on other data,
+    with another hand-over rule or other assistance data, or the mode is not deep."""
 
 
 @dataclasses.dataclass
@@ -168,10 +173,15 @@ class DeepStart:
     nav: object
     state: tuple
     scalar_s: float
+    #: The IF source the state refers to (not copied: :meth:`copy_for` puts the run's own
+    #: source in its place).
+    source: object = None
 
     def copy_for(self, source: IfSource) -> tuple:
-        """A fresh deep copy of :attr:`state` (the source itself is shared, not copied)."""
-        return copy.deepcopy(self.state, memo={id(source): source})
+        """A fresh deep copy of :attr:`state` in which ``source`` (an IF source on the same
+        file) takes the place of :attr:`source`; neither is copied."""
+        kept = source if self.source is None else self.source
+        return copy.deepcopy(self.state, memo={id(kept): source})
 
 
 @dataclasses.dataclass
@@ -349,9 +359,9 @@ class IntegratedReceiver:
             Unknown filter name or option, non-positive-definite ``P0``.
         HandoverError
             No satellite found or no hand-over state reached.
-        ValueError
+        StartMismatchError
             ``start`` from a start-up that differs from this run's (:class:`DeepStart`), or
-            given outside deep mode.
+            given outside deep mode (a ``ValueError``).
         """
         cfg = self.config
         t_all = time.perf_counter()
@@ -376,7 +386,7 @@ class IntegratedReceiver:
         self.deep_start = None
         if start is not None:
             if cfg.mode != "deep" or start.key != key or start.nav is not nav:
-                raise ValueError("start: the start-up state was made on other data or with "
+                raise StartMismatchError("start: the start-up state was made on other data or with "
                                  "another hand-over rule (DeepStart.key), or the mode is "
                                  "not deep")
             t0 = time.perf_counter()
@@ -497,7 +507,7 @@ class IntegratedReceiver:
             return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
         if keep_start:            # a copy: the vector loop below changes these objects
             state = copy.deepcopy((rx, engine, navdata, hand), memo={id(source): source})
-            self.deep_start = DeepStart(key, nav, state, t_scalar)
+            self.deep_start = DeepStart(key, nav, state, t_scalar, source)
         return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
                                  hand, truth, progress, t_scalar, t_all)
 
