@@ -19,15 +19,6 @@ The public API is :func:`generate`, :func:`run` and :func:`study` (:mod:`sdr_di.
 mirror the ``sdr-di`` commands. Everything else is internal and may move between releases.
 """
 
-import os
-
-# numba's ``omp`` layer keeps its worker threads spinning after each parallel region unless
-# told otherwise; the generator's kernel (one region per chunk) then takes CPU from its own
-# writer thread and from other processes (measured: `sdr-di generate` of the 60 s default
-# file 13.0 -> 11.3 user CPU-s, docs/notes/speed.md). Read by libgomp when numba first
-# loads it, so it must be set before any parallel kernel runs; a user's setting is kept.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
 from .api import GeneratedFiles, RunResult, generate, run, study
 
 __version__ = "0.1.0"
