@@ -348,8 +348,8 @@ def _keep_shared(inputs: Inputs, rule: tuple, start: Any) -> None:
     ident = _file_identity(inputs)
     if ident is None or SHARED_STARTS < 1:
         return
-    _shared[:] = [e for e in _shared if e[0] != (ident, rule)][-(SHARED_STARTS - 1):]
-    _shared.append(((ident, rule), start))
+    kept = [e for e in _shared if e[0] != (ident, rule)]
+    _shared[:] = kept[max(len(kept) - (SHARED_STARTS - 1), 0):] + [((ident, rule), start)]
 
 
 class generated_inputs:
@@ -457,9 +457,9 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
             cfg = apply_to_deep(cfg, a)
         rule = (cfg.handover_wait_s, cfg.iono_wait_s) if cfg.mode == "deep" else None
         start = inputs.deep_starts.get(rule)
-        other_task = start is None and rule is not None
-        if other_task:
-            start = shared_start(inputs, rule)
+        shared = None
+        if start is None and rule is not None:
+            shared = start = shared_start(inputs, rule)
         rx = IntegratedReceiver(cfg, scalar=scalar)
         try:
             try:
@@ -467,10 +467,11 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
                              truth=inputs.truth, start=start,
                              keep_start=rule is not None and start is None)
             except StartMismatchError:
-                if not (other_task and start is not None):
+                if shared is None:
                     raise
-                # another task's start-up on these files, but a different span or PRNs:
-                # this run makes its own
+                # another task's start-up on these files, but of another span, PRNs or
+                # assistance (refused before any work): this run makes its own
+                shared = None
                 rx = IntegratedReceiver(cfg, scalar=CountingScalarReceiver(log=False))
                 res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
                              truth=inputs.truth, keep_start=True)
@@ -478,8 +479,8 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
             if rx.deep_start is not None:
                 inputs.deep_starts[rule] = rx.deep_start
                 _keep_shared(inputs, rule, rx.deep_start)
-            elif other_task and start is not None:
-                inputs.deep_starts[rule] = start
+            elif shared is not None:   # this task's next filters continue from it too
+                inputs.deep_starts[rule] = shared
     except (SdrDiError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return DeepRun(filter_name, None, f"{type(exc).__name__}: {exc}", -1)
     k_h = round(res.handover_s * inputs.source.sampling_rate_hz)
