@@ -451,8 +451,10 @@ class IfSource:
         thread reads the next ``n + b`` samples from ``b`` before this call's end, the
         range the receivers' sequential chunk reads ask for next: they re-read an overlap of
         up to two coherent blocks, and ``b`` is twice the largest overlap of the last 8 calls
-        (``n / 2`` at most, and before any overlap was seen), so the file is read about once
-        rather than 1.5 times. A later call inside that range is served from it, so
+        (``n / 2`` at most, and before any overlap was seen): on the 40 s 25 MHz default
+        file the receivers ask for 1.12 times the file (chunks of 100 or 200 ms that
+        overlap by 10 ms) and the file is read 1.35 times (scalar and deep alike, measured
+        2026-12-04), rather than 1.5 times with ``b = n / 2``. A later call inside that range is served from it, so
         the file read overlaps the caller's correlation (the read releases the GIL, as do
         the correlator kernels); any other call reads synchronously and drops it. The values
         are the same either way.
