@@ -386,9 +386,9 @@ class IntegratedReceiver:
         self.deep_start = None
         if start is not None:
             if cfg.mode != "deep" or start.key != key or start.nav is not nav:
-                raise StartMismatchError("start: the start-up state was made on other data or with "
-                                 "another hand-over rule (DeepStart.key), or the mode is "
-                                 "not deep")
+                raise StartMismatchError(
+                    "start: the start-up state was made on other data or with another "
+                    "hand-over rule (DeepStart.key), or the mode is not deep")
             t0 = time.perf_counter()
             rx, engine, navdata, hand = start.copy_for(source)
             self.scalar = rx                       # its records are this run's from here

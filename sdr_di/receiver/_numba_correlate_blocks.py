@@ -78,8 +78,8 @@ def rotation_tables(dphi, rot_re, rot_im):
     """``rot_re[r, m] = cos(2 pi a)``, ``rot_im[r, m] = -sin(2 pi a)`` with ``a = m dphi[r]``
     reduced to ``[0, 1)`` cycles, in float64 and then rounded to float32 (the arithmetic of
     NumPy's ``multiply.outer``, ``floor``, ``cos`` and ``sin``, done in one pass: the same
-    values bit for bit, measured 3-4 times faster for the receivers' tables of 256
-    columns)."""
+    values bit for bit, 1.4 times faster for 20 rows of 256 columns: the two libm calls
+    per value are most of the cost)."""
     two_pi = 2.0 * math.pi
     for r in range(dphi.shape[0]):
         d = dphi[r]

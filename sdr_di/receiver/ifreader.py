@@ -454,10 +454,10 @@ class IfSource:
         (``n / 2`` at most, and before any overlap was seen): on the 40 s 25 MHz default
         file the receivers ask for 1.12 times the file (chunks of 100 or 200 ms that
         overlap by 10 ms) and the file is read 1.35 times (scalar and deep alike, measured
-        2026-12-04), rather than 1.5 times with ``b = n / 2``. A later call inside that range is served from it, so
-        the file read overlaps the caller's correlation (the read releases the GIL, as do
-        the correlator kernels); any other call reads synchronously and drops it. The values
-        are the same either way.
+        2026-12-04), rather than 1.5 times with ``b = n / 2``. A later call inside that
+        range is served from it, so the file read overlaps the caller's correlation (the
+        read releases the GIL, as do the correlator kernels); any other call reads
+        synchronously and drops it. The values are the same either way.
         """
         n_comp = 2 if self.format.is_complex else 1
         if self.spectrum_inverted:
