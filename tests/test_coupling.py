@@ -41,7 +41,7 @@ def runs(tmp_path_factory):
     sc = with_outages(sc, [{"prn": p, "start_s": BLOCK[0], "end_s": BLOCK[1], "blockage": True}
                            for p in prns[3:]])
     paths = generate_files(sc, d, progress=False)
-    out = {}
+    out = {"paths": paths}
     for mode in ("loose", "tight"):
         rc = main(["run", str(paths["if"]), "--mode", mode, "--filter", "ekf", "--no-progress",
                    "--out", str(d / mode)])
@@ -112,6 +112,50 @@ def test_tight_stays_bounded_with_three_satellites_while_loose_coasts(runs):
     # both back on 7 after the blockage
     after = t > BLOCK[1] + 1.0
     assert after.any() and np.all(tight[after, COL["n_used"]] == 7)
+
+
+@pytest.mark.slow
+def test_a_loop_over_a_kept_scalar_run_gives_the_rows_of_its_own_run(runs):
+    """Loose and tight share the scalar receiver's run (``ScalarRecord``: no feedback reaches
+    it): tight run over the epochs its own run kept equals that run to the bit, and loose run
+    over tight's epochs equals the CLI's loose run to the CSV's 12 digits (every column:
+    errors, states, formal sigmas, channel columns, NIS)."""
+    from sdr_di.integration.receiver import (IntegratedReceiver, IntegrationConfig,
+                                             ScalarRecord, StartMismatchError)
+    from sdr_di.integration.run_integrated import write_deep_csv
+    from sdr_di.io.imu_files import read_imu, read_truth
+    from sdr_di.orbits.rinex_nav import load_nav
+    from sdr_di.receiver.run_scalar import open_source, search_assistance
+
+    paths = runs["paths"]
+    meta = json.loads(paths["metadata"].read_text())
+    src = open_source(paths["if"])
+    imu = read_imu(paths["imu"])
+    truth = read_truth(paths["truth"])[0]
+    nav = load_nav(meta["ephemeris_file"])
+    # what `sdr-di run` gives the receiver (the fixture's runs)
+    kw = dict(nav=nav, truth=truth, assist=search_assistance(src, None, True))
+    first = IntegratedReceiver(IntegrationConfig(filter="ekf", mode="tight"))
+    a = first.run(src, imu, keep_start=True, **kw)
+    rec = first.scalar_record
+    assert isinstance(rec, ScalarRecord) and first.deep_start is None
+    again = IntegratedReceiver(IntegrationConfig(filter="ekf", mode="tight"))
+    b = again.run(open_source(paths["if"]), imu, start=rec, **kw)
+    assert again.profile["scalar"] < 0.1 * first.profile["scalar"]
+    assert b.handover_s == a.handover_s and b.prns == a.prns
+    for name in ("t", "llh", "v_n", "att", "pos_err", "sd", "nees", "cn0_dbhz", "used",
+                 "n_used", "nis"):
+        assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
+    loose = IntegratedReceiver(IntegrationConfig(filter="ekf", mode="loose")).run(
+        src, imu, start=rec, **kw)
+    rows, _ = runs["loose"]
+    csv = write_deep_csv(paths["if"].parent / "replayed_loose.csv", loose)
+    assert np.array_equal(np.loadtxt(csv, delimiter=",", skiprows=2), rows, equal_nan=True)
+    # refused: another GNSS rate, or deep mode
+    for cfg in (IntegrationConfig(filter="ekf", mode="loose", gnss_rate_hz=10.0),
+                IntegrationConfig(filter="ekf")):
+        with pytest.raises(StartMismatchError):
+            IntegratedReceiver(cfg).run(src, imu, start=rec, **kw)
 
 
 # ---- the sources without IF data (fast) -------------------------------------------------------

@@ -31,6 +31,7 @@ class _Receiver:
     def __init__(self, cfg, scalar=None):
         self.scalar = scalar
         self.deep_start = None
+        self.scalar_record = None
 
     def run(self, source, imu, *, prns, nav, truth, start=None, keep_start=False):
         key = (str(source.path), self.span)

@@ -217,7 +217,8 @@ class Inputs:
     nav: Any
     prns: list[int]
     paths: dict
-    #: deep start-up states at the hand-over, by hand-over rule (:func:`run_deep_variant`)
+    #: deep start-up states at the hand-over and loose/tight scalar runs, by hand-over rule
+    #: (:func:`run_deep_variant`)
     deep_starts: dict = dataclasses.field(default_factory=dict)
     #: the ephemeris file ``nav`` was read from (identifies the assistance data of a start-up
     #: shared between tasks: :func:`shared_start`)
@@ -435,7 +436,10 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     from a copy of it, with the same results as their own start-up would give
     (:class:`~sdr_di.integration.receiver.DeepStart`); a study's filters on one file share
     it, and so do the next tasks of this process on the same files (:func:`shared_start`:
-    a study's cells that differ only in the IMU).
+    a study's cells that differ only in the IMU). Loose and tight likewise run the scalar
+    receiver once (either mode's run serves both: it gets no feedback) and the other
+    filters' loops over its recorded epochs
+    (:class:`~sdr_di.integration.receiver.ScalarRecord`).
 
     Exceptions of the package (:class:`~sdr_di.errors.SdrDiError`) and numerical failures
     (``ValueError``, ``FloatingPointError``, ``numpy.linalg.LinAlgError``) are returned as
@@ -455,17 +459,19 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
             from ..integration.assumptions import apply_to_deep
 
             cfg = apply_to_deep(cfg, a)
-        rule = (cfg.handover_wait_s, cfg.iono_wait_s) if cfg.mode == "deep" else None
+        # the start-up (deep) or the whole scalar run (loose and tight: either mode's
+        # serves both) is made once per hand-over rule and kept
+        rule = (cfg.handover_wait_s, cfg.iono_wait_s) if cfg.mode == "deep" else \
+            ("scalar", cfg.handover_wait_s, cfg.iono_wait_s, cfg.gnss_every)
         start = inputs.deep_starts.get(rule)
         shared = None
-        if start is None and rule is not None:
+        if start is None:
             shared = start = shared_start(inputs, rule)
         rx = IntegratedReceiver(cfg, scalar=scalar)
         try:
             try:
                 res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
-                             truth=inputs.truth, start=start,
-                             keep_start=rule is not None and start is None)
+                             truth=inputs.truth, start=start, keep_start=start is None)
             except StartMismatchError:
                 if shared is None:
                     raise
@@ -476,9 +482,10 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
                 res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
                              truth=inputs.truth, keep_start=True)
         finally:          # kept also when this filter fails after the hand-over
-            if rx.deep_start is not None:
-                inputs.deep_starts[rule] = rx.deep_start
-                _keep_shared(inputs, rule, rx.deep_start)
+            made = rx.deep_start if rx.deep_start is not None else rx.scalar_record
+            if made is not None:
+                inputs.deep_starts[rule] = made
+                _keep_shared(inputs, rule, made)
             elif shared is not None:   # this task's next filters continue from it too
                 inputs.deep_starts[rule] = shared
     except (SdrDiError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:

@@ -115,7 +115,7 @@ from ..filters import filter_record
 from ..integration.assumptions import FixedNoiseSource
 from ..integration.consistency import consistency_summary
 from ..integration.gnss_epochs import GnssEpochRecorder
-from ..integration.loop import IntegrationLoop
+from ..integration.loop import BackgroundLoop, IntegrationLoop
 from ..integration.loop_process import LoopChild, LoopProcess, start_loop_behind
 from ..integration.loose_fixes import LooseFixSource
 from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
@@ -135,12 +135,13 @@ from .handover import (HandoverError, handover_channels, handover_span_s,
                        offer_subframe_klobuchar)
 
 __all__ = ["MODES", "DeepStart", "HandoverError", "IntegratedReceiver", "IntegrationConfig",
-           "IntegrationResult", "StartMismatchError", "check_imu_span"]
+           "IntegrationResult", "ScalarRecord", "StartMismatchError", "check_imu_span"]
 
 
 class StartMismatchError(ValueError):
-    """A :class:`DeepStart` given to :meth:`IntegratedReceiver.run` was made on other data,
-    with another hand-over rule or other assistance data, or the mode is not deep."""
+    """A :class:`DeepStart` or :class:`ScalarRecord` given to :meth:`IntegratedReceiver.run`
+    was made on other data, with another hand-over rule, assistance data or GNSS rate, or
+    for the other kind of mode (deep against loose and tight)."""
 
 
 @dataclasses.dataclass
@@ -182,6 +183,57 @@ class DeepStart:
         file) takes the place of :attr:`source`; neither is copied."""
         kept = source if self.source is None else self.source
         return copy.deepcopy(self.state, memo={id(kept): source})
+
+
+@dataclasses.dataclass
+class ScalarRecord:
+    """Loose and tight: the scalar receiver's run over the file, kept to run other filters
+    and the other of the two modes on it.
+
+    In loose and tight mode no filter output reaches the scalar receiver (no NCO feedback),
+    so its run, and the epochs :class:`~sdr_di.integration.gnss_epochs.GnssEpochRecorder`
+    keeps of it, depend only on what :class:`DeepStart` lists plus the GNSS rate
+    (``gnss_every``), not on the mode, the filter or its assumptions. The integration loop
+    reads nothing else of the receiver but its channels and tracking configuration at the
+    hand-over and its clock. :meth:`IntegratedReceiver.run` with ``keep_start=True`` keeps
+    one (:attr:`IntegratedReceiver.scalar_record`), and ``start=`` runs another loop over
+    its epochs instead of the receiver, with the same rows as a run of its own (the epochs
+    are never changed once recorded; tested in ``tests/test_coupling.py``).
+
+    Attributes
+    ----------
+    key : tuple
+        As :attr:`DeepStart.key`, then ``gnss_every``.
+    nav : object
+        The assistance navigation data the run took (compared by identity).
+    hand : dict
+        The hand-over: ``sample``, ``sol``, ``prns``, ``next_start`` and ``channels`` (the
+        receiver's PRNs then).
+    epochs : list of GnssEpoch
+        Every recorded epoch (read-only).
+    tracking_config, rx_time
+        The receiver's tracking configuration and receive-time scale.
+    scalar : ScalarReceiver
+        The receiver after its run (its records, e.g. the acquisitions it ran).
+    scalar_s : float
+        Wall time of the receiver's run [s].
+    """
+
+    key: tuple
+    nav: object
+    hand: dict
+    epochs: list
+    tracking_config: object
+    rx_time: object
+    scalar: object
+    scalar_s: float
+
+    def recorder(self) -> GnssEpochRecorder:
+        """A closed recorder holding the epochs (shared: a recorded epoch never changes)."""
+        rec = GnssEpochRecorder(None, None)
+        rec.epochs = self.epochs
+        rec.close()
+        return rec
 
 
 @dataclasses.dataclass
@@ -312,13 +364,16 @@ class IntegratedReceiver:
         self.profile: dict = {}
         #: the start-up state kept by :meth:`run` with ``keep_start=True``
         self.deep_start: DeepStart | None = None
+        #: loose and tight: the scalar run kept by :meth:`run` with ``keep_start=True``
+        self.scalar_record: ScalarRecord | None = None
 
     # ------------------------------------------------------------------------------------
     def run(self, source: IfSource, imu, *, prns=None, nav=None, truth=None,
             progress: Callable[[float, int, int], None] | None = None,
             duration_s: float | None = None,
             assist: dict[int, float | None] | None = None,
-            start: DeepStart | None = None, keep_start: bool = False) -> IntegrationResult:
+            start: DeepStart | ScalarRecord | None = None,
+            keep_start: bool = False) -> IntegrationResult:
         """Run the deep receiver over ``source`` with the IMU record ``imu``.
 
         Parameters
@@ -344,12 +399,15 @@ class IntegratedReceiver:
             :meth:`~sdr_di.receiver.scalar.ScalarReceiver.run` takes it (the sidecar's list
             in ``sdr-di run``, the same search as scalar mode's); None: a cold search of
             ``prns``.
-        start : DeepStart, optional
+        start : DeepStart or ScalarRecord, optional
             Deep mode: continue from this start-up state (made by an earlier run on the
-            same file with ``keep_start=True``) instead of running the start-up.
+            same file with ``keep_start=True``) instead of running the start-up. Loose and
+            tight: run the loop over the epochs of this scalar run (an earlier loose or
+            tight run's, either mode) instead of running the receiver.
         keep_start : bool
             Deep mode: keep a copy of the start-up state at the hand-over in
-            :attr:`deep_start` (None when no hand-over was reached).
+            :attr:`deep_start` (None when no hand-over was reached). Loose and tight: keep
+            the scalar run in :attr:`scalar_record`.
 
         Raises
         ------
@@ -360,8 +418,9 @@ class IntegratedReceiver:
         HandoverError
             No satellite found or no hand-over state reached.
         StartMismatchError
-            ``start`` from a start-up that differs from this run's (:class:`DeepStart`), or
-            given outside deep mode (a ``ValueError``).
+            ``start`` from a start-up or scalar run that differs from this run's
+            (:attr:`DeepStart.key`, :attr:`ScalarRecord.key`), or of the other kind of mode
+            (a ``ValueError``).
         """
         cfg = self.config
         t_all = time.perf_counter()
@@ -384,6 +443,15 @@ class IntegratedReceiver:
                None if assist is None else tuple(sorted(assist.items())),
                cfg.handover_wait_s, cfg.iono_wait_s)
         self.deep_start = None
+        self.scalar_record = None
+        if isinstance(start, ScalarRecord):
+            if cfg.mode == "deep" or start.key != key + (cfg.gnss_every,) \
+                    or start.nav is not nav:
+                raise StartMismatchError(
+                    "start: the scalar run was made on other data, with another hand-over "
+                    "rule or GNSS rate (ScalarRecord.key), or the mode is deep")
+            return self._replay_scalar_coupled_loop(source, imu, off, n_per, stop, start,
+                                                    truth, t_all)
         if start is not None:
             if cfg.mode != "deep" or start.key != key or start.nav is not nav:
                 raise StartMismatchError(
@@ -464,12 +532,14 @@ class IntegratedReceiver:
                 # loose/tight: the loop's grid starts where deep's would (the channels'
                 # next code epochs); the fix of the hand-over epoch is the first measurement
                 hand["next_start"] = max(int(rx.channels[p].next_start) for p in hand["prns"])
+                hand["channels"] = sorted(int(p) for p in rx.channels)
                 recorder.record(sample, obs)
                 # lost channels are searched around, and timed from, the last fix
                 rx.predictor = FixPredictor(engine, fs, source.carrier_hz)
                 # the integration loop runs behind the receiver, on a second thread
                 hand["coupled"] = self._start_scalar_coupled_loop(
-                    source, imu, off, n_per, stop, rx, engine, hand, recorder, truth)
+                    source, imu, off, n_per, stop, hand, recorder, truth, rx.config,
+                    engine.builder.rx_time)
                 return False
             return False
 
@@ -504,6 +574,11 @@ class IntegratedReceiver:
                  f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
                  "ephemeris and a valid fix") + short)
         if cfg.mode != "deep":
+            if keep_start:
+                self.scalar_record = ScalarRecord(
+                    key + (cfg.gnss_every,), nav,
+                    {k: hand[k] for k in ("sample", "sol", "prns", "next_start", "channels")},
+                    recorder.epochs, rx.config, engine.builder.rx_time, rx, t_scalar)
             return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
         if keep_start:            # a copy: the vector loop below changes these objects
             state = copy.deepcopy((rx, engine, navdata, hand), memo={id(source): source})
@@ -593,8 +668,9 @@ class IntegratedReceiver:
             sd=col["sd"], nees=col["nees"], updates=col["updates"])
 
     # ------------------------------------------------------------------------------------
-    def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, rx, engine, hand,
-                                   recorder, truth) -> dict:
+    def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, hand, recorder,
+                                   truth, tracking_config, rx_time,
+                                   behind: bool = True) -> dict:
         """Loose or tight mode: start the loop at the hand-over (module notes).
 
         Same hand-over grid point, INS alignment, clock and filter as :meth:`_vector_loop`;
@@ -609,7 +685,7 @@ class IntegratedReceiver:
         fs = source.sampling_rate_hz
         sol = hand["sol"]
         k_h = int(hand["sample"])
-        clock = SampleClock.of(engine.builder.rx_time, fs)
+        clock = SampleClock.of(rx_time, fs)
         t_if = imu.t + off
         i_h = max(int(np.searchsorted(t_if, max(k_h, hand["next_start"]) / fs)), 1)
         T = n_per / imu.rate_hz
@@ -622,13 +698,13 @@ class IntegratedReceiver:
         kf, process, meas = make_integration_filter(cfg, T, sol, llh_fix, att_sig, model)
         # the summary's record of what the filter uses, read from the built filter
         self.filter_used = filter_record(kf, cfg.filter, cfg.filter_options)
-        others = sorted(set(int(p) for p in rx.channels) - set(hand["prns"]))
+        others = sorted(set(hand["channels"]) - set(hand["prns"]))
         prns = tuple(hand["prns"]) + tuple(others)
         prof = {"scalar": 0.0, "measure": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
         imu_epoch = (clock.week, clock.sow(0) + off)     # BDT of IMU t = 0 (module notes)
         src_cls = LooseFixSource if loose else TightRangeSource
-        src = src_cls(recorder, prns, imu.t, imu_epoch, fs, prof, tracking_config=rx.config,
-                      interval_s=1.0 / cfg.gnss_rate_hz)
+        src = src_cls(recorder, prns, imu.t, imu_epoch, fs, prof,
+                      tracking_config=tracking_config, interval_s=1.0 / cfg.gnss_rate_hz)
         n1 = round(fs * 1e-3)            # deep's margin, so that the windows are the same
         loop = IntegrationLoop(
             imu=imu, t_if=t_if, i_start=i_h, k_start=k_grid0, n_per=n_per, fs=fs, stop=stop,
@@ -638,13 +714,29 @@ class IntegratedReceiver:
             output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
             profile=prof)
         adapt0 = kf.adaptation_time_s
-        thread = start_loop_behind(loop, src if loose or cfg.noise_policy == "cn0" else
-                                   FixedNoiseSource(src, cfg.sigma_range_m,
-                                                    cfg.sigma_rate_mps), src, recorder,
-                                   child=hand.get("child"))
+        run_src = src if loose or cfg.noise_policy == "cn0" else \
+            FixedNoiseSource(src, cfg.sigma_range_m, cfg.sigma_rate_mps)
+        if behind:
+            thread = start_loop_behind(loop, run_src, src, recorder, child=hand.get("child"))
+        else:              # the epochs are all recorded: the loop runs on a thread at once
+            thread = BackgroundLoop(loop, run_src)
         hand["child"] = None                              # taken (or not needed)
         return {"thread": thread, "loop": loop, "src": src, "clock": clock, "kf": kf,
                 "adapt0": adapt0, "k_grid0": k_grid0, "prof": prof}
+
+    def _replay_scalar_coupled_loop(self, source, imu, off, n_per, stop, record: ScalarRecord,
+                                    truth, t_all) -> IntegrationResult:
+        """Loose or tight mode over the epochs of an earlier run (:class:`ScalarRecord`):
+        the loop of :meth:`_start_scalar_coupled_loop` without the receiver."""
+        t0 = time.perf_counter()
+        hand = copy.deepcopy(record.hand)
+        self.scalar = record.scalar                # its records are this run's
+        recorder = record.recorder()
+        hand["coupled"] = self._start_scalar_coupled_loop(
+            source, imu, off, n_per, stop, hand, recorder, truth, record.tracking_config,
+            record.rx_time, behind=False)
+        return self._finish_scalar_coupled_loop(hand, recorder.epochs,
+                                                time.perf_counter() - t0, t_all)
 
     def _finish_scalar_coupled_loop(self, hand, epochs, t_scalar, t_all) -> IntegrationResult:
         """Loose or tight mode: wait for the loop (:meth:`_start_scalar_coupled_loop`),
