@@ -535,3 +535,11 @@ def test_deep_run_from_a_kept_start_up_equals_a_run_from_sample_zero(gen26):
     with pytest.raises(StartMismatchError, match="start-up state"):
         IntegratedReceiver(IntegrationConfig(filter="ekf")).run(
             src, imu, prns=prns, nav=nav, truth=truth, start=start, duration_s=20.0)
+    # nor by a run whose scalar receiver tracks with other loops
+    from sdr_di.receiver.scalar import ScalarReceiver
+    from sdr_di.receiver.tracking import TrackingConfig
+
+    other = ScalarReceiver(config=TrackingConfig(track_pll_bw_hz=10.0), log=False)
+    with pytest.raises(StartMismatchError):
+        IntegratedReceiver(IntegrationConfig(filter="ekf"), scalar=other).run(
+            src, imu, prns=prns, nav=nav, truth=truth, start=start)

@@ -150,8 +150,9 @@ class DeepStart:
 
     Deep mode's start-up (acquisition, scalar loops, decoding, the fixes up to the
     hand-over) does not depend on the integration filter, its rate or its assumptions: only
-    on the IF data, the PRNs searched, the assistance data, the span processed and the
-    hand-over rule (``handover_wait_s``, ``iono_wait_s``). A study runs several filters on
+    on the IF data, the PRNs searched, the assistance data, the span processed, the
+    hand-over rule (``handover_wait_s``, ``iono_wait_s``) and the scalar receiver's tracking
+    configuration. A study runs several filters on
     one file; :meth:`IntegratedReceiver.run` with ``keep_start=True`` keeps a copy of the
     state at the hand-over (:attr:`IntegratedReceiver.deep_start`) and ``start=`` continues
     another run from a fresh copy of it, with the same results as a run from sample 0 (the
@@ -161,7 +162,8 @@ class DeepStart:
     Attributes
     ----------
     key : tuple
-        IF path, samples processed, PRNs, assistance, hand-over rule.
+        IF path, samples processed, PRNs, assistance, hand-over rule, the scalar receiver's
+        tracking configuration.
     nav : object
         The assistance navigation data the start-up took (compared by identity).
     state : tuple
@@ -441,7 +443,7 @@ class IntegratedReceiver:
         key = (str(source.path), source.n_samples, stop,
                None if prns is None else tuple(prns),
                None if assist is None else tuple(sorted(assist.items())),
-               cfg.handover_wait_s, cfg.iono_wait_s)
+               cfg.handover_wait_s, cfg.iono_wait_s, self.scalar.config)
         self.deep_start = None
         self.scalar_record = None
         if isinstance(start, ScalarRecord):
