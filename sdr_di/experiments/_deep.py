@@ -467,11 +467,14 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
         shared = None
         if start is None:
             shared = start = shared_start(inputs, rule)
+        def run(rx, start):
+            return rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
+                          truth=inputs.truth, start=start, keep_start=start is None)
+
         rx = IntegratedReceiver(cfg, scalar=scalar)
         try:
             try:
-                res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
-                             truth=inputs.truth, start=start, keep_start=start is None)
+                res = run(rx, start)
             except StartMismatchError:
                 if shared is None:
                     raise
@@ -479,8 +482,7 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
                 # assistance (refused before any work): this run makes its own
                 shared = None
                 rx = IntegratedReceiver(cfg, scalar=CountingScalarReceiver(log=False))
-                res = rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
-                             truth=inputs.truth, keep_start=True)
+                res = run(rx, None)
         finally:          # kept also when this filter fails after the hand-over
             made = rx.deep_start if rx.deep_start is not None else rx.scalar_record
             if made is not None:

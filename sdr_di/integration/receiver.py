@@ -178,13 +178,12 @@ class DeepStart:
     scalar_s: float
     #: The IF source the state refers to (not copied: :meth:`copy_for` puts the run's own
     #: source in its place).
-    source: object = None
+    source: object
 
     def copy_for(self, source: IfSource) -> tuple:
         """A fresh deep copy of :attr:`state` in which ``source`` (an IF source on the same
         file) takes the place of :attr:`source`; neither is copied."""
-        kept = source if self.source is None else self.source
-        return copy.deepcopy(self.state, memo={id(kept): source})
+        return copy.deepcopy(self.state, memo={id(self.source): source})
 
 
 @dataclasses.dataclass
@@ -213,10 +212,11 @@ class ScalarRecord:
         receiver's PRNs then).
     epochs : list of GnssEpoch
         Every recorded epoch (read-only).
-    tracking_config, rx_time
-        The receiver's tracking configuration and receive-time scale.
+    rx_time : ReceiverTime
+        The receiver's receive-time scale.
     scalar : ScalarReceiver
-        The receiver after its run (its records, e.g. the acquisitions it ran).
+        The receiver after its run (its records, e.g. the acquisitions it ran; its
+        tracking configuration).
     scalar_s : float
         Wall time of the receiver's run [s].
     """
@@ -225,7 +225,6 @@ class ScalarRecord:
     nav: object
     hand: dict
     epochs: list
-    tracking_config: object
     rx_time: object
     scalar: object
     scalar_s: float
@@ -580,7 +579,7 @@ class IntegratedReceiver:
                 self.scalar_record = ScalarRecord(
                     key + (cfg.gnss_every,), nav,
                     {k: hand[k] for k in ("sample", "sol", "prns", "next_start", "channels")},
-                    recorder.epochs, rx.config, engine.builder.rx_time, rx, t_scalar)
+                    recorder.epochs, engine.builder.rx_time, rx, t_scalar)
             return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
         if keep_start:            # a copy: the vector loop below changes these objects
             state = copy.deepcopy((rx, engine, navdata, hand), memo={id(source): source})
@@ -735,7 +734,7 @@ class IntegratedReceiver:
         self.scalar = record.scalar                # its records are this run's
         recorder = record.recorder()
         hand["coupled"] = self._start_scalar_coupled_loop(
-            source, imu, off, n_per, stop, hand, recorder, truth, record.tracking_config,
+            source, imu, off, n_per, stop, hand, recorder, truth, record.scalar.config,
             record.rx_time, behind=False)
         return self._finish_scalar_coupled_loop(hand, recorder.epochs,
                                                 time.perf_counter() - t0, t_all)
