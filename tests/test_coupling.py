@@ -31,6 +31,7 @@ COL = {c: i for i, c in enumerate(DEEP_COLUMNS)}
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     from sdr_di.experiments._deep import ranked_prns, with_outages
+    from sdr_di.integration.receiver import IntegratedReceiver
     from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
     from sdr_di.sim.generate import generate_files
 
@@ -42,12 +43,26 @@ def runs(tmp_path_factory):
                            for p in prns[3:]])
     paths = generate_files(sc, d, progress=False)
     out = {"paths": paths}
-    for mode in ("loose", "tight"):
-        rc = main(["run", str(paths["if"]), "--mode", mode, "--filter", "ekf", "--no-progress",
-                   "--out", str(d / mode)])
-        assert rc == 0
-        out[mode] = (np.loadtxt(d / mode / f"default_{mode}.csv", delimiter=",", skiprows=2),
-                     json.loads((d / mode / f"default_{mode}_summary.json").read_text()))
+    # the CLI's receivers keep their scalar run (``keep_start``, which changes nothing else),
+    # for test_a_loop_over_a_kept_scalar_run_gives_the_rows_of_its_own_run
+    real_run = IntegratedReceiver.run
+    kept = {}
+
+    def keeping(self, *args, **kw):
+        res = real_run(self, *args, **{**kw, "keep_start": True})
+        kept[self.config.mode] = (self, res)
+        return res
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(IntegratedReceiver, "run", keeping)
+        for mode in ("loose", "tight"):
+            rc = main(["run", str(paths["if"]), "--mode", mode, "--filter", "ekf",
+                       "--no-progress", "--out", str(d / mode)])
+            assert rc == 0
+            out[mode] = (np.loadtxt(d / mode / f"default_{mode}.csv", delimiter=",",
+                                    skiprows=2),
+                         json.loads((d / mode / f"default_{mode}_summary.json").read_text()))
+    out["kept"] = kept
     return out
 
 
@@ -117,28 +132,25 @@ def test_tight_stays_bounded_with_three_satellites_while_loose_coasts(runs):
 @pytest.mark.slow
 def test_a_loop_over_a_kept_scalar_run_gives_the_rows_of_its_own_run(runs):
     """Loose and tight share the scalar receiver's run (``ScalarRecord``: no feedback reaches
-    it): tight run over the epochs its own run kept equals that run to the bit, and loose run
-    over tight's epochs equals the CLI's loose run to the CSV's 12 digits (every column:
-    errors, states, formal sigmas, channel columns, NIS)."""
+    it): tight run over the epochs the CLI's tight run kept equals that run to the bit, and
+    loose run over those epochs equals the CLI's loose run to the CSV's 12 digits (every
+    column: errors, states, formal sigmas, channel columns, NIS)."""
     from sdr_di.integration.receiver import (IntegratedReceiver, IntegrationConfig,
                                              ScalarRecord, StartMismatchError)
     from sdr_di.integration.run_integrated import write_deep_csv
     from sdr_di.io.imu_files import read_imu, read_truth
-    from sdr_di.orbits.rinex_nav import load_nav
     from sdr_di.receiver.run_scalar import open_source, search_assistance
 
     paths = runs["paths"]
-    meta = json.loads(paths["metadata"].read_text())
     src = open_source(paths["if"])
     imu = read_imu(paths["imu"])
     truth = read_truth(paths["truth"])[0]
-    nav = load_nav(meta["ephemeris_file"])
-    # what `sdr-di run` gives the receiver (the fixture's runs)
-    kw = dict(nav=nav, truth=truth, assist=search_assistance(src, None, True))
-    first = IntegratedReceiver(IntegrationConfig(filter="ekf", mode="tight"))
-    a = first.run(src, imu, keep_start=True, **kw)
+    first, a = runs["kept"]["tight"]
     rec = first.scalar_record
     assert isinstance(rec, ScalarRecord) and first.deep_start is None
+    # what `sdr-di run` gave the receiver (a record is taken with the navigation data it was
+    # made with: the same object)
+    kw = dict(nav=rec.nav, truth=truth, assist=search_assistance(src, None, True))
     again = IntegratedReceiver(IntegrationConfig(filter="ekf", mode="tight"))
     b = again.run(open_source(paths["if"]), imu, start=rec, **kw)
     assert again.profile["scalar"] < 0.1 * first.profile["scalar"]

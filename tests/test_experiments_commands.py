@@ -65,6 +65,22 @@ def test_bad_params_raise_one_line_errors(pair, msg):
     assert "\n" not in str(info.value)
 
 
+def test_compare_handover_wait_reaches_the_receivers_configuration():
+    """``handover_wait_s`` (compare, and a study's ``[base]``) becomes the receiver's hand-over
+    rule; a negative value is refused before any run."""
+    from sdr_di.experiments import compare
+    from sdr_di.experiments.variants import loop_config
+    from sdr_di.integration.receiver import IntegrationConfig
+
+    exp = get_experiment("compare")
+    p = parse_params(exp, ["handover_wait_s=1.5"])
+    assert p["handover_wait_s"] == 1.5
+    assert IntegrationConfig(**loop_config(p)).handover_wait_s == 1.5
+    assert "handover_wait_s" not in loop_config(parse_params(exp, []))   # receiver's default
+    with pytest.raises(ExperimentError, match="handover_wait_s=-1.0: expected a number >= 0"):
+        compare.check_params(parse_params(exp, ["handover_wait_s=-1"]))
+
+
 def test_aggregate_statistics_and_nonfinite_values():
     st = aggregate([{"a": 1.0, "b": "x", "c": math.nan}, {"a": 3.0, "b": "x", "c": 2.0},
                     {"a": 2, "b": "y", "c": 4.0}])

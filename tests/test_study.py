@@ -327,6 +327,8 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
         ("imu-noise-10x", "1", "ff-aukf")]
     assert "injected" in bad[0]["error"]
     assert sum(r["status"] == "ok" for r in runs) == 7
+    # the spec's hand-over rule (1 s after the first fix, not the receiver's 6 s)
+    assert all(6.0 < float(r["handover_s"]) < 9.0 for r in runs if r["status"] == "ok")
     assert cells[("imu-noise-10x", "ff-aukf")]["n_failed"] == "1"
     # consistency beside accuracy (issue 25): deep NIS blocks and NEES in both tables, NaN
     # for the failed run and for the other modes' blocks

@@ -58,6 +58,7 @@ default_params: dict = {
     "filter_rate_hz": 50.0,
     "output_rate_hz": 10.0,
     "gnss_rate_hz": None,
+    "handover_wait_s": None,
     "truth": {},
     "assume": {},
     "plots": True,
@@ -70,6 +71,7 @@ def check_params(params: dict) -> None:
     for key in ("duration_s", "filter_rate_hz", "output_rate_hz"):
         check_number(NAME, params, key)
     check_number(NAME, params, "settle_s", lo=0.0, lo_open=False)
+    check_number(NAME, params, "handover_wait_s", lo=0.0, lo_open=False, allow_none=True)
     for key in ("sampling_rate_hz", "cn0_dbhz", "gnss_rate_hz"):
         check_number(NAME, params, key, allow_none=True)
     for key in ("truth", "assume"):

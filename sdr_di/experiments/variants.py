@@ -133,11 +133,13 @@ def loop_config(params: dict, **fixed: Any) -> dict:
     parameters.
 
     ``filter_rate_hz``, ``output_rate_hz``, ``gnss_rate_hz`` (loose/tight fix or observable
-    rate) and ``deep_cn0_min_dbhz`` (the loop's channel gate, as ``cn0_min_dbhz``) are taken
-    when present and not ``None``; ``fixed`` wins over them.
+    rate), ``handover_wait_s`` (the hand-over rule's wait after the first fix, before 4
+    channels with time and ephemeris suffice) and ``deep_cn0_min_dbhz`` (the loop's channel
+    gate, as ``cn0_min_dbhz``) are taken when present and not ``None``; ``fixed`` wins over
+    them.
     """
     cfg: dict = {}
-    for key in ("filter_rate_hz", "output_rate_hz", "gnss_rate_hz"):
+    for key in ("filter_rate_hz", "output_rate_hz", "gnss_rate_hz", "handover_wait_s"):
         if params.get(key) is not None:
             cfg[key] = float(params[key])
     if params.get("deep_cn0_min_dbhz") is not None:
