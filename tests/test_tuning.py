@@ -232,3 +232,22 @@ def test_ratio_bounds_of_a_two_seed_interval_do_not_overflow():
     assert ratio_of_log(1000.0) == math.inf and ratio_of_log(-1000.0) == 0.0
     assert ratio_of_log(math.log(2.0)) == pytest.approx(2.0)
     assert math.isnan(ratio_of_log(math.nan))
+
+
+def test_mean_ratio_of_the_report_and_the_comparison_is_one_function():
+    """The geometric-mean ratio of ``Comparison.ratio`` and of the HTML report's claim
+    table: NaN for a non-finite mean log ratio, inf (not an OverflowError) beyond the float
+    range."""
+    import dataclasses
+
+    from sdr_di.studies.paired import Comparison, mean_ratio
+
+    assert mean_ratio(math.log(0.5)) == pytest.approx(0.5)
+    assert mean_ratio(800.0) == math.inf
+    assert math.isnan(mean_ratio(math.inf)) and math.isnan(mean_ratio(-math.inf))
+    assert math.isnan(mean_ratio(math.nan))
+    names = [f.name for f in dataclasses.fields(Comparison) if f.default is dataclasses.MISSING]
+    c = Comparison(**{n: ("x" if n in ("cell", "filter", "against", "quantity") else 1.0)
+                      for n in names})
+    c.log_mean = 800.0
+    assert c.ratio == math.inf

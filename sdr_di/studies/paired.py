@@ -85,6 +85,12 @@ def ratio_of_log(log_ratio: float) -> float:
     return math.inf if log_ratio > 709.0 else math.exp(log_ratio)
 
 
+def mean_ratio(log_mean: float) -> float:
+    """Geometric-mean ratio ``exp(log_mean)`` of a paired comparison: NaN when the mean log
+    ratio is not finite (an RMSE of 0 or inf in a pair), inf beyond the float range."""
+    return ratio_of_log(log_mean) if math.isfinite(log_mean) else math.nan
+
+
 @dataclasses.dataclass
 class Comparison:
     """Filter ``filter`` against ``against`` on one cell and quantity (module notes).
@@ -118,7 +124,7 @@ class Comparison:
     @property
     def ratio(self) -> float:
         """Geometric-mean RMSE ratio ``filter / against``."""
-        return math.exp(self.log_mean) if math.isfinite(self.log_mean) else math.nan
+        return mean_ratio(self.log_mean)
 
     def interval(self, kind: str) -> tuple[float, float]:
         """Corrected interval of the differences (``"difference"``) or log ratios."""

@@ -22,7 +22,7 @@ from pathlib import Path
 from ..io.atomic import atomic_open
 from ..experiments import plotting
 from .execute import read_json
-from .paired import ratio_of_log
+from .paired import mean_ratio, ratio_of_log
 from .campaign_report import CSS, img_html, sig, table_html
 from .spec import QUANTITY_KEYS
 from .tables import read_csv_table
@@ -166,8 +166,7 @@ def render_study_report(folder: str | Path) -> Path:
                     if c is None:
                         tds.append("")
                         continue
-                    ratio = math.exp(_num(c["log_mean"])) if math.isfinite(
-                        _num(c["log_mean"])) else math.nan
+                    ratio = mean_ratio(_num(c["log_mean"]))
                     lo, hi = _num(c["log_ci_low"]), _num(c["log_ci_high"])
                     iv = _interval(ratio_of_log(lo), ratio_of_log(hi), c.get("n_pairs")) \
                         if math.isfinite(lo) and math.isfinite(hi) else ""
