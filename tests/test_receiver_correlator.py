@@ -336,6 +336,35 @@ def test_row_split_runs_before_after_the_callers_part():
     assert ("part", mine[0][2], 10, False) in events
 
 
+def test_thread_choice_is_made_per_call_size(monkeypatch):
+    """KernelThreads keeps its costs per size class of the call: one thread measured cheaper
+    on small calls (a worker's wake-up weighs on 1 ms blocks) does not decide the large
+    ones, where the split was measured cheaper (receiver.threads notes: with one cost for
+    all sizes, the deep start-up ran most of its 20 ms blocks on one thread)."""
+    from sdr_di.receiver.threads import ENV_THREADS, KernelThreads
+
+    monkeypatch.delenv(ENV_THREADS, raising=False)
+    kt = KernelThreads()
+    m = kt.max_threads
+    if m < 2:
+        pytest.skip("needs two numba threads")
+    small, large = 2e3, 2e6              # samples per call
+    cost = {(small, 1): 1e-9, (small, m): 5e-9, (large, 1): 2e-9, (large, m): 1e-9}
+
+    def call(work):
+        t = kt.pick(work)
+        kt.record(t, cost[(work, t)])
+        return t
+
+    # each size class measures one thread, then the split (the first call of a setting
+    # starts its thread and is not counted)
+    assert [call(small) for _ in range(4)] == [1, 1, m, m]
+    assert [call(large) for _ in range(2)] == [1, m]
+    assert call(large) == m and call(small) == 1 and call(large) == m
+    assert kt.costs[int(np.log2(small))] == pytest.approx({1: 1e-9, m: 5e-9})
+    assert kt.costs[int(np.log2(large))] == pytest.approx({1: 2e-9, m: 1e-9})
+
+
 def _split_in_child():
     from sdr_di.receiver.threads import KernelThreads
 

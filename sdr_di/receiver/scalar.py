@@ -240,7 +240,8 @@ class ScalarReceiver:
         ``callback``, ``tracking``, ``total``), ``steps`` (kernel calls), ``processed_s``
         (file seconds), ``realtime_factor`` (processed seconds per wall second of
         ``tracking``, which includes the re-acquisitions) and ``kernel_s_per_msample`` (kernel
-        seconds per million sample-epochs, per thread setting).
+        seconds per million sample-epochs, per thread setting, of the last call's size class:
+        :attr:`~sdr_di.receiver.threads.KernelThreads.cost`).
     """
 
     def __init__(self, config: TrackingConfig | None = None, *, acquisition: dict | None = None,

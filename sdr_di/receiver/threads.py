@@ -17,12 +17,19 @@ are identical whatever the thread count or the split.
 :class:`KernelThreads` measures both settings (1 thread and numba's thread count), re-explores
 the other one for 1 call in every 256, and uses the split unless one thread costs less than 0.8
 of it per sample. The first call of each setting
-(thread start-up) is not counted. Used by the scalar receiver's correlator bank and the deep
-vector loop.
+(thread start-up) is not counted. The costs are kept per size class of the call (its samples,
+in powers of 2): a call's fixed costs (the worker's wake-up, the Python around the kernels)
+weigh 20 times more per sample in the scalar receiver's 1 ms blocks before bit
+synchronization than in its 20 ms blocks after it, and with one cost for both the 1 ms
+blocks' verdict (one thread) stuck: re-explored once every 256 calls, the split's cost
+hardly moved, and the deep start-up ran 1467 of its 1563 kernel calls on one thread
+(2.4 s of kernel wall over the first 12.2 s of the 40 s default file). Used by the scalar
+receiver's correlator bank and the deep vector loop.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import threading
@@ -103,8 +110,11 @@ class KernelThreads:
 
     Attributes
     ----------
+    costs : dict
+        ``{size class: {threads: smoothed seconds per unit of work}}`` of the two settings
+        (0: not measured); the size class of ``work`` units is ``floor(log2(work))``.
     cost : dict
-        ``{threads: smoothed seconds per unit of work}`` of the two settings (0: not measured).
+        The ``{threads: cost}`` of the last call's size class.
     """
 
     def __init__(self, threads: int | None = None) -> None:
@@ -112,21 +122,30 @@ class KernelThreads:
         if threads is None and os.environ.get(ENV_THREADS, "").strip():
             threads = int(os.environ[ENV_THREADS])
         self.fixed = None if threads is None else max(1, min(int(threads), self.max_threads))
+        self.costs: dict[int, dict[int, float]] = {}
         self.cost = {1: 0.0, self.max_threads: 0.0}
         self._warm: set[int] = set()
-        self._calls = 0
+        self._calls: dict[int, int] = {}
         self._before_s = 0.0     # smoothed CPU time of run_rows' `before` [s]
         self._sample_s = 0.0     # smoothed kernel CPU time per sample on one thread [s]
 
-    def pick(self) -> int:
-        """Thread count for the next call. Numba's own thread count of the calling thread is
-        set to 1: :meth:`run_rows` parallelizes over rows, not inside the kernel."""
+    def pick(self, work: float = 1.0) -> int:
+        """Thread count for the next call, of ``work`` units (samples). Numba's own thread
+        count of the calling thread is set to 1: :meth:`run_rows` parallelizes over rows, not
+        inside the kernel."""
+        size = int(math.log2(work)) if work >= 1.0 else 0
+        cost = self.costs.get(size)
+        if cost is None:
+            cost = self.costs[size] = {1: 0.0, self.max_threads: 0.0}
+        self.cost = cost              # what `record` updates
+        calls = self._calls.get(size, 0)
+        self._calls[size] = calls + 1
         if self.fixed is not None:
             t = self.fixed
         elif self.max_threads == 1:
             t = 1
         else:
-            c1, cm = self.cost[1], self.cost[self.max_threads]
+            c1, cm = cost[1], cost[self.max_threads]
             if c1 == 0.0:
                 t = 1
             elif cm == 0.0:
@@ -138,14 +157,14 @@ class KernelThreads:
                 # (scalar 30 s file: 13.2 s wall against 11.3 s with the split always)
                 best = 1 if c1 < 0.8 * cm else self.max_threads
                 other = self.max_threads if best == 1 else 1
-                t = other if self._calls % 256 == 255 else best
-        self._calls += 1
+                t = other if calls % 256 == 255 else best
         if numba.get_num_threads() != 1:
             numba.set_num_threads(1)
         return t
 
     def record(self, threads: int, cost: float) -> None:
-        """Measured cost of a call made with ``threads`` [s per unit of work]."""
+        """Measured cost of a call made with ``threads`` [s per unit of work], for the size
+        class of the last :meth:`pick`."""
         if threads not in self.cost:
             return
         if threads not in self._warm:
@@ -175,7 +194,7 @@ class KernelThreads:
         """
         ns = np.asarray(nsamp)
         n = ns.size
-        threads = self.pick()
+        threads = self.pick(float(ns.sum()))
         t0 = time.perf_counter()
         if threads == 1 or n < 2:
             call(0, n)
