@@ -334,6 +334,31 @@ def test_velocity_formal_covariance_consistent(world):
     assert np.mean(mah) == pytest.approx(4.0, abs=0.8)
 
 
+def test_satellite_states_equal_each_record_evaluated_alone(world):
+    """satellite_states evaluates the satellites of a week in one stacked call per pass;
+    every row equals the record's own three-pass evaluation bit for bit, with a satellite
+    timed in the previous week and one without an ephemeris in the same epoch."""
+    from sdr_di.orbits.broadcast import sat_pos_vel_clock
+
+    obs = world.synth(round(22.4 * world.fs)).obs_exact
+    wk = obs.t_tx_week.copy()
+    sow = obs.t_tx_sow.copy()
+    wk[1] -= 1                       # the same instant, counted from the previous week
+    sow[1] += 604800.0
+    obs = dataclasses.replace(obs, t_tx_week=wk, t_tx_sow=sow)
+    ephs = {p: e for p, e in world.eph.items() if p != int(obs.prn[2])}
+    sat = pvt.satellite_states(obs, ephs)
+    assert sat.missing == (int(obs.prn[2]),) and not sat.ok[2] and sat.ok.sum() == obs.n - 1
+    for i in np.flatnonzero(sat.ok):
+        eph, w, t_sv = ephs[int(obs.prn[i])], int(wk[i]), float(sow[i])
+        _, _, d0, _ = sat_pos_vel_clock(eph, t_sv, week=w)
+        _, _, d1, _ = sat_pos_vel_clock(eph, t_sv - d0[0], week=w)
+        r, v, d, dd = sat_pos_vel_clock(eph, t_sv - d1[0], week=w)
+        assert np.array_equal(sat.r_e[i], r[0]) and np.array_equal(sat.v_e[i], v[0])
+        assert sat.dt_sv[i] == d[0] and sat.ddt_sv[i] == dd[0]
+    assert np.all(np.isnan(sat.r_e[2]))
+
+
 @pytest.mark.parametrize("t_s", EPOCHS_S)
 def test_modelled_observables_are_the_generator_observables(world, t_s):
     """The PVT's models run forwards from the true state and clock give the exact

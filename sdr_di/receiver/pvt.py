@@ -80,7 +80,7 @@ from ..constants import C_LIGHT, OMEGA_E, SECONDS_PER_WEEK
 from ..errors import NoEphemerisError, UnknownPrnError
 from ..frames import C_e_n, ecef_to_llh, elevation_azimuth
 from ..orbits.atmosphere import iono_delay_b3i_m, saastamoinen_delay
-from ..orbits.broadcast import sat_pos_vel_clock
+from ..orbits.broadcast import sat_pos_vel_clock_stacked, stack_ephemerides
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from .navdata import NavDataInForce
 from .observables import (
@@ -353,17 +353,25 @@ def satellite_states(obs: Observables, ephemerides: Mapping[int, Ephemeris] | An
     ddt = np.full(n, np.nan)
     ok = np.zeros(n, bool)
     missing = []
+    by_week: dict[int, list[tuple[int, Ephemeris]]] = {}
     for i in range(n):
         prn, wk, t_sv = int(obs.prn[i]), int(obs.t_tx_week[i]), float(obs.t_tx_sow[i])
         eph = lookup_ephemeris(ephemerides, prn, wk, t_sv)
         if eph is None:
             missing.append(prn)
             continue
-        _, _, d0, _ = sat_pos_vel_clock(eph, t_sv, week=wk)
-        _, _, d1, _ = sat_pos_vel_clock(eph, t_sv - d0[0], week=wk)
-        ri, vi, di, ddi = sat_pos_vel_clock(eph, t_sv - d1[0], week=wk)
-        r[i], v[i], dt[i], ddt[i] = ri[0], vi[0], di[0], ddi[0]
-        ok[i] = True
+        by_week.setdefault(wk, []).append((i, eph))
+    # every satellite of a week in one stacked evaluation per pass: each row is the value
+    # the record gives alone (sat_pos_vel_clock_stacked), bit for bit
+    for wk, sats in by_week.items():
+        idx = [i for i, _ in sats]
+        stack = stack_ephemerides([eph for _, eph in sats])
+        t_sv = obs.t_tx_sow[idx].astype(float)[:, None]
+        _, _, d0, _ = sat_pos_vel_clock_stacked(stack, t_sv, week=wk)
+        _, _, d1, _ = sat_pos_vel_clock_stacked(stack, t_sv - d0, week=wk)
+        ri, vi, di, ddi = sat_pos_vel_clock_stacked(stack, t_sv - d1, week=wk)
+        r[idx], v[idx], dt[idx], ddt[idx] = ri[:, 0], vi[:, 0], di[:, 0], ddi[:, 0]
+        ok[idx] = True
     return SatelliteStates(ok, r, v, dt, ddt, tuple(missing))
 
 
