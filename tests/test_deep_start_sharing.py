@@ -70,7 +70,7 @@ def test_the_next_task_on_the_same_files_continues_from_the_first_tasks_start_up
     first, second = _inputs(files), _inputs(files)
     for f in ("ekf", "ukf"):
         assert _deep.run_deep_variant(first, f).error is None
-    made = first.deep_starts[(R.IntegrationConfig().handover_wait_s,
+    made = first.starts[(R.IntegrationConfig().handover_wait_s,
                               R.IntegrationConfig().iono_wait_s)]
     assert _Receiver.calls == [(None, True), (made, False)]
     nav_before = second.nav
@@ -87,7 +87,7 @@ def test_a_start_up_of_another_span_is_not_taken_and_the_run_makes_its_own(files
     assert _deep.run_deep_variant(second, "ekf").error is None
     shared = _Receiver.calls[0]
     assert [c[1] for c in _Receiver.calls] == [True, False, True]   # refused, then its own
-    own = next(iter(second.deep_starts.values()))
+    own = next(iter(second.starts.values()))
     assert own.key[1] == "first 20 s" and own is not shared
     assert _deep.run_deep_variant(second, "ukf").error is None       # the task's own
     assert _Receiver.calls[-1] == (own, False)

@@ -217,9 +217,9 @@ class Inputs:
     nav: Any
     prns: list[int]
     paths: dict
-    #: deep start-up states at the hand-over and loose/tight scalar runs, by hand-over rule
-    #: (:func:`run_deep_variant`)
-    deep_starts: dict = dataclasses.field(default_factory=dict)
+    #: kept starts, by hand-over rule (:func:`run_deep_variant`): deep start-up states at the
+    #: hand-over (``DeepStart``) and loose/tight scalar runs (``ScalarRecord``)
+    starts: dict = dataclasses.field(default_factory=dict)
     #: the ephemeris file ``nav`` was read from (identifies the assistance data of a start-up
     #: shared between tasks: :func:`shared_start`)
     nav_path: Path | None = None
@@ -432,7 +432,7 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     :class:`~sdr_di.integration.receiver.IntegrationConfig` fields.
 
     Deep mode runs the scalar start-up once per ``inputs`` and hand-over rule: the first
-    run keeps its state at the hand-over (``inputs.deep_starts``) and the next ones continue
+    run keeps its state at the hand-over (``inputs.starts``) and the next ones continue
     from a copy of it, with the same results as their own start-up would give
     (:class:`~sdr_di.integration.receiver.DeepStart`); a study's filters on one file share
     it, and so do the next tasks of this process on the same files (:func:`shared_start`:
@@ -463,7 +463,7 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
         # serves both) is made once per hand-over rule and kept
         rule = (cfg.handover_wait_s, cfg.iono_wait_s) if cfg.mode == "deep" else \
             ("scalar", cfg.handover_wait_s, cfg.iono_wait_s, cfg.gnss_every)
-        start = inputs.deep_starts.get(rule)
+        start = inputs.starts.get(rule)
         shared = None
         if start is None:
             shared = start = shared_start(inputs, rule)
@@ -486,10 +486,10 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
         finally:          # kept also when this filter fails after the hand-over
             made = rx.deep_start if rx.deep_start is not None else rx.scalar_record
             if made is not None:
-                inputs.deep_starts[rule] = made
+                inputs.starts[rule] = made
                 _keep_shared(inputs, rule, made)
             elif shared is not None:   # this task's next filters continue from it too
-                inputs.deep_starts[rule] = shared
+                inputs.starts[rule] = shared
     except (SdrDiError, ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         return DeepRun(filter_name, None, f"{type(exc).__name__}: {exc}", -1)
     k_h = round(res.handover_s * inputs.source.sampling_rate_hz)
