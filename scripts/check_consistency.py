@@ -12,8 +12,9 @@ For every seed and C/N0 the default scenario (``signals/default.toml``; the seed
 IMU errors and the signal noise; truth IMU and oscillator equal to the assumed ones) is
 generated once at ``--fs`` for ``--duration`` s
 (:class:`~sdr_di.experiments._deep.generated_inputs`, the experiments' generator and file
-cache), and every mode x filter runs on those files with ``IntegrationConfig(mode=..., filter=...)``
-(the run of ``sdr-di run``, through the experiments' ``run_deep_variant``). As in the weak-signal experiment, every satellite is at 40
+cache), and every mode x filter runs on those files with
+``IntegrationConfig(mode=..., filter=...)`` (the run of ``sdr-di run``, through the
+experiments' ``run_deep_variant``). As in the weak-signal experiment, every satellite is at 40
 dB-Hz until ``--t-step`` s (the start-up needs a strong signal: at 30 dB-Hz the default
 scenario never hands over) and at ``--cn0`` from then to the end (an attenuation window of
 the scenario schema, :func:`~sdr_di.experiments._deep.with_outages`). The figures are the

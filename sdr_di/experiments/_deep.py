@@ -467,6 +467,7 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
         shared = None
         if start is None:
             shared = start = shared_start(inputs, rule)
+
         def run(rx, start):
             return rx.run(inputs.source, inputs.imu, prns=inputs.prns, nav=inputs.nav,
                           truth=inputs.truth, start=start, keep_start=start is None)
@@ -479,9 +480,9 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
                 if shared is None:
                     raise
                 # another task's start-up on these files, but of another span, PRNs or
-                # assistance (refused before any work): this run makes its own
+                # assistance (refused before any work, the receiver untouched): this run
+                # makes its own
                 shared = None
-                rx = IntegratedReceiver(cfg, scalar=CountingScalarReceiver(log=False))
                 res = run(rx, None)
         finally:          # kept also when this filter fails after the hand-over
             made = rx.deep_start if rx.deep_start is not None else rx.scalar_record
