@@ -336,6 +336,38 @@ def test_row_split_runs_before_after_the_callers_part():
     assert ("part", mine[0][2], 10, False) in events
 
 
+def test_split_call_holds_background_work_until_its_workers_end():
+    """While a split call runs (the caller's part and `before`, the worker's part, up to the
+    caller's collecting it), wait_for_split_calls waits; a one-thread call does not hold it
+    (the other core is free); after the call it returns at once. Background work (the IF
+    read-ahead) waits on it."""
+    import numba
+
+    from sdr_di.receiver.threads import KernelThreads, wait_for_split_calls
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two numba threads")
+    seen = []
+
+    def part(a, b):
+        seen.append(("part", wait_for_split_calls(0.0)))
+
+    KernelThreads(2).run_rows(part, np.ones(10),
+                              before=lambda done: seen.append(("before", wait_for_split_calls(0.0))))
+    assert seen and not any(free for _, free in seen)
+    assert wait_for_split_calls(0.0)
+    seen.clear()
+    KernelThreads(1).run_rows(part, np.ones(10))
+    assert seen == [("part", True)]
+
+    def failing(a, b):
+        raise RuntimeError("kernel failed")
+
+    with pytest.raises(RuntimeError):
+        KernelThreads(2).run_rows(failing, np.ones(10))
+    assert wait_for_split_calls(0.0)        # released on failure too
+
+
 def test_thread_choice_is_made_per_call_size(monkeypatch):
     """KernelThreads keeps its costs per size class of the call: one thread measured cheaper
     on small calls (a worker's wake-up weighs on 1 ms blocks) does not decide the large

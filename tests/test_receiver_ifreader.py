@@ -388,3 +388,66 @@ def test_read_stored_power_equals_mean_power_of_the_values(tmp_path, fmt, monkey
         if ahead is not None and ahead[0] <= s and s + m <= sum(ahead[:2]):
             summed_ahead += ahead[2].result()[1] is not None
     assert summed_ahead == (3 if get_format(fmt).name in ("iq_int8", "iq_int4") else 0)
+
+
+def test_read_ahead_pieces_wait_for_split_calls_and_the_caller_reads_the_rest(tmp_path,
+                                                                               monkeypatch):
+    """The read-ahead reads a piece at a time and only while no split kernel call runs
+    (receiver.threads.wait_for_split_calls): with a split call in progress and no timeout,
+    the caller that needs the values reads every piece itself, and gets the values and
+    block sums of a synchronous read; the background thread then finds nothing left."""
+    import threading
+
+    from sdr_di.receiver import ifreader, threads
+    from sdr_di.receiver._numba_correlate_bits import mean_power
+
+    monkeypatch.setattr(ifreader, "_POWER_BLOCK", 64)
+    monkeypatch.setattr(ifreader, "_PIECE_BLOCKS", 2)        # pieces of 64 samples
+    monkeypatch.setattr(ifreader, "_SPLIT_WAIT_S", 30.0)
+    n = 6000
+    src, ref = _read_ahead_and_plain(tmp_path / "w.bin", "iq_int8", n, seed=11)
+    readers = []
+    real = ifreader.IfSource._read_stored_into
+
+    def recording(self, out, s, m, c):
+        readers.append(threading.current_thread() is threading.main_thread())
+        return real(self, out, s, m, c)
+
+    monkeypatch.setattr(ifreader.IfSource, "_read_stored_into", recording)
+    threads._split_call(True)
+    try:
+        src.read_stored(0, 1000)                 # schedules [500, 2000)
+        ahead = src._ahead
+        got, nc, pw = src.read_stored_power(1000, 900)
+    finally:
+        threads._split_call(False)
+    exp, _ = ref.read_stored(1000, 900)
+    np.testing.assert_array_equal(got, exp)
+    assert pw == float(mean_power(exp, 2))
+    assert ahead[0] == 500 and len(ahead[2].pieces) == 24
+    assert len(readers) == 24 and all(readers)   # every piece on the caller's thread
+    ahead[2].result()                            # nothing left to read
+    assert len(readers) == 24
+
+
+@pytest.mark.parametrize("fmt", ["iq_int8", "iq_int4", "real_int16"])
+def test_read_ahead_of_a_file_cut_short_falls_back_to_the_reads_error(tmp_path, fmt,
+                                                                       monkeypatch):
+    """A file that loses its end after it was opened, before the read-ahead read it (held
+    back by a split call): the read-ahead's short read is not served, and the synchronous
+    read raises SampleFormatError (no garbage values)."""
+    from sdr_di.errors import SampleFormatError
+    from sdr_di.receiver import ifreader, threads
+
+    monkeypatch.setattr(ifreader, "_SPLIT_WAIT_S", 30.0)
+    path = tmp_path / "cut.bin"
+    src, _ = _read_ahead_and_plain(path, fmt, 20_000, seed=13)
+    threads._split_call(True)
+    try:
+        src.read_stored(0, 4000)
+        data = path.read_bytes()
+        path.write_bytes(data[:len(data) // 4])
+        with pytest.raises(SampleFormatError, match="short read"):
+            src.read_stored(4000, 4000)
+    finally:
+        threads._split_call(False)

@@ -84,6 +84,7 @@ import collections
 import functools
 import math
 import os
+import threading
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -146,6 +147,10 @@ _CHECK_WINDOW_BYTES = 65536
 #: a block's sum of 8-bit squares stays below 2**31).
 _POWER_BLOCK = 65536
 _CHECK_MIN_PAIRS = 4096
+#: Power blocks per piece of a read-ahead (:class:`_ReadAhead`): 1 MiB of 8-bit values.
+_PIECE_BLOCKS = 16
+#: Longest wait of the read-ahead thread for the split kernel calls to end, per piece [s].
+_SPLIT_WAIT_S = 0.02
 
 
 class IfSource:
@@ -518,17 +523,37 @@ class IfSource:
         m = x.size // n_comp
         return x, n_comp, (total / m if m > 0 else 0.0)
 
-    def _read_ahead_job(self, start_sample: int, n: int, n_comp: int):
-        """The read-ahead thread's work: the values, and their block sums of squares when
-        they are 8-bit (:meth:`read_stored_power`)."""
-        from ._numba_correlate_bits import block_sum_squares
+    def _stored_dtype(self) -> np.dtype:
+        """The dtype :meth:`read_stored` returns (native byte order)."""
+        fmt = self.format
+        if self._tables is not None:
+            return np.dtype(np.int8)
+        dt = np.dtype("<f4") if fmt.name == "gr_complex" else np.dtype(fmt.dtype)
+        return dt.newbyteorder("=")
 
-        buf = self._read_stored_now(start_sample, n, n_comp)
-        sums = None
-        if buf.dtype == np.int8:
-            sums = np.empty(-(-buf.size // _POWER_BLOCK))
-            block_sum_squares(buf, _POWER_BLOCK, sums)
-        return buf, sums
+    def _read_stored_into(self, out: np.ndarray, start_sample: int, n: int,
+                          n_comp: int) -> None:
+        """:meth:`_read_stored_now` of a checked range into ``out`` (``n * n_comp`` values
+        of :meth:`_stored_dtype`): formats stored as they are served are read straight
+        into it (``os.preadv``, no intermediate array), the others converted and copied."""
+        fmt = self.format
+        bps = fmt.bytes_per_sample
+        if self._tables is not None or not np.dtype(
+                "<f4" if fmt.name == "gr_complex" else fmt.dtype).isnative:
+            out[:] = self._read_stored_now(start_sample, n, n_comp)
+            return
+        view = memoryview(out).cast("B")
+        fd = os.open(self.path, os.O_RDONLY)
+        try:
+            done, want, off = 0, n * bps, start_sample * bps
+            while done < want:
+                got = os.preadv(fd, [view[done:want]], off + done)
+                if got <= 0:
+                    raise SampleFormatError(
+                        f"IF file {self.path}: short read at sample {start_sample}")
+                done += got
+        finally:
+            os.close(fd)
 
     def _read_stored_now(self, start_sample: int, n: int, n_comp: int) -> np.ndarray:
         """:meth:`read_stored` of a checked range, read now (a fresh array)."""
@@ -558,13 +583,15 @@ class IfSource:
         return out
 
     def _schedule_ahead(self, start_sample: int, n: int, n_comp: int) -> None:
-        """Start reading ``[start_sample, start_sample + n)`` in the background."""
+        """Start reading ``[start_sample, start_sample + n)`` in the background
+        (:class:`_ReadAhead`)."""
         if self._pool is None:
             from concurrent.futures import ThreadPoolExecutor
 
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="if-read-ahead")
-        self._ahead = (start_sample, n, self._pool.submit(self._read_ahead_job, start_sample,
-                                                          n, n_comp))
+        job = _ReadAhead(self, start_sample, n, n_comp)
+        self._pool.submit(job.run)
+        self._ahead = (start_sample, n, job)
 
     def _take_ahead(self, start_sample: int, n: int, n_comp: int, with_power: bool = False):
         """The requested range from the pending read-ahead, or None (which is dropped).
@@ -573,12 +600,12 @@ class IfSource:
         ahead, self._ahead = self._ahead, None
         if ahead is None:
             return None
-        a0, m, fut = ahead
+        a0, m, job = ahead
         if not (a0 <= start_sample and start_sample + n <= a0 + m):
-            fut.cancel()
+            job.cancel()
             return None
         try:
-            buf, sums = fut.result()
+            buf, sums = job.result()
         except Exception:  # noqa: BLE001 - read again in the caller's thread, which raises
             return None
         i = (start_sample - a0) * n_comp
@@ -627,6 +654,91 @@ class IfSource:
 
 
 # -- layout heuristic ------------------------------------------------------------------------
+
+class _ReadAhead:
+    """One read-ahead of ``[start, start + n)`` of an :class:`IfSource`, in pieces of
+    :data:`_PIECE_BLOCKS` power blocks, with their block sums of squares when the values are
+    8-bit (:meth:`IfSource.read_stored_power`).
+
+    The read-ahead thread (:meth:`run`) reads a piece only while no split kernel call runs
+    (:func:`~sdr_di.receiver.threads.wait_for_split_calls`, at most
+    :data:`_SPLIT_WAIT_S` per piece): during one, both cores are busy with the calling
+    thread and the kernel worker the caller waits for, and a read there delayed the worker.
+    On the 2-core machine (40 s default file, deep run) the main thread's waits on the
+    worker were 0.8-1.1 s per run with the whole chunk read at once and 0.4-0.7 s with the
+    read-ahead thread at the idle scheduling class (which risks stalling the caller on a
+    loaded machine, where a starved thread may hold the GIL). The caller that needs the
+    values (:meth:`result`) reads the pieces not yet taken itself, so it never waits for
+    more than the pieces being read: nothing is starved when the kernels never stop.
+    """
+
+    def __init__(self, src: IfSource, start: int, n: int, n_comp: int) -> None:
+        self.src, self.start, self.n_comp = src, start, n_comp
+        self.values = np.empty(n * n_comp, src._stored_dtype())
+        self.sums = np.empty(-(-self.values.size // _POWER_BLOCK)) \
+            if self.values.dtype == np.int8 else None
+        step = _PIECE_BLOCKS * _POWER_BLOCK // n_comp          # samples per piece
+        self.pieces = [(a, min(a + step, n)) for a in range(0, n, step)]
+        self._next = 0                   # first piece not taken
+        self._busy = 0                   # pieces being read
+        self._stop = False
+        self._error: BaseException | None = None
+        self._cond = threading.Condition()
+
+    def _take(self) -> int | None:
+        with self._cond:
+            if self._stop or self._error is not None or self._next >= len(self.pieces):
+                return None
+            self._busy += 1
+            self._next += 1
+            return self._next - 1
+
+    def _read(self, i: int) -> None:
+        from ._numba_correlate_bits import block_sum_squares
+
+        try:
+            a, b = self.pieces[i]
+            v0, v1 = a * self.n_comp, b * self.n_comp
+            self.src._read_stored_into(self.values[v0:v1], self.start + a, b - a,
+                                       self.n_comp)
+            if self.sums is not None:    # v0 is a multiple of the block
+                block_sum_squares(self.values[v0:v1], _POWER_BLOCK,
+                                  self.sums[v0 // _POWER_BLOCK:-(-v1 // _POWER_BLOCK)])
+        except BaseException as e:  # noqa: BLE001 - re-raised by result()
+            with self._cond:
+                self._error = self._error or e
+        finally:
+            with self._cond:
+                self._busy -= 1
+                self._cond.notify_all()
+
+    def run(self) -> None:
+        """The read-ahead thread's work (class notes)."""
+        from .threads import wait_for_split_calls
+
+        while True:
+            wait_for_split_calls(_SPLIT_WAIT_S)
+            i = self._take()
+            if i is None:
+                return
+            self._read(i)
+
+    def result(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The values and their block sums (None unless 8-bit): the pieces not yet taken
+        are read here, the ones being read waited for; a read's exception is raised."""
+        while (i := self._take()) is not None:
+            self._read(i)
+        with self._cond:
+            self._cond.wait_for(lambda: self._busy == 0)
+        if self._error is not None:
+            raise self._error
+        return self.values, self.sums
+
+    def cancel(self) -> None:
+        """Read no more pieces (the values are not needed)."""
+        with self._cond:
+            self._stop = True
+
 
 def _circ_mean(lo_u: np.ndarray, period: int) -> float:
     """|mean(exp(2 pi j lo / period))|: 0 for a flat distribution, ~1 when peaked near 0."""

@@ -40,7 +40,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numba
 import numpy as np
 
-__all__ = ["KernelThreads", "balanced_cuts", "split_stats"]
+__all__ = ["KernelThreads", "balanced_cuts", "split_stats", "wait_for_split_calls"]
 
 #: Environment variable fixing the thread count of every automatic :class:`KernelThreads`
 #: (benchmarks: ``scripts/bench_deep.py --kernel-threads``).
@@ -54,6 +54,12 @@ _POOL_PID = 0
 #: Process-wide CPU accounting of the split calls (:func:`split_stats`).
 _STATS = {"calls": 0, "caller_cpu_s": 0.0, "worker_cpu_s": 0.0, "wait_cpu_s": 0.0}
 _POOL_LOCK = threading.Lock()
+#: Split calls of :meth:`KernelThreads.run_rows` in progress in the process, and the event
+#: set while there is none (:func:`wait_for_split_calls`).
+_SPLIT_LOCK = threading.Lock()
+_SPLIT_RUNNING = 0
+_NO_SPLIT_CALL = threading.Event()
+_NO_SPLIT_CALL.set()
 
 
 def _one_numba_thread() -> None:
@@ -80,6 +86,26 @@ def split_stats() -> dict:
     plus ``wait_cpu_s`` estimates a run's wall time on idle cores, whatever the load it was
     measured under."""
     return dict(_STATS)
+
+
+def wait_for_split_calls(timeout_s: float) -> bool:
+    """Wait until no split call of :meth:`KernelThreads.run_rows` runs in the process, for
+    at most ``timeout_s`` seconds; True when none runs. Background work that can wait (the
+    IF read-ahead: :class:`~sdr_di.receiver.ifreader._ReadAhead`) calls it so as not to take
+    a core from a kernel worker the caller will wait for (also while the caller waits:
+    a read then shared the worker's core, and the caller's waits on the workers stayed as
+    long as without the wait, 0.9-1.1 s per 40 s deep run)."""
+    return _NO_SPLIT_CALL.wait(timeout_s)
+
+
+def _split_call(begin: bool) -> None:
+    global _SPLIT_RUNNING
+    with _SPLIT_LOCK:
+        _SPLIT_RUNNING += 1 if begin else -1
+        if _SPLIT_RUNNING == 0:
+            _NO_SPLIT_CALL.set()
+        else:
+            _NO_SPLIT_CALL.clear()
 
 
 def balanced_cuts(weights, parts: int) -> list[int]:
@@ -217,6 +243,7 @@ class KernelThreads:
                 call(a, b)
                 return time.thread_time() - tc
 
+            _split_call(True)
             futs = [pool.submit(timed, cuts[j], cuts[j + 1]) for j in range(1, threads)
                     if cuts[j + 1] > cuts[j]]
             main_cpu = 0.0
@@ -243,7 +270,10 @@ class KernelThreads:
                     self._before_s = dt if self._before_s == 0.0 else \
                         0.8 * self._before_s + 0.2 * dt
             finally:
-                worker_cpu = [f.result() for f in futs]
+                try:
+                    worker_cpu = [f.result() for f in futs]
+                finally:
+                    _split_call(False)
             _STATS["calls"] += 1
             _STATS["caller_cpu_s"] += main_cpu
             _STATS["worker_cpu_s"] += sum(worker_cpu)
