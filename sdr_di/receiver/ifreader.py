@@ -460,9 +460,12 @@ class IfSource:
         file the receivers ask for 1.12 times the file (chunks of 100 or 200 ms that
         overlap by 10 ms) and the file is read 1.35 times (scalar and deep alike, measured
         2026-12-04), rather than 1.5 times with ``b = n / 2``. A later call inside that
-        range is served from it, so the file read overlaps the caller's correlation (the
-        read releases the GIL, as do the correlator kernels); any other call reads
-        synchronously and drops it. The values are the same either way.
+        range is served from it, so the file read overlaps the caller's work (the read
+        releases the GIL, as do the correlator kernels); any other call reads
+        synchronously and drops it. The read-ahead goes a piece at a time, while no split
+        kernel call keeps both cores busy, and the call that needs the values reads the
+        pieces not yet taken itself (:class:`_ReadAhead`). The values are the same either
+        way.
         """
         n_comp = 2 if self.format.is_complex else 1
         if self.spectrum_inverted:
@@ -664,12 +667,14 @@ class _ReadAhead:
     (:func:`~sdr_di.receiver.threads.wait_for_split_calls`, at most
     :data:`_SPLIT_WAIT_S` per piece): during one, both cores are busy with the calling
     thread and the kernel worker the caller waits for, and a read there delayed the worker.
-    On the 2-core machine (40 s default file, deep run) the main thread's waits on the
-    worker were 0.8-1.1 s per run with the whole chunk read at once and 0.4-0.7 s with the
-    read-ahead thread at the idle scheduling class (which risks stalling the caller on a
-    loaded machine, where a starved thread may hold the GIL). The caller that needs the
-    values (:meth:`result`) reads the pieces not yet taken itself, so it never waits for
-    more than the pieces being read: nothing is starved when the kernels never stop.
+    On the 2-core machine (40 s default file, deep run, interleaved runs, 2026-12-04) the
+    main thread's waits on the kernel worker were 0.88-1.10 s per run with each chunk read
+    at once, whenever asked, and 0.53-0.81 s with the pieces held back (0.38-0.70 s with the
+    read thread at the idle scheduling class instead, which can stall the caller on a loaded
+    machine: a starved thread may hold the GIL). The caller that needs the values
+    (:meth:`result`) reads the pieces not yet taken itself, so it waits for no more than the
+    pieces being read, and nothing is starved when the kernels never stop (several
+    receivers in threads of one process).
     """
 
     def __init__(self, src: IfSource, start: int, n: int, n_comp: int) -> None:
