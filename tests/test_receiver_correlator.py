@@ -421,6 +421,31 @@ def test_row_split_works_in_a_forked_child():
         assert p.apply_async(_split_in_child).get(timeout=30) == [(0, 5), (5, 10)]
 
 
+def _split_calls_free_in_child():
+    from sdr_di.receiver.threads import wait_for_split_calls
+
+    return wait_for_split_calls(0.0)
+
+
+def test_forked_child_does_not_inherit_the_parents_split_call():
+    """A child forked while the parent is inside a split call starts with none running (its
+    read-ahead would otherwise wait on a call that never ends in the child)."""
+    import multiprocessing as mp
+
+    from sdr_di.receiver import threads
+
+    if "fork" not in mp.get_all_start_methods():
+        pytest.skip("needs fork")
+    threads._split_call(True)
+    try:
+        assert not threads.wait_for_split_calls(0.0)
+        with mp.get_context("fork").Pool(1) as p:
+            assert p.apply_async(_split_calls_free_in_child).get(timeout=30)
+    finally:
+        threads._split_call(False)
+    assert threads.wait_for_split_calls(0.0)
+
+
 def test_block_sum_squares_equals_plain_sums():
     """block_sum_squares (int64 sums): the float64 sums of squares of each block, short last
     block included, with the extreme 8-bit values."""

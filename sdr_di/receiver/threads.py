@@ -98,6 +98,18 @@ def wait_for_split_calls(timeout_s: float) -> bool:
     return _NO_SPLIT_CALL.wait(timeout_s)
 
 
+def _no_split_call_in_child() -> None:
+    # a fork copies the state of the parent's split calls, which are not the child's (and
+    # the parent's lock may be held by a thread the child does not have)
+    global _SPLIT_LOCK, _SPLIT_RUNNING, _NO_SPLIT_CALL
+    _SPLIT_LOCK, _SPLIT_RUNNING, _NO_SPLIT_CALL = threading.Lock(), 0, threading.Event()
+    _NO_SPLIT_CALL.set()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_no_split_call_in_child)
+
+
 def _split_call(begin: bool) -> None:
     global _SPLIT_RUNNING
     with _SPLIT_LOCK:
