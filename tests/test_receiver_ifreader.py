@@ -349,12 +349,20 @@ def test_read_ahead_reads_an_overlapped_sequential_pass_about_once(tmp_path, mon
     read = []
     real = ifreader.IfSource._read_stored_now
 
+    real_into = ifreader.IfSource._read_stored_into
+
     def counting(self, s, m, c):
         if self is src:
             read.append(m)
         return real(self, s, m, c)
 
+    def counting_into(self, out, s, m, c):    # the read-ahead's pieces
+        if self is src:
+            read.append(m)
+        return real_into(self, out, s, m, c)
+
     monkeypatch.setattr(ifreader.IfSource, "_read_stored_now", counting)
+    monkeypatch.setattr(ifreader.IfSource, "_read_stored_into", counting_into)
     s, served, calls = 0, 0, 0
     while s + n <= n_file:
         a = src._ahead
@@ -418,16 +426,20 @@ def test_read_ahead_pieces_wait_for_split_calls_and_the_caller_reads_the_rest(tm
     try:
         src.read_stored(0, 1000)                 # schedules [500, 2000)
         ahead = src._ahead
-        got, nc, pw = src.read_stored_power(1000, 900)
+        got, nc, pw = src.read_stored_power(1000, 900)     # and then [1900, 2800)
+        during = list(readers)
     finally:
         threads._split_call(False)
     exp, _ = ref.read_stored(1000, 900)
     np.testing.assert_array_equal(got, exp)
     assert pw == float(mean_power(exp, 2))
     assert ahead[0] == 500 and len(ahead[2].pieces) == 24
-    assert len(readers) == 24 and all(readers)   # every piece on the caller's thread
+    assert during == [True] * 24                 # every piece on the caller's thread
     ahead[2].result()                            # nothing left to read
-    assert len(readers) == 24
+    assert readers.count(True) == 24
+    nxt = src._ahead[2]
+    nxt.result()                                 # read in the background once allowed
+    assert len(nxt.pieces) == 15 and len(readers) == 39
 
 
 @pytest.mark.parametrize("fmt", ["iq_int8", "iq_int4", "real_int16"])
