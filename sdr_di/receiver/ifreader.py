@@ -668,7 +668,7 @@ class _ReadAhead:
     :data:`_SPLIT_WAIT_S` per piece): during one, both cores are busy with the calling
     thread and the kernel worker the caller waits for, and a read there delayed the worker.
     On the 2-core machine (40 s default file, deep run, interleaved runs, 2026-12-04) the
-    main thread's waits on the kernel worker were 0.88-1.10 s per run with each chunk read
+    main thread's waits on the kernel worker were 0.79-1.17 s per run with each chunk read
     at once, whenever asked, and 0.53-0.81 s with the pieces held back (0.38-0.70 s with the
     read thread at the idle scheduling class instead, which can stall the caller on a loaded
     machine: a starved thread may hold the GIL). The caller that needs the values
