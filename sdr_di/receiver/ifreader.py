@@ -541,7 +541,7 @@ class IfSource:
         into it (``os.preadv``, no intermediate array), the others converted and copied."""
         fmt = self.format
         bps = fmt.bytes_per_sample
-        if self._tables is not None or not np.dtype(
+        if self._tables is not None or not hasattr(os, "preadv") or not np.dtype(
                 "<f4" if fmt.name == "gr_complex" else fmt.dtype).isnative:
             out[:] = self._read_stored_now(start_sample, n, n_comp)
             return
@@ -690,9 +690,12 @@ class _ReadAhead:
         self._error: BaseException | None = None
         self._cond = threading.Condition()
 
+    def _left(self) -> bool:
+        return not self._stop and self._error is None and self._next < len(self.pieces)
+
     def _take(self) -> int | None:
         with self._cond:
-            if self._stop or self._error is not None or self._next >= len(self.pieces):
+            if not self._left():
                 return None
             self._busy += 1
             self._next += 1
@@ -721,7 +724,7 @@ class _ReadAhead:
         """The read-ahead thread's work (class notes)."""
         from .threads import wait_for_split_calls
 
-        while True:
+        while self._left():            # (taken by the caller: not waited for)
             wait_for_split_calls(_SPLIT_WAIT_S)
             i = self._take()
             if i is None:

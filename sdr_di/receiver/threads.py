@@ -255,11 +255,12 @@ class KernelThreads:
                 call(a, b)
                 return time.thread_time() - tc
 
-            _split_call(True)
-            futs = [pool.submit(timed, cuts[j], cuts[j + 1]) for j in range(1, threads)
-                    if cuts[j + 1] > cuts[j]]
+            futs: list = []
             main_cpu = 0.0
+            _split_call(True)
             try:
+                futs.extend(pool.submit(timed, cuts[j], cuts[j + 1]) for j in range(1, threads)
+                            if cuts[j + 1] > cuts[j])
                 if cuts[1] > 0:
                     dt = timed(0, cuts[1])
                     main_cpu += dt
