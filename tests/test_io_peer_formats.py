@@ -192,6 +192,30 @@ def test_json_sidecar_wins_over_tag(tmp_path):
     assert src.format.name == "iq_int8" and src.sampling_rate_hz == 1e6
 
 
+def test_foreign_json_named_like_the_file_is_refused_with_the_way_out(tmp_path, capsys):
+    """A JSON file beside the IF file with its stem that is not an sdr-di sidecar (a
+    SignalSim configuration named like its output): one line saying so and naming
+    --ignore-sidecar, exit 2 before any work; with --ignore-sidecar the tag describes the
+    file. The sidecar named itself keeps the plain message."""
+    from sdr_di.cli import main
+    from sdr_di.errors import SidecarError
+
+    p = write(tmp_path, bytes(range(256)) * 40, tag_text("INT4X2", prog="IFDataGen"))
+    (tmp_path / "x.json").write_text(json.dumps({"time": {"type": "UTC"},
+                                                 "output": {"format": "IQ4"}}))
+    with pytest.raises(SidecarError, match=r"not an sdr-di sidecar .*sidecar of x\.bin "
+                                           r"\(--ignore-sidecar reads the file without it"):
+        open_source(p)
+    with pytest.raises(SidecarError, match=r"not an sdr-di sidecar \(no \"schema\""):
+        open_source(tmp_path / "x.json")
+    src = open_source(p, ignore_sidecar=True)
+    assert src.format.name == "iq_int4_sm" and src.sampling_rate_hz == 4e6   # the tag's
+    assert main(["run", str(p), "--no-progress", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("sdr-di: error: sidecar ") and "\n" not in err
+    assert "--ignore-sidecar" in err and not (tmp_path / "out").exists()
+
+
 # -- bad tags: one line naming the key ----------------------------------------------------------
 
 BAD = [

@@ -240,8 +240,11 @@ def read_sidecar(path: str | Path) -> dict[str, Any]:
     if not isinstance(meta, dict):
         raise SidecarError(f"sidecar {path}: not a JSON object (top level is "
                            f"{type(meta).__name__})")
-    if meta.get("schema") != SCHEMA:
-        raise SidecarError(f"sidecar {path}: schema {meta.get('schema')!r}, expected {SCHEMA!r}")
+    if "schema" not in meta:
+        raise SidecarError(f"sidecar {path}: not an sdr-di sidecar (no \"schema\": "
+                           f"{SCHEMA!r})")
+    if meta["schema"] != SCHEMA:
+        raise SidecarError(f"sidecar {path}: schema {meta['schema']!r}, expected {SCHEMA!r}")
     for key, required, ok, what in _CHECKS:
         if key not in meta:
             if required:

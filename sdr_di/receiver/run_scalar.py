@@ -83,7 +83,17 @@ def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,
     if not ignore_sidecar and sidecar.exists():
         if rfch not in (None, 1):
             raise SampleFormatError(f"{path}: --rfch {rfch}: an sdr-di file has one RF channel")
-        conflicts = flag_conflicts(read_sidecar(sidecar), sampling_rate_hz=sampling_rate_hz,
+        try:
+            meta = read_sidecar(sidecar)
+        except SidecarError as exc:
+            if path.suffix == ".json":
+                raise
+            # the IF file was named: X.json beside it may be another program's file (a
+            # SignalSim configuration named like its output)
+            raise SidecarError(f"{exc}; it is read as the sidecar of {path.name} "
+                               "(--ignore-sidecar reads the file without it: by its tag, "
+                               "else --fs/--if/--format)") from None
+        conflicts = flag_conflicts(meta, sampling_rate_hz=sampling_rate_hz,
                                    if_hz=if_hz, sample_format=sample_format,
                                    spectrum_inverted=spectrum_inverted,
                                    start_week=start_week, start_sow=start_sow)
