@@ -526,13 +526,16 @@ class IfSource:
         m = x.size // n_comp
         return x, n_comp, (total / m if m > 0 else 0.0)
 
+    def _file_dtype(self) -> np.dtype:
+        """The dtype of the values in the file, for the formats read without a byte table."""
+        return np.dtype("<f4") if self.format.name == "gr_complex" else np.dtype(
+            self.format.dtype)
+
     def _stored_dtype(self) -> np.dtype:
         """The dtype :meth:`read_stored` returns (native byte order)."""
-        fmt = self.format
         if self._tables is not None:
             return np.dtype(np.int8)
-        dt = np.dtype("<f4") if fmt.name == "gr_complex" else np.dtype(fmt.dtype)
-        return dt.newbyteorder("=")
+        return self._file_dtype().newbyteorder("=")
 
     def _read_stored_into(self, out: np.ndarray, start_sample: int, n: int,
                           n_comp: int) -> None:
@@ -541,8 +544,8 @@ class IfSource:
         into it (``os.preadv``, no intermediate array), the others converted and copied."""
         fmt = self.format
         bps = fmt.bytes_per_sample
-        if self._tables is not None or not hasattr(os, "preadv") or not np.dtype(
-                "<f4" if fmt.name == "gr_complex" else fmt.dtype).isnative:
+        if self._tables is not None or not hasattr(os, "preadv") or \
+                not self._file_dtype().isnative:
             out[:] = self._read_stored_now(start_sample, n, n_comp)
             return
         view = memoryview(out).cast("B")
@@ -562,9 +565,7 @@ class IfSource:
         """:meth:`read_stored` of a checked range, read now (a fresh array)."""
         fmt = self.format
         if n == 0:
-            dt = np.float32 if fmt.name == "gr_complex" else \
-                np.int8 if self._tables is not None else fmt.dtype
-            return np.empty(0, dt)
+            return np.empty(0, self._stored_dtype())
         # one read() into a fresh array: cheaper than mapping the range and copying it
         # (no page faults on a new mapping per chunk)
         bps = fmt.bytes_per_sample
@@ -576,7 +577,7 @@ class IfSource:
                 raw = raw[byte::bps]
             out = pairs[raw].view(np.int8)
         else:
-            dt = np.dtype("<f4") if fmt.name == "gr_complex" else fmt.dtype
+            dt = self._file_dtype()
             out = np.fromfile(self.path, dtype=dt, count=n * bps // dt.itemsize,
                               offset=start_sample * bps)
             if not out.dtype.isnative:
