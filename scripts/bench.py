@@ -25,7 +25,11 @@ and prints the process wall time and CPU time, the
 real-time factor (file seconds per wall second of the whole process, and of the tracking loop
 alone), each stage's share of the wall time (``ScalarReceiver.profile``) and the peak RSS (10 s
 vs 40 s shows that memory does not grow with the file length). The machine's load average is
-printed: on a shared machine, repeat (``--repeat``) and report best and typical. Each file
+printed: on a shared machine, repeat (``--repeat``) and report best and typical. So is the
+machine's speed before and after the runs (``run`` and ``deep``:
+``bench_correlate.speed_line``, a fixed kernel workload and a fixed filter-sized Python/NumPy
+step): on the shared VM the same work takes up to 1.5 times longer from one hour, even one
+minute, to the next, and a figure is only comparable beside the speed it was measured at. Each file
 is run with the cold search of all 63 PRNs (``sdr-di run --cold``, the receiver before the
 assisted search) and the assisted one (``sdr-di run``: the sidecar's satellites around their
 Doppler). A closing line per file gives target 2 (best assisted run: x real time against 3x,
@@ -338,6 +342,9 @@ def bench_run(args: argparse.Namespace) -> None:
               "CPU s: the process's user + system time (all threads; on a shared machine the "
               "load-independent cost: below half the file length = 2x real time on one free "
               "core)")
+        from bench_correlate import speed_line
+
+        print(speed_line("at start"))
         scalar_head = (f"{'search':>8} {'file s':>6} {'wall s':>7} {'CPU s':>6} "
                        f"{'x real time':>11} {'tracking':>8} "
                        + " ".join(f"{s[:7]:>7}" for s in _STAGES)
@@ -416,6 +423,7 @@ def bench_run(args: argparse.Namespace) -> None:
             for f, b in best.items():
                 _print_target4(f, b, mode_best.get(f, {}), args.repeat)
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+        print(speed_line("at the end"))
         print(f"load average {load:.2f} at the end")
     finally:
         if not args.keep:

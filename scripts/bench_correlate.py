@@ -35,6 +35,7 @@ needs the attributes ``channels``, ``fs``, ``ms``, ``seconds``, ``threads`` and 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import time
 
@@ -93,6 +94,69 @@ def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int
         phi = phi + n_int * dphi
         phi -= np.floor(phi)
     return time.perf_counter() - t0
+
+
+def speed_reference(seconds: float = 1.0) -> float:
+    """The machine's speed at this moment: CPU time per sample and channel [ns] of the
+    receiver's kernel on one thread, on a fixed workload (7 channels, 25 MHz, 1 ms rows,
+    ``seconds`` of stored 4-bit-in-int8 samples, the same random draw every time).
+
+    The benchmarks print it before and after their runs: on the shared VM the same work
+    takes up to 1.5 times longer in one hour than in another, and a figure without the
+    machine's speed beside it cannot be compared with another session's."""
+    rng = np.random.default_rng(1)
+    fs, n_ch = 25e6, 7
+    n_int = round(fs * 1e-3)
+    n_block = n_int * 50
+    x = (rng.normal(size=n_block) + 1j * rng.normal(size=n_block)).astype(np.complex64)
+    xs = np.clip(np.rint(x.view(np.float32) * 2.5), -7, 7).astype(np.int8)
+    bits = bit_windows(padded_replicas(rng.choice(np.array([-1, 1], np.int8),
+                                                  size=(n_ch, 10230))))
+    n_iv = max(1, round(seconds * 1e3))
+    old = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        _one_rate_receiver(xs, True, bits, n_int, 2, fs, rng)     # compile / warm up
+        c0 = time.thread_time()
+        _one_rate_receiver(xs, True, bits, n_int, n_iv, fs, rng)
+        cpu = time.thread_time() - c0
+    finally:
+        numba.set_num_threads(old)
+    return cpu / (n_iv * n_int * n_ch) * 1e9
+
+
+def python_reference(iterations: int = 800) -> float:
+    """The speed of the interpreter and small NumPy calls at this moment: CPU time of one
+    step of a fixed filter-sized workload [us] (a 17-state covariance predict and a
+    14-measurement update with ``np.linalg.solve``, plus scalar Python arithmetic), the kind
+    of work the deep loop's main thread does between kernel calls."""
+    rng = np.random.default_rng(2)
+    F = np.eye(17) + 1e-3 * rng.normal(size=(17, 17))
+    Q = 1e-6 * np.eye(17)
+    H = rng.normal(size=(14, 17))
+    R = np.eye(14)
+    P0 = np.eye(17)
+    acc = 0.0
+    c0 = time.thread_time()
+    for k in range(iterations):
+        P = F @ P0 @ F.T + Q          # from the same P every step: the same values each time
+        S = H @ P @ H.T + R
+        K = np.linalg.solve(S, H @ P).T
+        P = P - K @ H @ P
+        for v in (0.1 * k, 0.2 * k, 0.3 * k):
+            acc += math.sin(v) * math.cos(v) / (1.0 + v * v)
+    return (time.thread_time() - c0) / iterations * 1e6
+
+
+def speed_line(when: str) -> str:
+    """One line with :func:`speed_reference` and :func:`python_reference` for a benchmark's
+    output."""
+    py = sorted(python_reference() for _ in range(5))
+    return (f"machine speed {when}: the receiver's correlator at {speed_reference():.3f} ns "
+            f"per sample-channel on one thread, a filter-sized Python/NumPy step "
+            f"{py[0]:.1f}-{py[-1]:.1f} us over 5 x 800 steps (scripts/bench_correlate.py "
+            "speed_reference, python_reference; lower is faster; on the shared VM the "
+            "second varies from one second to the next)")
 
 
 def run(args: argparse.Namespace) -> list[dict]:

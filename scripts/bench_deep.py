@@ -122,9 +122,12 @@ def run(args: argparse.Namespace) -> list[dict]:
 
             _run_generate(args.duration, tmp)
             path = tmp / "bench.bin"
+        from bench_correlate import speed_line
+
         print(f"machine: {os.cpu_count()} cores, load average "
               f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; file {path.name}; filter "
               f"{args.filter} at {args.filter_rate:g} Hz")
+        print(speed_line("at start"))
         print(f"{'run':>3} {'file s':>7} {'wall s':>7} {'CPU s':>6} {'main':>5} {'x RT':>6} {'start-up s':>10} "
               f"{'loop s':>7} {'loop xRT':>8} {'corr%':>6} {'pref%':>6} {'filt%':>6} "
               f"{'ins%':>5} {'nco%':>5} {'read%':>6} {'RSS MiB':>8}")
@@ -173,6 +176,7 @@ def run(args: argparse.Namespace) -> list[dict]:
                   f"{k} {100 * p[k] / loop:.0f}%" for k in ("correlate", "read", "nco",
                                                            "filter", "prefilter", "ins"))
               + f"); load average {os.getloadavg()[0]:.2f} at the end")
+        print(speed_line("at the end"))
     finally:
         if not args.keep:
             shutil.rmtree(tmp, ignore_errors=True)
