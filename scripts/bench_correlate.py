@@ -96,6 +96,20 @@ def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int
     return time.perf_counter() - t0
 
 
+def _workload(rng: np.random.Generator, n_block: int, n_ch: int, real: bool = False):
+    """Random samples (``float32`` real or ``complex64``), random +-1 code replicas (one
+    row per channel), their bit windows, and the samples stored as the receivers store
+    4-bit values (``int8``, interleaved I/Q for complex)."""
+    if real:
+        x = rng.normal(size=n_block).astype(np.float32)
+    else:
+        x = (rng.normal(size=n_block) + 1j * rng.normal(size=n_block)).astype(np.complex64)
+    table = padded_replicas(rng.choice(np.array([-1, 1], np.int8), size=(n_ch, 10230)))
+    xs = x.view(np.float32) if not real else x
+    xs = np.clip(np.rint(xs * 2.5), -7, 7).astype(np.int8)
+    return x, table, bit_windows(table), xs
+
+
 def speed_reference(seconds: float = 1.0) -> float:
     """The machine's speed at this moment: CPU time per sample and channel [ns] of the
     receiver's kernel on one thread, on a fixed workload (7 channels, 25 MHz, 1 ms rows,
@@ -107,11 +121,7 @@ def speed_reference(seconds: float = 1.0) -> float:
     rng = np.random.default_rng(1)
     fs, n_ch = 25e6, 7
     n_int = round(fs * 1e-3)
-    n_block = n_int * 50
-    x = (rng.normal(size=n_block) + 1j * rng.normal(size=n_block)).astype(np.complex64)
-    xs = np.clip(np.rint(x.view(np.float32) * 2.5), -7, 7).astype(np.int8)
-    bits = bit_windows(padded_replicas(rng.choice(np.array([-1, 1], np.int8),
-                                                  size=(n_ch, 10230))))
+    _, _, bits, xs = _workload(rng, n_int * 50, n_ch)
     n_iv = max(1, round(seconds * 1e3))
     old = numba.get_num_threads()
     numba.set_num_threads(1)
@@ -155,8 +165,8 @@ def speed_line(when: str) -> str:
     return (f"machine speed {when}: the receiver's correlator at {speed_reference():.3f} ns "
             f"per sample-channel on one thread, a filter-sized Python/NumPy step "
             f"{py[0]:.1f}-{py[-1]:.1f} us over 5 x 800 steps (scripts/bench_correlate.py "
-            "speed_reference, python_reference; lower is faster; on the shared VM the "
-            "second varies from one second to the next)")
+            "speed_reference, python_reference; lower is faster; on the shared VM the step time "
+            "varies from one second to the next)")
 
 
 def run(args: argparse.Namespace) -> list[dict]:
@@ -165,12 +175,7 @@ def run(args: argparse.Namespace) -> list[dict]:
     fs = float(args.fs)
     n_int = round(fs * args.ms * 1e-3)
     n_ch = int(args.channels)
-    n_block = n_int * 50
-    if args.real:
-        x = rng.normal(size=n_block).astype(np.float32)
-    else:
-        x = (rng.normal(size=n_block) + 1j * rng.normal(size=n_block)).astype(np.complex64)
-    table = padded_replicas(rng.choice(np.array([-1, 1], np.int8), size=(n_ch, 10230)))
+    x, table, bits, xs = _workload(rng, n_int * 50, n_ch, args.real)
     n_intervals = max(1, round(args.seconds * 1e3 / args.ms))
     max_threads = numba.config.NUMBA_NUM_THREADS
     threads = [t for t in args.threads if 1 <= t <= max_threads] or [numba.get_num_threads()]
@@ -181,9 +186,6 @@ def run(args: argparse.Namespace) -> list[dict]:
           f"{'x real time':>12} {'ns/s-ch':>8}")
     rows = []
     old = numba.get_num_threads()
-    bits = bit_windows(table)
-    xs = x.view(np.float32) if not args.real else x
-    xs = np.clip(np.rint(xs * 2.5), -7, 7).astype(np.int8)  # 4-bit values stored in int8
     try:
         for kernel in ("table", "receiver", "recv_f32"):
             for t in threads:
