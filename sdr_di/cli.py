@@ -333,6 +333,10 @@ def _add_run(sub) -> None:
                    "without them, with a warning (default 0: hand over at once and take the "
                    "model up when subframe 1 is decoded, the rows before it flagged in the "
                    "solution's iono column; 30: one D1 frame)")
+    g.add_argument("--nco-latency", type=int, choices=(0, 1), default=None,
+                   help="deep: filter intervals between an update and the NCO commands that "
+                   "first use it, beyond the next (default 0; 1: the next interval is "
+                   "correlated while the filter updates, on a second core: docs/deep.md)")
     g.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
                    help="what the integration filter believes: IMU spec, oscillator, R, P0, "
                    "initial errors (docs/assumptions.md)")
@@ -359,6 +363,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep, loose or tight")
     if args.gnss_rate is not None and args.mode not in ("loose", "tight"):
         raise UsageError("--gnss-rate: only with --mode loose or tight")
+    if args.nco_latency is not None and args.mode != "deep":
+        raise UsageError("--nco-latency: only with --mode deep")
     if args.approx_pos is not None and (args.mode != "scalar" or args.ephemeris is None):
         raise UsageError("--approx-pos: only in scalar mode, with --ephemeris")
     _check_run_options(args)
@@ -566,6 +572,8 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
         kw["align"] = args.align
     if args.iono_wait is not None:
         kw["iono_wait_s"] = args.iono_wait
+    if args.nco_latency is not None:
+        kw["nco_latency"] = args.nco_latency
     try:
         cfg = IntegrationConfig(**kw)
     except ValueError as exc:

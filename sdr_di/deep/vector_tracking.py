@@ -198,6 +198,10 @@ class VectorTracking:
         self.dp_prev = None
         self._first = True
         self._pred = self._P1 = self._Pc1 = None
+        # NCOs one interval ahead (launch): the launched interval, and the pre-filter step
+        # (code [chips], frequency [Hz] per channel) to take after its correlations
+        self._launched: tuple | None = None
+        self._shift_end: tuple | None = None
 
     # ------------------------------------------------------------------------------------
     def start(self, rx: ScalarReceiver, ins, clock_bias_m: float, k_start: int) -> None:
@@ -230,7 +234,7 @@ class VectorTracking:
         rows = self.command_ncos(iv)
         if not self.load_samples(rows):
             return None
-        pf = _ChannelPass(self, iv, rows)
+        pf = _ChannelPass(self, iv, rows, self._pred)
 
         def before(epochs_done: int, epl: np.ndarray) -> None:
             # the filter's predict does not need this interval's correlations, and a channel
@@ -240,6 +244,34 @@ class VectorTracking:
             pf.run(epochs_done, epl)
         epl = self.correlate(rows, before=before)
         pf.run(rows.starts.size, epl)
+        return pf.measurements()
+
+    def launch(self, loop: IntegrationLoop, iv: Interval, work=None) -> bool:
+        """NCO commands and correlation of interval ``iv`` with the NCOs one interval ahead
+        (``nco_latency = 1``, :meth:`~sdr_di.integration.loop.IntegrationLoop.run_ahead`):
+        ``work()``, the previous interval's pre-filters, filter update and feedback, runs on
+        this thread while the kernel's worker correlates (it needs none of these rows).
+        The rows and their outputs wait for :meth:`measure_launched`. False (``work`` not
+        run) when the IF data ends inside the interval."""
+        rows = self.command_ncos(iv)
+        if not self.load_samples(rows):
+            return False
+        pred = self._pred
+        epl = self.correlate(rows, before=None if work is None else (lambda done, epl: work()))
+        self._launched = (iv, rows, pred, epl)
+        return True
+
+    def measure_launched(self, loop: IntegrationLoop, iv: Interval) -> Measurements:
+        """Pre-filters and measurements of the launched interval ``iv`` (:meth:`launch`).
+        Each pre-filter is first moved by the NCO step at the interval's end, which the
+        feedback of the filter's prediction to ``k1`` made while the interval was being
+        correlated (:meth:`feed_back_ahead`), so that ``z`` refers to the corrected INS."""
+        iv_l, rows, pred, epl = self._launched
+        if iv_l is not iv:
+            raise RuntimeError("measure_launched: interval was not the one launched")
+        pf = _ChannelPass(self, iv, rows, pred)
+        pf.run(rows.starts.size, epl)
+        self._shift_end = None
         return pf.measurements()
 
     def command_ncos(self, iv: Interval) -> _EpochRows:
@@ -370,6 +402,9 @@ class VectorTracking:
             cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
             self.pre.process(c.idx, E, P, L, nsamp / fs, cn0_lin,
                              block_start=epochs % min(c.bit_ms, self.cfg.coherent_ms) == 0)
+        if self._shift_end is not None:
+            # NCOs one interval ahead: the step of the feedback made during the interval
+            self.pre.shift(c.idx, self._shift_end[0][c.idx], self._shift_end[1][c.idx])
         good = self._usable(c, cnt)
         c.used = good
         return good
@@ -424,22 +459,54 @@ class VectorTracking:
         of sight (its NCOs move by it), then decorrelated, or restarted from the NCO when
         lost or inconsistent (frequency prior: the filter's rate sigma on that line of
         sight, at least ``_SIGMA_F_MIN``)."""
-        n_ch, pre, cfg = self.n_channels, self.pre, self.cfg
-        self.meas_all.set_geometry(iv.nav1.llh, self._pred.U[:, 0])
+        n_ch, pre = self.n_channels, self.pre
+        Hx = self._move_ncos(iv.nav1.llh, self._pred, x)
+        for c in self.chans:
+            i = c.idx
+            pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
+        self.restart_prefilters(loop)
+
+    def _move_ncos(self, llh, pred, x: np.ndarray) -> np.ndarray:
+        """NCO ranges at the next ``k0``: the last command's ranges at ``k1`` moved by the
+        correction ``x`` (``P1 - H x``, geometry of ``pred`` at ``llh``). Returns ``H x``
+        (ranges, then range rates) [m, m/s]."""
+        n_ch = self.n_channels
+        self.meas_all.set_geometry(llh, pred.U[:, 0])
         Hx = self.meas_all.matrix @ x
         self.P_k0 = self._P1 - Hx[:n_ch]
         self.Pc_k0 = self._Pc1 - Hx[:n_ch]
+        return Hx
+
+    def restart_prefilters(self, loop: IntegrationLoop) -> None:
+        """Each pre-filter after the filter update: restarted from its NCO when lost or
+        inconsistent (frequency prior: the filter's rate sigma on that line of sight, at
+        least ``_SIGMA_F_MIN``; geometry of the last :meth:`_move_ncos` or
+        :meth:`geometry_of`), else decorrelated."""
+        n_ch, pre, cfg = self.n_channels, self.pre, self.cfg
         Hr = self.meas_all.matrix[n_ch:]
         sig_f = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hr, loop.kf.P, Hr), 0.0)) / LAMBDA_B3I
         for c in self.chans:
             i = c.idx
-            pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
             if c.fast_fail >= 2 or pre.nis_p[i] < cfg.nis_p_min:
                 # lost, or inconsistent: restart from the NCO (INS) with the integration
                 # filter's rate uncertainty as the frequency prior
                 pre.reset(i, sigma_phi=1.0, sigma_f=max(float(sig_f[i]), _SIGMA_F_MIN))
             else:
                 pre.decorrelate(i)
+
+    def geometry_of(self, iv: Interval) -> None:
+        """Lines of sight of launched interval ``iv`` for :meth:`restart_prefilters`."""
+        iv_l, _, pred, _ = self._launched
+        self.meas_all.set_geometry(iv.nav1.llh, pred.U[:, 0])
+
+    def feed_back_ahead(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+        """NCOs one interval ahead: the correction ``x`` the loop fed back at the end of
+        the launched interval ``iv`` (the filter's prediction to ``iv.k1``) moves the NCO
+        ranges of the next command (``P1 - H x``); the pre-filters take the same step after
+        the launched interval's correlations (:meth:`measure_launched`)."""
+        n_ch = self.n_channels
+        Hx = self._move_ncos(iv.nav1.llh, self._pred, x)
+        self._shift_end = (CHIP_RATE_B3I / C_LIGHT * Hx[:n_ch], Hx[n_ch:] / LAMBDA_B3I)
 
     def take_up_navigation_data(self, loop: IntegrationLoop, iv: Interval) -> None:
         """Navigation data decoded so far, taken up at the interval's end
@@ -453,7 +520,15 @@ class VectorTracking:
             step = _take_up_model_change(
                 self.ephs, new_ephs or self.ephs, self.iono, new_iono, clock.week,
                 clock.sow(k1), loop.ins, loop.clock_bias_m, self.tau_prev,
-                np.array([c.used for c in chans]), self.meas_all, loop.kf, self.pre)
+                np.array([c.used for c in chans]), self.meas_all, loop.kf)
+            if self._launched is None:
+                for i in range(self.n_channels):
+                    self.pre.shift(i, step.d_tau[i], step.d_f[i])
+            else:
+                # NCOs one interval ahead: the launched interval's NCOs ran on the old model;
+                # its pre-filters take the step after its correlations (measure_launched)
+                self._shift_end = (self._shift_end[0] + step.d_tau,
+                                   self._shift_end[1] + step.d_f)
             self.P_k0 = self.P_k0 + step.dP - step.Hx_rho
             self.Pc_k0 = self.Pc_k0 + step.dPc - step.Hx_rho
             loop.clock_bias_m = step.clock_bias_m
@@ -479,8 +554,8 @@ class _ChannelPass:
     :meth:`run` takes the channels whose epochs are all correlated: first those of the
     kernel call's leading part, while its worker correlates the rest, then the others."""
 
-    def __init__(self, vt: VectorTracking, iv: Interval, rows: _EpochRows) -> None:
-        self.vt, self.iv, self.rows = vt, iv, rows
+    def __init__(self, vt: VectorTracking, iv: Interval, rows: _EpochRows, pred) -> None:
+        self.vt, self.iv, self.rows, self.pred = vt, iv, rows, pred
         self.next = 0                     # next channel
         self.a = 0                        # its first epoch
         self.z_rho: list = []
@@ -532,7 +607,7 @@ class _ChannelPass:
         if use.any():
             z = np.array(self.z_rho + self.z_rate)      # (lists: cheaper than np.r_)
             R = np.diag(np.array(self.r_rho + self.r_rate))
-        return Measurements(z=z, R=R, geometry=(self.iv.nav1.llh, self.vt._pred.U[use, 0]),
+        return Measurements(z=z, R=R, geometry=(self.iv.nav1.llh, self.pred.U[use, 0]),
                             used=use)
 
 
@@ -545,11 +620,13 @@ class _ModelStep:
     Hx_rho: np.ndarray      # range change of the state step [m]
     x: np.ndarray           # state step (17,)
     clock_bias_m: float     # clock bias after the step [m]
+    d_tau: np.ndarray       # pre-filter step (PreFilterBank.shift): code [chips]
+    d_f: np.ndarray         # and frequency [Hz] of each channel
 
 
 def _take_up_model_change(ephs_old, ephs_new, iono_old, iono_new, week: int, sow_nom: float,
-                          ins, clock_bias_m: float, tau, used: np.ndarray, meas_all, kf,
-                          pre: PreFilterBank) -> _ModelStep:
+                          ins, clock_bias_m: float, tau, used: np.ndarray, meas_all,
+                          kf) -> _ModelStep:
     """Switch the range model (ephemerides, ionosphere) at a clean epoch (module notes).
 
     The predicted ranges at the epoch move by ``dP`` (new model minus old, same position and
@@ -558,8 +635,9 @@ def _take_up_model_change(ephs_old, ephs_new, iono_old, iono_new, week: int, sow
     solution of ``H_rho x = dP`` over the channels in the measurement vector (position and
     clock columns). The INS and the clock are moved by ``x_c`` (the loop's feedback), the
     pre-filters by what the NCOs then move, ``dP - H x_c`` (which removes the misfit the old
-    model left in the innovations), and the position/clock covariance grows by
-    ``(x_c / 2)^2`` for the error of that projection (the filter's weights are not equal).
+    model left in the innovations; returned as ``d_tau``, ``d_f`` for the caller to take),
+    and the position/clock covariance grows by ``(x_c / 2)^2`` for the error of that
+    projection (the filter's weights are not equal).
     """
     r = llh_to_ecef(*ins.llh)
     old = predict_ranges(ephs_old, week, [sow_nom], [r], [clock_bias_m], iono_old, tau0=tau)
@@ -579,9 +657,9 @@ def _take_up_model_change(ephs_old, ephs_new, iono_old, iono_new, week: int, sow
     Hx = H @ x
     z3 = np.zeros(3)
     ins.correct(z3, z3, x[6:9], z3, z3)
-    for i in range(n):
-        pre.shift(i, -CHIP_RATE_B3I / C_LIGHT * (dP[i] - Hx[i]), Hx[n + i] / LAMBDA_B3I)
-    return _ModelStep(dP=dP, dPc=dPc, Hx_rho=Hx[:n], x=x, clock_bias_m=clock_bias_m - x[15])
+    return _ModelStep(dP=dP, dPc=dPc, Hx_rho=Hx[:n], x=x, clock_bias_m=clock_bias_m - x[15],
+                      d_tau=-CHIP_RATE_B3I / C_LIGHT * (dP - Hx[:n]),
+                      d_f=Hx[n:] / LAMBDA_B3I)
 
 
 class _NavLog:

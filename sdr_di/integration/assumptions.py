@@ -407,7 +407,12 @@ class FixedNoiseSource:
         return getattr(self._source, name)
 
     def measure(self, loop, iv):
-        m = self._source.measure(loop, iv)
+        return self._fixed(self._source.measure(loop, iv))
+
+    def measure_launched(self, loop, iv):
+        return self._fixed(self._source.measure_launched(loop, iv))
+
+    def _fixed(self, m):
         if m is not None and m.z is not None and m.z.size:
             n = m.z.size // 2
             m.R = np.diag(np.r_[[self._sig[0] ** 2] * n, [self._sig[1] ** 2] * n])

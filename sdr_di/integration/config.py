@@ -94,6 +94,12 @@ class IntegrationConfig:
         hand over at once; the rows before the take-up are flagged (``iono`` column of the
         solution file), so a file whose assistance has no ionosphere lines gives up to 30 s
         more solution instead of none.
+    nco_latency : int
+        Deep mode: filter intervals between an update and the NCO commands that first use
+        it, beyond the next (receiver notes, *NCOs one interval ahead*). 0 (default): the
+        update at the end of interval ``k`` steers interval ``k + 1``. 1: it steers
+        ``k + 2``, as in a receiver whose correlators run on while the filter updates; the
+        correlation of ``k + 1`` then overlaps the update of ``k`` on a second core.
     """
 
     filter: str = "ekf"
@@ -128,6 +134,7 @@ class IntegrationConfig:
     iono_wait_s: float = 0.0
     mode: str = "deep"
     gnss_rate_hz: float = 5.0
+    nco_latency: int = 0
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -153,6 +160,12 @@ class IntegrationConfig:
         v = self.iono_wait_s
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ValueError(f"iono_wait_s must be >= 0, got {v!r}")
+        if isinstance(self.nco_latency, bool) or self.nco_latency not in (0, 1):
+            raise ValueError(f"nco_latency must be 0 or 1 (filter intervals), got "
+                             f"{self.nco_latency!r}")
+        if self.mode != "deep" and self.nco_latency:
+            raise ValueError(f"nco_latency applies to deep mode only (the {self.mode} loop "
+                             "commands no NCOs)")
         if self.mode != "deep" and self.gnss_rate_hz > self.filter_rate_hz + 1e-9:
             raise ValueError(f"gnss_rate_hz {self.gnss_rate_hz:g} must not exceed the filter "
                              f"rate {self.filter_rate_hz:g} Hz")

@@ -28,6 +28,7 @@ clock minus BDT, times c) beside the INS.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import sys
@@ -238,6 +239,68 @@ class IntegrationLoop:
             self.write_row(iv, m, source)
             self.i0, self.k0 = iv.i1, iv.k1
 
+    def run_ahead(self, source) -> None:
+        """:meth:`run` with the NCOs one interval ahead (deep, ``nco_latency = 1``; module
+        notes, *NCOs one interval ahead*): the INS is propagated over interval ``j + 1``
+        and its NCOs commanded before the update of interval ``j``, and that interval's
+        correlation runs on the kernel's worker thread while this thread runs
+        :meth:`_close_ahead` of ``j``. ``source``: :class:`~sdr_di.deep.vector_tracking.
+        VectorTracking` (``launch``, ``measure_launched``, ``geometry_of``,
+        ``restart_prefilters``, ``feed_back_ahead``)."""
+        iv = self.next_interval()
+        if iv is None:
+            return
+        self.propagate_ins(iv)
+        if not source.launch(self, iv):
+            return
+        source.feed_back_ahead(self, iv, np.zeros(17))   # nothing fed back before the first
+        while True:
+            self.i0, self.k0 = iv.i1, iv.k1
+            nxt = None if self.stop_requested else self.next_interval()
+            # the INS and clock at iv.k1 (before the update of iv) for its solution row (a
+            # shallow copy: StrapdownINS.correct and step replace their arrays)
+            at_k1 = (copy.copy(self.ins), self.clock_bias_m, self.clock_drift_mps) \
+                if (self.n_intervals + 1) % self.output_every == 0 else None
+            if nxt is not None:
+                self.propagate_ins(nxt)
+                if source.launch(self, nxt, lambda: self._close_ahead(iv, nxt, at_k1, source)):
+                    iv = nxt
+                    continue
+            self._close_ahead(iv, None, at_k1, source)
+            return
+
+    def _close_ahead(self, iv: Interval, nxt: Interval | None, at_k1: tuple, source) -> None:
+        """Interval ``iv`` of :meth:`run_ahead`, the INS already propagated over ``nxt``
+        (None: the last interval): pre-filters and measurements, predict (on the first
+        interval) and update, pre-filter restarts, the solution row at ``iv.k1`` (``at_k1``:
+        the INS and clock there, corrected by the update), then the predict over ``nxt``
+        and the feedback of the predicted error at ``nxt.k1`` (INS, clock, NCO ranges of
+        the next command, pre-filter step after ``nxt``'s correlations) and the navigation
+        data taken up there."""
+        m = source.measure_launched(self, iv)
+        self.filter_step(iv, m)
+        source.geometry_of(iv)
+        source.restart_prefilters(self)
+        at = None
+        if at_k1 is not None:
+            ins, bias, drift = at_k1
+            x = self.kf.x
+            ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
+            at = (ins, bias - x[15], drift - x[16])
+        self.write_row(iv, m, source, at=at)
+        if nxt is None:
+            return
+        self.predict_filter(nxt)
+        ta = time.perf_counter()
+        x = self.kf.x.copy()
+        self.ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
+        self.clock_bias_m = nxt.clock_bias_m - x[15]
+        self.clock_drift_mps = self.clock_drift_mps - x[16]
+        source.feed_back_ahead(self, nxt, x)
+        self.kf.x = np.zeros(17)
+        self.profile["ins"] += time.perf_counter() - ta
+        source.take_up_navigation_data(self, nxt)
+
     # ------------------------------------------------------------------------------------
     def next_interval(self) -> Interval | None:
         """The next interval after ``(i0, k0)``; None when the IMU record or the IF data
@@ -314,23 +377,28 @@ class IntegrationLoop:
         self.profile["ins"] += time.perf_counter() - ta
         return x
 
-    def write_row(self, iv: Interval, m: Measurements, source: MeasurementSource) -> None:
+    def write_row(self, iv: Interval, m: Measurements, source: MeasurementSource,
+                  at: tuple | None = None) -> None:
         """Solution row at ``k1`` every ``output_every`` intervals: time, BDT (receiver time
         minus clock bias / c), INS position/velocity/attitude after the feedback, clock,
         the source's channel columns, mean NIS since the last row, errors vs the truth,
         the formal 1-sigma of the corrected solution in ENU (``sd``) and its NEES per
-        degree of freedom of position, velocity, attitude (``nees``)."""
+        degree of freedom of position, velocity, attitude (``nees``). ``at``: ``(INS, clock
+        bias [m], clock drift [m/s])`` at ``k1`` when the loop's own have moved on
+        (:meth:`run_ahead`)."""
         ta = time.perf_counter()
         self.n_intervals += 1
         if self.n_intervals % self.output_every == 0:
-            ins, rows, k1, fs = self.ins, self.rows, iv.k1, self.fs
+            ins, bias, drift = (self.ins, self.clock_bias_m, self.clock_drift_mps) \
+                if at is None else at
+            rows, k1, fs = self.rows, iv.k1, self.fs
             rows["t"].append(k1 / fs)
-            rows["sow"].append(self.sow_of_sample(k1) - self.clock_bias_m / C_LIGHT)
+            rows["sow"].append(self.sow_of_sample(k1) - bias / C_LIGHT)
             rows["llh"].append(ins.llh.copy())
             rows["v"].append(ins.v_n.copy())
             rows["att"].append(ins.att.copy())
-            rows["b"].append(self.clock_bias_m)
-            rows["d"].append(self.clock_drift_mps)
+            rows["b"].append(bias)
+            rows["d"].append(drift)
             rows["n"].append(m.n_used)
             rows["used"].append(m.used.copy())
             for k, v in source.row().items():

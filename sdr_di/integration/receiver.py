@@ -634,9 +634,10 @@ class IntegratedReceiver:
             output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
             progress=progress, profile=prof)
         adapt0 = kf.adaptation_time_s
+        src = tracking if cfg.noise_policy == "cn0" else FixedNoiseSource(
+            tracking, cfg.sigma_range_m, cfg.sigma_rate_mps)
         try:
-            loop.run(tracking if cfg.noise_policy == "cn0" else FixedNoiseSource(
-                tracking, cfg.sigma_range_m, cfg.sigma_rate_mps))
+            (loop.run_ahead if cfg.nco_latency else loop.run)(src)
         finally:
             tracking.close()
         return self._result(loop, clock, tuple(c.prn for c in chans), kf, adapt0, k_grid0,

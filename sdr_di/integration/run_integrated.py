@@ -278,6 +278,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     write_deep_csv(files["solution"], res)
     summary = {
         "mode": res.mode, "filter": res.filter_name, "handover_s": res.handover_s,
+        "nco_latency": cfg.nco_latency if res.mode == "deep" else None,
         "prns": list(res.prns), "rows": int(res.t.size),
         "channels_always_used": bool(res.used.all()) if res.used.size else False,
         "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],
