@@ -5,7 +5,7 @@ Usage::
 
     python scripts/bench_deep.py [--duration 40] [--filter ff-aukf] [--if-file F.bin]
                                  [--filter-rate 50] [--keep] [--repeat 1]
-                                 [--kernel-threads N]
+                                 [--kernel-threads N] [--nco-latency 0 [1]]
 
 Generates the default scenario (7 satellites, 25 MHz, 4-bit ``iq_int8``; ``--duration`` s)
 unless ``--if-file`` names one with its sidecar, then runs the deep receiver (the pipeline of
@@ -28,6 +28,10 @@ the integration filter, CSV/JSON output) in a fresh process and prints:
   longer parts, reads); and the CPU time of the other threads (kernel worker, IF read-ahead);
 * the peak RSS of the process, and the load average (the machine is shared: repeat and report
   best and typical).
+
+``--nco-latency 0 1`` runs the deep receiver with each setting in turn in every repeat
+(interleaved, so that both see the same minutes of this shared machine; docs/deep.md, *NCOs
+one interval ahead*) and closes with the best run of each.
 
 ``run(args)`` is the entry point of ``scripts/bench.py deep``.
 """
@@ -62,12 +66,13 @@ def sched(tid=None):
         return None
 
 path, out, filt, rate = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
+latency = int(sys.argv[5])
 meta = json.loads(Path(path).with_suffix('.json').read_text())
 prns = [s['prn'] for s in meta['satellites']]
 s0 = sched()
 t0 = time.perf_counter()
-res = run_deep(open_source(path), out, config=IntegrationConfig(filter=filt, filter_rate_hz=rate),
-               prns=prns, progress=False)
+res = run_deep(open_source(path), out, config=IntegrationConfig(
+    filter=filt, filter_rate_hz=rate, nco_latency=latency), prns=prns, progress=False)
 wall, cpu_main = time.perf_counter() - t0, time.thread_time()   # main thread, from start
 s1 = sched()
 main_sched = None if s0 is None or s1 is None else {
@@ -91,7 +96,8 @@ print('RESULT', json.dumps({'wall': wall, 'cpu_main': cpu_main, 'split': split_s
 TARGET_RT = 3.0
 
 
-def _one(path: Path, out: Path, filt: str, rate: float, threads: int | None = None) -> dict:
+def _one(path: Path, out: Path, filt: str, rate: float, threads: int | None = None,
+         latency: int = 0) -> dict:
     import resource
 
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -99,8 +105,8 @@ def _one(path: Path, out: Path, filt: str, rate: float, threads: int | None = No
     env = dict(os.environ)
     if threads:
         env["SDR_DI_KERNEL_THREADS"] = str(threads)   # receiver.threads.ENV_THREADS
-    res = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(out), filt, str(rate)],
-                         check=False, capture_output=True, text=True, env=env)
+    res = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(out), filt, str(rate),
+                          str(latency)], check=False, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if res.returncode != 0:
@@ -126,18 +132,21 @@ def run(args: argparse.Namespace) -> list[dict]:
 
         print(f"machine: {os.cpu_count()} cores, load average "
               f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; file {path.name}; filter "
-              f"{args.filter} at {args.filter_rate:g} Hz")
+              f"{args.filter} at {args.filter_rate:g} Hz; NCO latency "
+              f"{' and '.join(map(str, args.nco_latency))} (run column: repeat.latency)")
         print(speed_line("at start"))
         print(f"{'run':>3} {'file s':>7} {'wall s':>7} {'CPU s':>6} {'main':>5} {'x RT':>6} {'start-up s':>10} "
               f"{'loop s':>7} {'loop xRT':>8} {'corr%':>6} {'pref%':>6} {'filt%':>6} "
               f"{'ins%':>5} {'nco%':>5} {'read%':>6} {'RSS MiB':>8}")
-        for i in range(args.repeat):
-            d = _one(path, tmp / f"out{i}", args.filter, args.filter_rate, args.kernel_threads)
+        for i, lat in ((i, lat) for i in range(args.repeat) for lat in args.nco_latency):
+            d = _one(path, tmp / f"out{i}_{lat}", args.filter, args.filter_rate,
+                     args.kernel_threads, lat)
+            d["latency"] = lat
             p = d["profile"]
             loop = max(p["loop"], 1e-9)
             sh = {k: 100 * p[k] / loop for k in ("correlate", "prefilter", "filter", "ins",
                                                  "nco", "read")}
-            print(f"{i:3d} {p['processed_s']:7.1f} {d['process_wall']:7.1f} {d['cpu_s']:6.1f} "
+            print(f"{f'{i}.{lat}':>3} {p['processed_s']:7.1f} {d['process_wall']:7.1f} {d['cpu_s']:6.1f} "
                   f"{d['cpu_main']:5.1f} "
                   f"{p['processed_s'] / d['process_wall']:6.2f} {p['scalar']:10.1f} "
                   f"{loop:7.1f} {p['deep_s'] / loop:8.2f} {sh['correlate']:6.0f} "
@@ -159,23 +168,8 @@ def run(args: argparse.Namespace) -> list[dict]:
                       + f", the rest (IF read-ahead, ended threads) "
                       f"{d['cpu_s'] - d['cpu_main'] - sum(d.get('threads', {}).values()):.2f} s")
             rows.append(d)
-        b = min(rows, key=lambda r: r["process_wall"])
-        p = b["profile"]
-        loop = max(p["loop"], 1e-9)
-        # wall time on idle cores (receiver.threads.split_stats): the main thread's chain
-        idle = b["cpu_main"] + b["split"]["wait_cpu_s"]
-        print(f"target 3 (deep, best of {len(rows)}): {p['processed_s']:.0f} s file in "
-              f"{b['process_wall']:.2f} s wall = {p['processed_s'] / b['process_wall']:.2f}x "
-              f"real time (target >= {TARGET_RT:g}x, start-up and hand-over included), CPU "
-              f"{b['cpu_s']:.1f} s, {p['processed_s'] / b['cpu_s']:.2f} file s per CPU s; on "
-              f"idle cores about {idle:.1f} s = {p['processed_s'] / idle:.2f}x (main thread "
-              f"{b['cpu_main']:.1f} s CPU + {b['split']['wait_cpu_s']:.1f} s waiting for the "
-              f"kernel worker's longer parts); start-up "
-              f"{100 * p['scalar'] / b['process_wall']:.0f}% of "
-              f"the wall time, loop {100 * loop / b['process_wall']:.0f}% (" + ", ".join(
-                  f"{k} {100 * p[k] / loop:.0f}%" for k in ("correlate", "read", "nco",
-                                                           "filter", "prefilter", "ins"))
-              + f"); load average {os.getloadavg()[0]:.2f} at the end")
+        for lat in args.nco_latency:
+            _best_line([r for r in rows if r["latency"] == lat], lat)
         print(speed_line("at the end"))
     finally:
         if not args.keep:
@@ -183,6 +177,28 @@ def run(args: argparse.Namespace) -> list[dict]:
         else:
             print(f"kept {tmp}")
     return rows
+
+
+def _best_line(rows: list[dict], latency: int) -> None:
+    """The closing line of the best run of one NCO latency."""
+    b = min(rows, key=lambda r: r["process_wall"])
+    p = b["profile"]
+    loop = max(p["loop"], 1e-9)
+    # wall time on idle cores (receiver.threads.split_stats): the main thread's chain
+    idle = b["cpu_main"] + b["split"]["wait_cpu_s"]
+    print(f"target 3 (deep, NCO latency {latency}, best of {len(rows)}): "
+          f"{p['processed_s']:.0f} s file in "
+          f"{b['process_wall']:.2f} s wall = {p['processed_s'] / b['process_wall']:.2f}x "
+          f"real time (target >= {TARGET_RT:g}x, start-up and hand-over included), CPU "
+          f"{b['cpu_s']:.1f} s, {p['processed_s'] / b['cpu_s']:.2f} file s per CPU s; on "
+          f"idle cores about {idle:.1f} s = {p['processed_s'] / idle:.2f}x (main thread "
+          f"{b['cpu_main']:.1f} s CPU + {b['split']['wait_cpu_s']:.1f} s waiting for the "
+          f"kernel worker's longer parts); start-up "
+          f"{100 * p['scalar'] / b['process_wall']:.0f}% of "
+          f"the wall time, loop {100 * loop / b['process_wall']:.0f}% (" + ", ".join(
+              f"{k} {100 * p[k] / loop:.0f}%" for k in ("correlate", "read", "nco",
+                                                       "filter", "prefilter", "ins"))
+          + f"); load average {os.getloadavg()[0]:.2f} at the end")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -197,6 +213,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="fix the correlator kernels' thread count (default: chosen by "
                         "measured speed); 2 on a loaded machine makes the idle-core "
                         "estimate that of the split the kernels use on idle cores")
+    p.add_argument("--nco-latency", type=int, nargs="+", choices=(0, 1), default=[0],
+                   help="deep's NCO latency [filter intervals] (default 0); several: each "
+                        "in turn in every repeat (interleaved)")
 
 
 def main(argv=None) -> int:

@@ -323,8 +323,9 @@ def _iono_bias_m(nav, prns, t_sow, truth_llh):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("nco_latency", [0, 1])
 def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_data(
-        late_start_file, nav, monkeypatch, capsys):
+        late_start_file, nav, monkeypatch, capsys, nco_latency):
     """Issue 18 on a generated file: the assistance file has no ionosphere lines and records
     whose clocks differ from the broadcast ones by +-3 ns; the hand-over does not wait
     (``iono_wait_s=0``). The run warns once, switches the Klobuchar model on when the loop
@@ -335,7 +336,11 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     is below 0.3 m (tests/test_deep.py; 0.163 m measured on this file); the ionosphere left
     out would bias the position by the least-squares projection of the delays (computed
     here, metres), the clock errors by up to ~1 m. The error from 2 s after the last switch
-    must be below 0.3 m and below a fifth of the ionosphere bias."""
+    must be below 0.3 m and below a fifth of the ionosphere bias.
+
+    ``nco_latency=1`` (NCOs one interval ahead): each model change is taken up at the end of
+    the interval being correlated, and its pre-filter step waits for that interval's
+    correlations; the same bounds hold."""
     import sdr_di.orbits.rinex_nav as rinex_nav
     from sdr_di.integration.run_integrated import run_deep
     from sdr_di.integration.receiver import IntegrationConfig
@@ -346,8 +351,9 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
 
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav, change))
     src = open_source(late_start_file / "default.bin")
-    out = late_start_file / "run"
-    summ = run_deep(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=0.0),
+    out = late_start_file / f"run{nco_latency}"
+    summ = run_deep(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=0.0,
+                                                       nco_latency=nco_latency),
                     progress=False)
     err = capsys.readouterr().err
     assert err.count("sdr-di: warning:") == 1 and "without ionosphere" in err

@@ -20,6 +20,30 @@ samples ``(i0, i1]``, IF samples ``[k0, k1)``) of :meth:`IntegrationLoop.run`::
                            ephemeris / ionosphere decoded in the interval taken up at its end
     write_row              solution row at the output rate (after the feedback)
 
+NCOs one interval ahead (deep, ``nco_latency = 1``: :meth:`IntegrationLoop.run_ahead`, the
+reasons in :mod:`sdr_di.integration.receiver`'s notes): the same stages in another order, so
+that the source's correlation of interval ``j + 1`` runs while this thread closes ``j``::
+
+    propagate_ins(j + 1)   from the INS corrected at j.k1 by the error predicted there
+    source.launch(j + 1)   NCO commands of j + 1 and its correlation, split between the
+                           kernel's worker and this thread; after this thread's part (while
+                           the worker still correlates), _close_ahead(j):
+        source.measure_launched(j)   pre-filters of j, each first moved by the feedback
+                                     made at j.k1 while j was correlated
+        filter_step(j)               update (predict too on the first interval)
+        source.restart_prefilters    lost or inconsistent pre-filters restarted
+        write_row(j)                 INS and clock at j.k1, corrected by the update
+        predict_filter(j + 1), then the predicted error at (j + 1).k1 fed back (INS, clock,
+        source.feed_back_ahead: NCO ranges of the next command, the pre-filter step after
+        j + 1), error state reset; source.take_up_navigation_data at (j + 1).k1
+
+Tried and not kept: the correlation of ``j + 1`` started on the worker as soon as it is
+commanded, so that it also overlaps the INS propagation and NCO commands of ``j + 2``
+(outputs the same bytes). It took 12-13 s against 9-10 s for the run above (40 s file,
+2 cores): with this thread in Python almost all the time, the worker waited for the GIL at
+each Python step around its kernels (thread start, the rotation tables' and the kernel's
+dispatch), and its part took 5.9 ms per interval against about 3.3 ms of kernel CPU.
+
 State layout (paper 004 Table 1): attitude error 0-2, velocity error 3-5, position error
 (lat, lon, h) 6-8, gyro bias 9-11, accelerometer bias 12-14, clock bias 15 [m], clock drift
 16 [m/s]. The clock is carried here as ``clock_bias_m`` / ``clock_drift_mps`` (receiver
