@@ -207,7 +207,7 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         assist: bool = True, filter_rate_hz: float | None = None,
         align: Literal["truth", "gnss"] | None = None, duration_s: float | None = None,
         gnss_rate_hz: float | None = None, iono_wait_s: float | None = None,
-        assume: PathLike | None = None,
+        assume: PathLike | None = None, nco_latency: int | None = None,
         sampling_rate_hz: float | None = None, if_hz: float | None = None,
         sample_format: str | None = None, rfch: int | None = None, inverted: bool = False,
         start_week: int | None = None, start_sow: float | None = None,
@@ -259,6 +259,10 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         Seconds the hand-over waits for ionosphere coefficients (``--iono-wait``).
     assume : path, optional
         What the filter believes (``--assume``, docs/assumptions.md).
+    nco_latency : {0, 1}, optional
+        Deep only: filter intervals between an update and the NCO commands that first use
+        it, beyond the next (``--nco-latency``; default 0; docs/deep.md, *NCOs one interval
+        ahead*).
     sampling_rate_hz, if_hz, sample_format, rfch, inverted, start_week, start_sow
         A file sdr-di did not write (``--fs``, ``--if``, ``--format``, ``--rfch``,
         ``--inverted``, ``--start-week``, ``--start-sow``).
@@ -289,7 +293,7 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
     if_file = Path(if_file)
     integrated = {"filter": filter, "imu": imu, "truth": truth, "filter_rate_hz":
                   filter_rate_hz, "align": align, "duration_s": duration_s,
-                  "iono_wait_s": iono_wait_s, "assume": assume}
+                  "iono_wait_s": iono_wait_s, "assume": assume, "nco_latency": nco_latency}
     given = [k for k, v in integrated.items() if v is not None]
     if ephemeris is not None and not (mode == "scalar" and approx_pos is not None):
         given.append("ephemeris")
@@ -299,6 +303,10 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         raise ValueError(f"{', '.join(given)}: only with mode deep, loose or tight")
     if gnss_rate_hz is not None and mode not in ("loose", "tight"):
         raise ValueError("gnss_rate_hz: only with mode loose or tight")
+    if nco_latency is not None and mode != "deep":
+        raise ValueError("nco_latency: only with mode deep")
+    if nco_latency is not None and (isinstance(nco_latency, bool) or nco_latency not in (0, 1)):
+        raise ValueError(f"nco_latency must be 0 or 1 (filter intervals), got {nco_latency!r}")
     if approx_pos is not None and (mode != "scalar" or ephemeris is None):
         raise ValueError("approx_pos: only in scalar mode, with ephemeris")
     for key, v in (("rate_hz", rate_hz), ("filter_rate_hz", filter_rate_hz),
@@ -378,7 +386,8 @@ def _run_integrated(source, out_dir: Path, prns, mode: str, rate_hz: float, cold
     kw: dict[str, Any] = {"filter": (opt["filter"] or "ekf").strip().lower(),
                           "output_rate_hz": rate_hz, "mode": mode}
     for key, name in (("gnss_rate_hz", None), ("filter_rate_hz", "filter_rate_hz"),
-                      ("align", "align"), ("iono_wait_s", "iono_wait_s")):
+                      ("align", "align"), ("iono_wait_s", "iono_wait_s"),
+                      ("nco_latency", "nco_latency")):
         v = gnss_rate_hz if name is None else opt[name]
         if v is not None:
             kw[key] = v

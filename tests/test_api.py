@@ -68,6 +68,8 @@ def test_scalar_run_returns_metrics_and_paths_like_the_cli(short_file, tmp_path)
     ({"mode": "loose", "iono_wait_s": -1.0}, "iono_wait_s must be a finite number >= 0"),
     ({"pll_bw_hz": 40.0}, "unstable loop"),
     ({"mode": "tight", "gnss_rate_hz": 3.0}, "10 Hz divided by a whole number"),
+    ({"mode": "loose", "nco_latency": 1}, "nco_latency: only with mode deep"),
+    ({"mode": "deep", "nco_latency": 2}, "nco_latency must be 0 or 1"),
 ])
 def test_run_refuses_options_that_do_not_fit_before_any_work(short_file, tmp_path, kw, match):
     files, _ = short_file
