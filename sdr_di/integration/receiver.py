@@ -50,10 +50,10 @@ Decisions
   and that predicted error is fed back there (INS, clock, the ranges the next NCO command
   starts from), and each pre-filter takes the same step after the correlations of
   ``k + 1``, so every measurement refers to the INS the filter's state describes. Paired
-  over 6 seeds it changed no error or consistency figure measurably in steady tracking, but
-  after a 3 s blockage of every satellite a velocity loss of up to 10 % was not excluded
-  (docs/deep.md, *NCOs one interval ahead*); so the default stays 0, which also keeps
-  earlier results and studies reproducible.
+  over 6 seeds it changed no error or consistency figure measurably in steady tracking;
+  after a 3 s blockage of every satellite one set of 6 seeds did not exclude a velocity
+  loss (one seed 16 % worse) and a second set showed none (docs/deep.md, *NCOs one interval
+  ahead*). The default stays 0, which also keeps earlier results and studies reproducible.
 * **Hand-over** (from scalar tracking) once a valid WLS fix with velocity exists and every
   channel in ``TRACK`` has its transmit time and an ephemeris (decoded, or from the
   assistance navigation file, as paper 004 feeds its ephemerides to the receiver); after
