@@ -587,3 +587,40 @@ def test_deep_run_from_a_kept_start_up_equals_a_run_from_sample_zero(gen26):
     with pytest.raises(StartMismatchError):
         IntegratedReceiver(IntegrationConfig(filter="ekf"), scalar=other).run(
             src, imu, prns=prns, nav=nav, truth=truth, start=start)
+
+
+def test_compare_nco_latency_table_applies_the_stated_criterion():
+    """scripts/compare_nco_latency.py's verdict (the runs themselves are full-rate, by hand):
+    paired log ratios with t intervals; an RMSE passes with the interval's upper end at most
+    1.05, a NIS/NEES with the interval inside 0.9-1.1; any failure fails the verdict."""
+    import argparse
+    import importlib.util
+
+    path = REPO_ROOT / "scripts" / "compare_nco_latency.py"
+    spec = importlib.util.spec_from_file_location("compare_nco_latency", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    args = argparse.Namespace(filter="ekf", duration=40.0, fs=25e6, blockage=None)
+    keys = [k for k, *_ in mod.ACCURACY + mod.CONSISTENCY] + ["loop_wall_s", "loop_cpu_s"]
+
+    def rows(scale):
+        out = []
+        for seed in range(4):
+            base = {k: 1.0 + 0.1 * seed for k in keys}
+            out.append({"seed": seed, "nco_latency": 0, **base})
+            out.append({"seed": seed, "nco_latency": 1,
+                        **{k: v * scale(k, seed) for k, v in base.items()}})
+        return out
+
+    text, ok = mod.paired_table(rows(lambda k, s: 1.0 + 0.001 * (s - 1.5)), args)
+    assert ok and "loses nothing measurable" in text and "FAIL" not in text
+    # velocity 4 % worse on average, scattered: the interval reaches past 1.05
+    text, ok = mod.paired_table(
+        rows(lambda k, s: 1.04 + 0.03 * (s - 1.5) if k == "vel_mps_rmse" else 1.0), args)
+    line = next(ln for ln in text.splitlines() if ln.startswith("| velocity RMSE"))
+    assert not ok and line.endswith("FAIL |")
+    # a NEES 12 % lower fails the consistency band, although lower looks "better"
+    text, ok = mod.paired_table(
+        rows(lambda k, s: 0.88 + 0.002 * (s - 1.5) if k == "nees_pos" else 1.0), args)
+    assert not ok and next(ln for ln in text.splitlines()
+                           if ln.startswith("| NEES position")).endswith("FAIL |")
