@@ -404,7 +404,7 @@ class VectorTracking:
                              block_start=epochs % min(c.bit_ms, self.cfg.coherent_ms) == 0)
         if self._shift_end is not None:
             # NCOs one interval ahead: the step of the feedback made during the interval
-            self.pre.shift(c.idx, self._shift_end[0][c.idx], self._shift_end[1][c.idx])
+            self._shift_prefilters(*self._shift_end, (c.idx,))
         good = self._usable(c, cnt)
         c.used = good
         return good
@@ -459,23 +459,25 @@ class VectorTracking:
         of sight (its NCOs move by it), then decorrelated, or restarted from the NCO when
         lost or inconsistent (frequency prior: the filter's rate sigma on that line of
         sight, at least ``_SIGMA_F_MIN``)."""
-        n_ch, pre = self.n_channels, self.pre
-        Hx = self._move_ncos(iv.nav1.llh, self._pred, x)
-        for c in self.chans:
-            i = c.idx
-            pre.shift(i, CHIP_RATE_B3I / C_LIGHT * Hx[i], Hx[n_ch + i] / LAMBDA_B3I)
+        self._shift_prefilters(*self._move_ncos(iv.nav1.llh, self._pred, x))
         self.restart_prefilters(loop)
 
-    def _move_ncos(self, llh, pred, x: np.ndarray) -> np.ndarray:
+    def _move_ncos(self, llh, pred, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """NCO ranges at the next ``k0``: the last command's ranges at ``k1`` moved by the
-        correction ``x`` (``P1 - H x``, geometry of ``pred`` at ``llh``). Returns ``H x``
-        (ranges, then range rates) [m, m/s]."""
+        correction ``x`` (``P1 - H x``, geometry of ``pred`` at ``llh``). Returns the
+        pre-filters' step, what their NCOs move (:meth:`_shift_prefilters`)."""
         n_ch = self.n_channels
         self.meas_all.set_geometry(llh, pred.U[:, 0])
         Hx = self.meas_all.matrix @ x
         self.P_k0 = self._P1 - Hx[:n_ch]
         self.Pc_k0 = self._Pc1 - Hx[:n_ch]
-        return Hx
+        return CHIP_RATE_B3I / C_LIGHT * Hx[:n_ch], Hx[n_ch:] / LAMBDA_B3I
+
+    def _shift_prefilters(self, d_tau: np.ndarray, d_f: np.ndarray, channels=None) -> None:
+        """Move pre-filters (default all) by their NCOs' step: ``d_tau`` [chips], ``d_f``
+        [Hz] per channel (:meth:`~sdr_di.deep.prefilter.PreFilterBank.shift`)."""
+        for i in range(self.n_channels) if channels is None else channels:
+            self.pre.shift(i, d_tau[i], d_f[i])
 
     def restart_prefilters(self, loop: IntegrationLoop) -> None:
         """Each pre-filter after the filter update: restarted from its NCO when lost or
@@ -504,9 +506,7 @@ class VectorTracking:
         the launched interval ``iv`` (the filter's prediction to ``iv.k1``) moves the NCO
         ranges of the next command (``P1 - H x``); the pre-filters take the same step after
         the launched interval's correlations (:meth:`measure_launched`)."""
-        n_ch = self.n_channels
-        Hx = self._move_ncos(iv.nav1.llh, self._pred, x)
-        self._shift_end = (CHIP_RATE_B3I / C_LIGHT * Hx[:n_ch], Hx[n_ch:] / LAMBDA_B3I)
+        self._shift_end = self._move_ncos(iv.nav1.llh, self._pred, x)
 
     def take_up_navigation_data(self, loop: IntegrationLoop, iv: Interval) -> None:
         """Navigation data decoded so far, taken up at the interval's end
@@ -522,8 +522,7 @@ class VectorTracking:
                 clock.sow(k1), loop.ins, loop.clock_bias_m, self.tau_prev,
                 np.array([c.used for c in chans]), self.meas_all, loop.kf)
             if self._launched is None:
-                for i in range(self.n_channels):
-                    self.pre.shift(i, step.d_tau[i], step.d_f[i])
+                self._shift_prefilters(step.d_tau, step.d_f)
             else:
                 # NCOs one interval ahead: the launched interval's NCOs ran on the old model;
                 # its pre-filters take the step after its correlations (measure_launched)

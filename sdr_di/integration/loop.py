@@ -315,14 +315,7 @@ class IntegrationLoop:
         if nxt is None:
             return
         self.predict_filter(nxt)
-        ta = time.perf_counter()
-        x = self.kf.x.copy()
-        self.ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
-        self.clock_bias_m = nxt.clock_bias_m - x[15]
-        self.clock_drift_mps = self.clock_drift_mps - x[16]
-        source.feed_back_ahead(self, nxt, x)
-        self.kf.x = np.zeros(17)
-        self.profile["ins"] += time.perf_counter() - ta
+        self.feed_back(nxt, source, source.feed_back_ahead)
         source.take_up_navigation_data(self, nxt)
 
     # ------------------------------------------------------------------------------------
@@ -387,16 +380,19 @@ class IntegrationLoop:
             self.updates["dof"].append(m.z.size // 2)
         self.profile["filter"] += time.perf_counter() - ta
 
-    def feed_back(self, iv: Interval, source: MeasurementSource) -> np.ndarray:
-        """Closed-loop feedback of the filter's error state ``x``: the INS (attitude,
-        velocity, position, IMU biases) and the clock, then the source's own share; ``x``
-        reset to zero. Returns the ``x`` fed back (17,)."""
+    def feed_back(self, iv: Interval, source: MeasurementSource,
+                  share: Callable | None = None) -> np.ndarray:
+        """Closed-loop feedback of the filter's error state ``x`` at ``iv.k1``: the INS
+        (attitude, velocity, position, IMU biases) and the clock, then the source's own
+        share (``share(loop, iv, x)``, default ``source.feed_back``; :meth:`run_ahead`: the
+        predicted error with ``source.feed_back_ahead``); ``x`` reset to zero. Returns the
+        ``x`` fed back (17,)."""
         ta = time.perf_counter()
         x = self.kf.x.copy()
         self.ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
         self.clock_bias_m = iv.clock_bias_m - x[15]
         self.clock_drift_mps = self.clock_drift_mps - x[16]
-        source.feed_back(self, iv, x)
+        (source.feed_back if share is None else share)(self, iv, x)
         self.kf.x = np.zeros(17)
         self.profile["ins"] += time.perf_counter() - ta
         return x
