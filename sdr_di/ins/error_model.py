@@ -174,17 +174,35 @@ def rotvec_to_dcm(phi: np.ndarray) -> np.ndarray:
     phi = np.asarray(phi, float)
     th2 = np.sum(phi * phi, axis=-1)[..., None, None]
     K = skew(phi)
-    return _rotvec_to_dcm_of(th2, K, K @ K)
+    a, b, _ = _so3_coefficients(th2)
+    return _I3 + a * K + b * (K @ K)
 
 
-def _rotvec_to_dcm_of(th2: np.ndarray, K: np.ndarray, KK: np.ndarray) -> np.ndarray:
-    """:func:`rotvec_to_dcm` from ``|phi|^2`` (..., 1, 1), ``[phi x]`` and ``[phi x]^2``."""
+def _so3_coefficients(th2: np.ndarray, jacobian: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Coefficients of ``exp([phi x]) = I + a [phi x] + b [phi x]^2`` (Rodrigues) and, with
+    ``jacobian``, of ``C_w^-1 = J_r(phi)^-1 = I + [phi x]/2 + c [phi x]^2`` (module notes),
+    from ``|phi|^2`` (..., 1, 1); series below ``|phi|^2 = 1e-12`` (``a``, ``b``) and ``1e-8``
+    (``c``). One ``sin`` and one ``cos`` serve both (the error model needs both)."""
     th = np.sqrt(th2)
+    if th2.min(initial=1.0) >= 1e-8:
+        # no series needed (the usual case): the closed forms the selections below give
+        s, co = np.sin(th), np.cos(th)
+        return (s / th, (1.0 - co) / th2,
+                1.0 / th2 - (1.0 + co) / (2.0 * th * s) if jacobian else None)
     small = th2 < 1e-12
     safe = np.where(small, 1.0, th)
-    a = np.where(small, 1.0 - th2 / 6.0, np.sin(safe) / safe)
-    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(safe)) / np.where(small, 1.0, th2))
-    return _I3 + a * K + b * KK
+    s, co = np.sin(safe), np.cos(safe)
+    a = np.where(small, 1.0 - th2 / 6.0, s / safe)
+    b = np.where(small, 0.5 - th2 / 24.0, (1.0 - co) / np.where(small, 1.0, th2))
+    if not jacobian:
+        return a, b, None
+    # where 1e-12 <= |phi|^2 < 1e-8 the closed form is computed (safe = |phi| >= 1e-6, no
+    # division by zero) and discarded for the series
+    small = th2 < 1e-8
+    c = np.where(small, 1.0 / 12.0 + th2 / 720.0,
+                 1.0 / np.where(small, 1.0, th2) - (1.0 + co) / (2.0 * safe * s))
+    return a, b, c
 
 
 def dcm_to_rotvec(C: np.ndarray) -> np.ndarray:
@@ -200,36 +218,19 @@ def dcm_to_rotvec(C: np.ndarray) -> np.ndarray:
     return k[..., None] * w
 
 
-def _inv_right_jacobian(phi: np.ndarray) -> np.ndarray:
-    """``C_w^-1 = J_r(phi)^-1`` (..., 3, 3)."""
-    th2 = np.sum(phi * phi, axis=-1)[..., None, None]
-    K = skew(phi)
-    return _inv_right_jacobian_of(th2, K, K @ K)
-
-
-def _inv_right_jacobian_of(th2: np.ndarray, K: np.ndarray, KK: np.ndarray) -> np.ndarray:
-    """:func:`_inv_right_jacobian` from ``|phi|^2`` (..., 1, 1), ``[phi x]`` and
-    ``[phi x]^2`` (shared with :func:`rotvec_to_dcm` in :func:`error_derivative`)."""
-    th = np.sqrt(th2)
-    small = th2 < 1e-8
-    ths = np.where(small, 1.0, th)
-    c = np.where(small, 1.0 / 12.0 + th2 / 720.0,
-                 1.0 / np.where(small, 1.0, th2) - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
-    return _I3 + 0.5 * K + c * KK
-
-
 def _rates(lat, h, v):
-    """w_ie^n, w_en^n (..., 3) and radii, vectorized."""
+    """w_ie^n, w_en^n (..., 3), ``R_N + h`` and ``cos(lat)``, vectorized."""
     R_M, R_N = radii_of_curvature(lat)
     sl, cl = np.sin(lat), np.cos(lat)
+    RN_h = R_N + h
     w_ie = np.zeros(np.shape(lat) + (3,))            # filled in place: cheaper than stacking
     w_ie[..., 1] = OMEGA_E * cl
     w_ie[..., 2] = OMEGA_E * sl
     w_en = np.empty_like(w_ie)
     w_en[..., 0] = -v[..., 1] / (R_M + h)
-    w_en[..., 1] = v[..., 0] / (R_N + h)
-    w_en[..., 2] = v[..., 0] * sl / cl / (R_N + h)
-    return w_ie, w_en, R_M, R_N
+    w_en[..., 1] = v[..., 0] / RN_h
+    w_en[..., 2] = v[..., 0] * sl / cl / RN_h
+    return w_ie, w_en, RN_h, cl
 
 
 def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.ndarray,
@@ -246,42 +247,40 @@ def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.n
     lat_c, h_c = nav.llh[0], nav.llh[2]
     v_c = nav.v_n
     # computed-state quantities (scalars/3-vectors)
-    wie_c, wen_c, RM_c, RN_c = _rates(np.array(lat_c), np.array(h_c), v_c)
+    wie_c, wen_c, RNh_c, _ = _rates(np.array(lat_c), np.array(h_c), v_c)
     win_c = wie_c + wen_c
     # true state = computed - error
     lat_t = lat_c - dp[:, 0]
     h_t = h_c - dp[:, 2]
     v_t = v_c - dv
-    wie_t, wen_t, RM_t, RN_t = _rates(lat_t, h_t, v_t)
+    wie_t, wen_t, RNh_t, cl_t = _rates(lat_t, h_t, v_t)
     d_wie = wie_c - wie_t
     d_wen = wen_c - wen_t
-    # C_n^n' = exp(-[phi x]) (p, 3, 3): rotvec_to_dcm(-phi) written with the skew matrix
-    # and |phi|^2 that C_w^-1 also needs (negation is exact: the same values)
+    # C_n^n' = exp(-[phi x]) (p, 3, 3) with the skew matrix, |phi|^2 and trigonometry that
+    # C_w^-1 also needs (negation is exact: the same values as rotvec_to_dcm(-phi))
     th2 = np.sum(phi * phi, axis=-1)[..., None, None]
     K = skew(phi)
     KK = K @ K
-    A = _rotvec_to_dcm_of(th2, -K, KK)
+    a, b, c = _so3_coefficients(th2, jacobian=True)
+    A = _I3 - a * K + b * KK
     At = np.swapaxes(A, -1, -2)
     I = _I3
     # attitude (eq 2, line 1)
     u = (np.einsum("pij,j->pi", I - A, win_c) + np.einsum("pij,pj->pi", A, d_wie + d_wen)
          - eps @ Cb.T)
-    phi_dot = np.einsum("pij,pj->pi", _inv_right_jacobian_of(th2, K, KK), u)
+    phi_dot = np.einsum("pij,pj->pi", _I3 + 0.5 * K + c * KK, u)
     # velocity (eq 2, line 2)
     Cf = Cb @ f_b
     dv_dot = (np.einsum("pij,j->pi", I - At, Cf) + np.einsum("pij,pj->pi", At, nab @ Cb.T)
               - cross_rows(2.0 * wie_c + wen_c, dv) - cross_rows(2.0 * d_wie + d_wen, v_t))
     g_c = float(normal_gravity(lat_c, h_c))
     dv_dot[:, 2] -= g_c - normal_gravity(lat_t, h_t)
-    # position (eq 2, lines 3-5)
-    dlat = v_c[1] / (RM_c + h_c) - v_t[:, 1] / (RM_t + h_t)
-    dlon = (v_c[0] / ((RN_c + h_c) * math.cos(lat_c))
-            - v_t[:, 0] / ((RN_t + h_t) * np.cos(lat_t)))
+    # position (eq 2, lines 3-5): dlat' = v_N/(R_M + h), computed minus true, is -dw_en_E
     out = np.zeros_like(X)
     out[:, 0:3] = phi_dot
     out[:, 3:6] = dv_dot
-    out[:, 6] = dlat
-    out[:, 7] = dlon
+    out[:, 6] = -d_wen[:, 0]
+    out[:, 7] = v_c[0] / (RNh_c * math.cos(lat_c)) - v_t[:, 0] / (RNh_t * cl_t)
     out[:, 8] = dv[:, 2]
     # clock (eq 4)
     out[:, 15] = X[:, 16]

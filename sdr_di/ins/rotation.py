@@ -91,7 +91,7 @@ def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     at a fraction of its cost on small arrays (no axis moves)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))   # filled in place, not stacked
+    out = np.empty(np.broadcast(a, b).shape)   # filled in place, not stacked
     out[..., 0] = a1 * b2 - a2 * b1
     out[..., 1] = a2 * b0 - a0 * b2
     out[..., 2] = a0 * b1 - a1 * b0
