@@ -81,6 +81,44 @@ def test_compare_handover_wait_reaches_the_receivers_configuration():
         compare.check_params(parse_params(exp, ["handover_wait_s=-1"]))
 
 
+@pytest.mark.parametrize("name", ["compare", "count-change", "outage", "weak-signal",
+                                  "jamming"])
+def test_nco_latency_parameter_of_every_deep_experiment(name):
+    """``nco_latency`` (a study cell's parameter) becomes the deep loop's setting; absent, the
+    receiver's default stays; anything but 0 or 1 is refused before any run."""
+    from sdr_di.experiments.variants import loop_config
+    from sdr_di.integration.receiver import IntegrationConfig
+
+    exp = get_experiment(name)
+    p = parse_params(exp, ["nco_latency=1"])
+    exp.check_params(p)
+    assert IntegrationConfig(**loop_config(p)).nco_latency == 1
+    assert "nco_latency" not in loop_config(parse_params(exp, []))
+    for bad in ("2", "true", "0.5"):
+        with pytest.raises(ExperimentError, match=f"{name}: nco_latency=.*expected 0 or 1"):
+            exp.check_params(parse_params(exp, [f"nco_latency={bad}"]))
+
+
+def test_nco_latency_goes_to_deep_variants_only(monkeypatch):
+    """One experiment with ``nco_latency=1`` and modes ``deep,loose``: the deep variant's
+    configuration gets it, the loose one's does not (it would be refused: no NCOs)."""
+    from sdr_di.experiments._deep import run_deep_variant
+    from sdr_di.integration import receiver
+
+    made = []
+
+    def recorder(**kw):
+        made.append(kw)
+        raise ValueError("recorded")
+
+    monkeypatch.setattr(receiver, "IntegrationConfig", recorder)
+    for mode in ("deep", "loose"):
+        dr = run_deep_variant(None, "ekf", mode=mode, nco_latency=1, filter_rate_hz=50.0)
+        assert dr.error == "ValueError: recorded"
+    assert made[0] == {"filter": "ekf", "nco_latency": 1, "filter_rate_hz": 50.0}
+    assert made[1] == {"filter": "ekf", "mode": "loose", "filter_rate_hz": 50.0}
+
+
 def test_aggregate_statistics_and_nonfinite_values():
     st = aggregate([{"a": 1.0, "b": "x", "c": math.nan}, {"a": 3.0, "b": "x", "c": 2.0},
                     {"a": 2, "b": "y", "c": 4.0}])

@@ -429,7 +429,9 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     the call also works with a receiver that predates the modes. ``assume`` is the filter's
     assumptions (an experiment's ``assume`` dict, :func:`parse_assume`), applied to the
     configuration as ``--assume`` is. ``config`` are further
-    :class:`~sdr_di.integration.receiver.IntegrationConfig` fields.
+    :class:`~sdr_di.integration.receiver.IntegrationConfig` fields; ``nco_latency`` goes to
+    deep variants only (loose and tight have no NCOs to command), so one experiment can
+    set it for its deep variants beside loose or tight ones.
 
     Deep mode runs the scalar start-up once per ``inputs`` and hand-over rule: the first
     run keeps its state at the hand-over (``inputs.starts``) and the next ones continue
@@ -451,6 +453,7 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
 
     if mode != "deep":
         config["mode"] = mode
+        config.pop("nco_latency", None)
     scalar = CountingScalarReceiver(log=False)
     try:
         cfg = IntegrationConfig(filter=filter_name, **config)

@@ -34,6 +34,7 @@ from ._deep import (
 )
 from .filter_figures import rmse_bar_plot
 from .variants import (
+    check_nco_latency,
     loop_config,
     plot_error_norms,
     run_variants,
@@ -56,6 +57,7 @@ default_params: dict = {
     "sampling_rate_hz": None,
     "cn0_dbhz": None,
     "filter_rate_hz": 50.0,
+    "nco_latency": None,
     "output_rate_hz": 10.0,
     "gnss_rate_hz": None,
     "handover_wait_s": None,
@@ -67,6 +69,7 @@ default_params: dict = {
 
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
+    check_nco_latency(NAME, params)
     variant_list(NAME, params["filters"], params["modes"])
     for key in ("duration_s", "filter_rate_hz", "output_rate_hz"):
         check_number(NAME, params, key)

@@ -71,6 +71,7 @@ from ._deep import (
 )
 from .filter_figures import QUANTITIES, STATS, rmse_bar_plot
 from .variants import (
+    check_nco_latency,
     loop_config,
     plot_error_norms,
     run_variants,
@@ -98,6 +99,7 @@ default_params: dict = {
     "sampling_rate_hz": None,
     "cn0_dbhz": None,
     "filter_rate_hz": 50.0,
+    "nco_latency": None,
     "output_rate_hz": 10.0,
     "plots": True,
 }
@@ -111,6 +113,7 @@ def _duration(params: dict, n_seg: int) -> float:
 
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
+    check_nco_latency(NAME, params)
     variant_list(NAME, params["filters"], params["modes"])
     counts = parse_list(f"{NAME}: counts", params["counts"], int)
     if min(counts) < 1:

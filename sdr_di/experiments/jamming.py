@@ -67,7 +67,7 @@ from ._deep import (
     run_deep_variant,
 )
 from .filter_figures import filter_list, parse_filter_spec
-from .variants import loop_config, mode_list
+from .variants import check_nco_latency, loop_config, mode_list
 from .weak_signal import MODES, scalar_run
 
 __all__ = ["DESCRIPTION", "MODES", "NAME", "check_params", "default_params", "js_at",
@@ -96,6 +96,7 @@ default_params: dict = {
     "sampling_rate_hz": None,
     "deep_cn0_min_dbhz": None,
     "filter_rate_hz": 50.0,
+    "nco_latency": None,
     "plots": True,
 }
 
@@ -111,6 +112,7 @@ def _modes(text: str) -> list[str]:
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError` (one line
     naming the parameter)."""
+    check_nco_latency(NAME, params)
     _modes(params["modes"])
     filter_list(NAME, params["filter"])
     if isinstance(params["bits"], bool) or params["bits"] not in _FORMATS:

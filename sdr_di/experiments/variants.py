@@ -134,9 +134,10 @@ def loop_config(params: dict, **fixed: Any) -> dict:
 
     ``filter_rate_hz``, ``output_rate_hz``, ``gnss_rate_hz`` (loose/tight fix or observable
     rate), ``handover_wait_s`` (the hand-over rule's wait after the first fix, before 4
-    channels with time and ephemeris suffice) and ``deep_cn0_min_dbhz`` (the loop's channel
-    gate, as ``cn0_min_dbhz``) are taken when present and not ``None``; ``fixed`` wins over
-    them.
+    channels with time and ephemeris suffice), ``deep_cn0_min_dbhz`` (the loop's channel
+    gate, as ``cn0_min_dbhz``) and ``nco_latency`` (deep variants only:
+    :func:`~._deep.run_deep_variant`) are taken when present and not ``None``; ``fixed``
+    wins over them.
     """
     cfg: dict = {}
     for key in ("filter_rate_hz", "output_rate_hz", "gnss_rate_hz", "handover_wait_s"):
@@ -144,8 +145,18 @@ def loop_config(params: dict, **fixed: Any) -> dict:
             cfg[key] = float(params[key])
     if params.get("deep_cn0_min_dbhz") is not None:
         cfg["cn0_min_dbhz"] = float(params["deep_cn0_min_dbhz"])
+    if params.get("nco_latency") is not None:
+        cfg["nco_latency"] = int(params["nco_latency"])
     cfg.update(fixed)
     return cfg
+
+
+def check_nco_latency(exp: str, params: dict) -> None:
+    """Reject an ``nco_latency`` other than ``None`` (the receiver's default), 0 or 1."""
+    v = params.get("nco_latency")
+    if v is not None and (isinstance(v, bool) or v not in (0, 1)):
+        raise ExperimentError(f"{exp}: nco_latency={v!r}: expected 0 or 1 (filter intervals "
+                              "between an update and the NCO commands it first steers)")
 
 
 def nan_figures(label: str, infix: str = "") -> dict:
