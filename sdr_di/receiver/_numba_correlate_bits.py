@@ -67,12 +67,20 @@ noise level (``sqrt(n)`` times the sample's standard deviation; measured on rand
 tracking loop, C/N0 estimator and discriminator already sees. float32 doubles the vector lanes
 of the wipe-off and the sums: 1.27 against 1.70 ns per sample and channel on one thread of
 an Intel Xeon (AVX-512; session 8, same run shape as below), where the kernel was float64
-throughout before. The kernel is compiled with the ``reassoc`` and ``contract`` fast-math
-flags only (no ``nnan``/``ninf``/``arcp``), which lets LLVM vectorize the loops and fuse
-multiply-adds. The work is split into ``n_rows * n_sub`` tasks (row x contiguous range of
-whole blocks) run with ``prange``; each task writes its partial sums, which are added in a
-fixed order, so results depend on the thread count only through the float64 association of
-whole-block sums (~1e-16 relative), not on scheduling.
+throughout before. The kernel is compiled with the ``reassoc`` fast-math flag only (no
+``nnan``/``ninf``/``arcp``), which lets LLVM vectorize the loops; :func:`_run_sums` also has
+``contract`` (fused multiply-adds). The kernel itself had ``contract`` too, until it turned
+out that LLVM then fused differently in the code numba runs after compiling and in the code
+it writes to its cache: a run that compiled the kernel (the first after an install or a
+change) gave other sums in the last float32 bits than every later run, and the deep
+receiver's outputs on the 40 s default file differed from the second row on
+(``tests/test_receiver_correlator.py::test_kernels_compiled_here_equal_the_cached_ones``;
+the int8 kernel gives the same sums either way and keeps the flag; :func:`mean_power` dropped
+it too, for float64 samples). Without it the kernel is 0-7 % slower (25 MHz, one thread;
+no difference at 2.5 MHz). The work is split into ``n_rows * n_sub`` tasks (row x
+contiguous range of whole blocks) run with ``prange``; each task writes its partial sums,
+which are added in a fixed order, so results depend on the thread count only through the
+float64 association of whole-block sums (~1e-16 relative), not on scheduling.
 
 Speed of the float64 kernel (development machine, AMD EPYC with AVX-512; 7 channels at
 25 MHz, one thread, thread CPU time on the shared machine): 1.35-1.5 ns per sample and
@@ -164,7 +172,7 @@ def correlate_epl_bits(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, t
                             dchip, phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out)
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath={"reassoc", "contract"},
+@njit(cache=True, nogil=True, parallel=True, fastmath={"reassoc"},
       boundscheck=False)
 def correlate_epl_float(
     xs,  # int8/int16/float32/float64 (n * n_comp,): stored samples, I/Q interleaved when n_comp == 2
@@ -295,7 +303,7 @@ def pack_bit_windows(neg, out):
             out[c, j] = w
 
 
-@njit(cache=True, nogil=True, fastmath={"reassoc", "contract"}, boundscheck=False)
+@njit(cache=True, nogil=True, fastmath={"reassoc"}, boundscheck=False)
 def mean_power(xs, n_comp):
     """Mean ``|x|^2`` per sample of stored samples (I/Q interleaved when ``n_comp == 2``).
 
