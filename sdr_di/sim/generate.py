@@ -33,6 +33,7 @@ from ..errors import OutputError, ScenarioError
 from ..ins.imu import ImuErrorModel
 from ..io.atomic import OutputSet, check_output_dir, ensure_output_dir
 from ..io.imu_files import write_imu, write_truth
+from ..io.page_cache import ReleaseBehind
 from ..io.sample_formats import get_format
 from ..io.sidecar import file_fingerprint, write_sidecar
 from ..io.sigmf_files import check_b3i_in_band, sigmf_metadata
@@ -220,15 +221,29 @@ def write_overlapped(fh, chunks, bar=None) -> None:
 
     At most one write is in flight: it is waited for before the next is started, so the
     buffer it reads is never the one being generated (two buffers cycle). An error of a write
-    (disk full) is raised here, in the caller's thread.
+    (disk full) is raised here, in the caller's thread. The written pages leave the page
+    cache behind the writer (:class:`~sdr_di.io.page_cache.ReleaseBehind`).
     """
+    try:
+        release = ReleaseBehind(fh.fileno())
+        pos = fh.tell()
+    except (AttributeError, OSError, ValueError):   # not a file of the system (a buffer)
+        release, pos = None, 0
+
+    def write(buf: memoryview) -> None:
+        nonlocal pos
+        fh.write(buf)
+        pos += buf.nbytes
+        if release is not None:
+            release.advance(pos)
+
     with ThreadPoolExecutor(1, thread_name_prefix="sdr-di-writer") as pool:
         pending = None
         try:
             for chunk in chunks:
                 if pending is not None:
                     pending.result()
-                pending = pool.submit(fh.write, memoryview(np.ascontiguousarray(chunk)).cast("B"))
+                pending = pool.submit(write, memoryview(np.ascontiguousarray(chunk)).cast("B"))
                 if bar is not None:
                     bar.update(int(chunk.shape[0]))
             if pending is not None:

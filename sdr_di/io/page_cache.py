@@ -1,0 +1,58 @@
+"""Streaming IF files through the operating system's page cache without filling it.
+
+A generated or read IF file is gigabytes (25 MHz 8-bit I/Q: 50 MB per second of signal) and
+is streamed once, front to back. Left to itself, the kernel keeps every page of it in its
+page cache until memory runs short, which costs twice:
+
+* the cache takes fresh memory for each new page. On a virtual machine whose free memory
+  is handed back to the host, that memory must be faulted in again, page by page: measured
+  on the 2-core development VM, writing 1 GB of new file data cost 4.9-5.4 s of system CPU
+  time when the memory was cold, against 0.2-0.3 s when the pages of a file deleted just
+  before were reused (``/tmp`` test, 4 MB writes);
+* the file evicts what the user's other programs keep cached.
+
+:class:`ReleaseBehind` therefore tells the kernel (``posix_fadvise(POSIX_FADV_DONTNEED)``)
+that the pages behind the current position will not be needed again, over a trailing window
+of ``window_bytes``: the first advice on a dirty page starts its write-back, a later one drops
+it once clean, and the memory is reused for the next pages (same test, cold memory: 0.4-0.6 s
+of system time per GB). It changes no byte of any file: advice only, ignored where the
+platform has no ``posix_fadvise`` or the file does not support it (a pipe).
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["ReleaseBehind"]
+
+#: Default trailing window [bytes]: about 1.3 s of a 25 MHz 8-bit I/Q file.
+WINDOW_BYTES = 64 << 20
+
+
+class ReleaseBehind:
+    """Drop a streamed file's pages from the page cache behind the current position.
+
+    Parameters
+    ----------
+    fd : int
+        Open file descriptor.
+    window_bytes : int
+        Length of the trailing window advised at each :meth:`advance` [bytes]: every page
+        is advised about ``window_bytes / step`` times, so a dirty page whose write-back the
+        first advice started is dropped by a later one.
+    """
+
+    def __init__(self, fd: int, window_bytes: int = WINDOW_BYTES) -> None:
+        self.fd = fd
+        self.window = int(window_bytes)
+        self.enabled = hasattr(os, "posix_fadvise")
+
+    def advance(self, pos: int) -> None:
+        """The stream is at byte ``pos``: advise ``[pos - window, pos)`` as not needed."""
+        if not self.enabled or pos <= 0:
+            return
+        start = max(0, pos - self.window)
+        try:
+            os.posix_fadvise(self.fd, start, pos - start, os.POSIX_FADV_DONTNEED)
+        except OSError:          # not a regular file (a pipe): nothing to release
+            self.enabled = False
