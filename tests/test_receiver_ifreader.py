@@ -463,3 +463,29 @@ def test_read_ahead_of_a_file_cut_short_falls_back_to_the_reads_error(tmp_path, 
             src.read_stored(4000, 4000)
     finally:
         threads._split_call(False)
+
+
+@pytest.mark.skipif(not hasattr(os, "posix_fadvise"), reason="no posix_fadvise here")
+def test_sequential_reads_release_the_pages_a_window_behind(tmp_path, monkeypatch):
+    """A front-to-back pass (with the read-ahead, and without) advises every byte but the
+    last window's as not needed, and reads the same values as without the advice."""
+    from sdr_di.io import page_cache
+
+    n, window = 40_000, 20_000                           # iq_int8: 2 bytes per sample
+    monkeypatch.setattr(page_cache.release_read_behind, "__defaults__", (window,))
+    advised = []
+    real = os.posix_fadvise
+
+    def spy(fd, off, length, adv):
+        assert adv == os.POSIX_FADV_DONTNEED
+        advised.append((off, off + length))
+        real(fd, off, length, adv)
+
+    monkeypatch.setattr(os, "posix_fadvise", spy)
+    src, ref = _read_ahead_and_plain(tmp_path / "r.bin", "iq_int8", n, seed=3)
+    for s in range(0, n, 4000):
+        np.testing.assert_array_equal(src.read_stored(s, 4000)[0], ref.read_stored(s, 4000)[0])
+    covered = np.zeros(2 * n, bool)
+    for a, b in advised:
+        covered[a:b] = True
+    assert covered[:2 * n - window].all() and not covered[2 * n - window:].any()

@@ -15,15 +15,20 @@ page cache until memory runs short, which costs twice:
 that the pages behind the current position will not be needed again, over a trailing window
 of ``window_bytes``: the first advice on a dirty page starts its write-back, a later one drops
 it once clean, and the memory is reused for the next pages (same test, cold memory: 0.4-0.6 s
-of system time per GB). It changes no byte of any file: advice only, ignored where the
-platform has no ``posix_fadvise`` or the file does not support it (a pipe).
+of system time per GB). The IF reader does the same behind its reads
+(:func:`release_read_behind`): the 2 GB default test file read from disk cost 4.4 s of
+system time into fresh cache pages, 0.3 s with the pages released behind (as much as
+reading it from the cache), at 1.1 s of wall time (the read-ahead thread's). A file read
+again later comes from the disk, not the cache; files shorter than the window keep every
+page. Advice only: no byte of any file changes, and it is skipped where the platform has no
+``posix_fadvise`` or the file does not support it (a pipe).
 """
 
 from __future__ import annotations
 
 import os
 
-__all__ = ["ReleaseBehind"]
+__all__ = ["ReleaseBehind", "release_read_behind"]
 
 #: Default trailing window [bytes]: about 1.3 s of a 25 MHz 8-bit I/Q file.
 WINDOW_BYTES = 64 << 20
@@ -56,3 +61,19 @@ class ReleaseBehind:
             os.posix_fadvise(self.fd, start, pos - start, os.POSIX_FADV_DONTNEED)
         except OSError:          # not a regular file (a pipe): nothing to release
             self.enabled = False
+
+
+def release_read_behind(fd: int, offset: int, n: int, window_bytes: int = WINDOW_BYTES) -> None:
+    """After reading ``n`` bytes at ``offset`` of a file streamed front to back: advise the
+    ``n`` bytes ``window_bytes`` before them, ``[offset - window, offset + n - window)``, as
+    not needed (stateless: reads that tile the file advise every byte but its last
+    ``window_bytes``, which a reader going back a little, a chunk overlap, still finds
+    cached)."""
+    end = offset + int(n) - int(window_bytes)
+    if end <= 0 or not hasattr(os, "posix_fadvise"):
+        return
+    start = max(0, offset - int(window_bytes))
+    try:
+        os.posix_fadvise(fd, start, end - start, os.POSIX_FADV_DONTNEED)
+    except OSError:
+        pass

@@ -95,6 +95,7 @@ import numpy as np
 from ..constants import F_B3I, SECONDS_PER_WEEK
 from ..errors import SampleFormatError
 from ..io.sample_formats import SampleFormat, byte_layout, get_format
+from ..io.page_cache import release_read_behind
 from ..io.sidecar import check_member, member_path, read_sidecar
 
 __all__ = ["FormatCheckError", "IfFileWarning", "IfSource", "check_format_statistics"]
@@ -541,7 +542,11 @@ class IfSource:
                           n_comp: int) -> None:
         """:meth:`_read_stored_now` of a checked range into ``out`` (``n * n_comp`` values
         of :meth:`_stored_dtype`): formats stored as they are served are read straight
-        into it (``os.preadv``, no intermediate array), the others converted and copied."""
+        into it (``os.preadv``, no intermediate array), the others converted and copied.
+        The pages a read leaves 64 MiB behind it leave the page cache
+        (:func:`~sdr_di.io.page_cache.release_read_behind`): on the 2-core VM a 2 GB file
+        read from disk cost 4.4 s of system time into fresh cache pages, 0.3 s with them
+        released and reused (as much as reading it from the cache)."""
         fmt = self.format
         bps = fmt.bytes_per_sample
         if self._tables is not None or not hasattr(os, "preadv") or \
@@ -558,6 +563,7 @@ class IfSource:
                     raise SampleFormatError(
                         f"IF file {self.path}: short read at sample {start_sample}")
                 done += got
+            release_read_behind(fd, off, want)
         finally:
             os.close(fd)
 
