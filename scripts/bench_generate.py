@@ -184,9 +184,10 @@ def profile_stages(duration: float, work: str) -> dict:
         prof["packing"] = cpu() - c0
     path = Path(work) / "profile_write.bin"
     c0 = cpu()
+    from sdr_di.sim.generate import write_overlapped     # the generator's writer
+
     with open(path, "wb") as fh:
-        fh.writelines(memoryview(chunks[k % len(chunks)]).cast("B")
-                      for k in range(n_total // gen.chunk_nodes))
+        write_overlapped(fh, (chunks[k % len(chunks)] for k in range(n_total // gen.chunk_nodes)))
     prof["write"] = cpu() - c0
     path.unlink()
     prof["samples"] = gen.n_samples
