@@ -489,3 +489,28 @@ def test_sequential_reads_release_the_pages_a_window_behind(tmp_path, monkeypatc
     for a, b in advised:
         covered[a:b] = True
     assert covered[:2 * n - window].all() and not covered[2 * n - window:].any()
+
+
+def test_read_ahead_kernel_is_compiled_on_the_callers_thread(tmp_path):
+    """The read-ahead thread's numba kernel is compiled (or loaded) by the thread that
+    schedules it, never on the read-ahead thread, where numba's ``catch_warnings`` could
+    take the caller's warnings: in a fresh process with an empty numba cache and a
+    read-ahead thread that does nothing, the kernel has its int8 signature after a read."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "r.bin"
+    path.write_bytes(np.zeros(2 * 100_000, np.int8).tobytes())
+    code = f"""
+from sdr_di.receiver import ifreader
+from sdr_di.receiver._numba_correlate_bits import block_sum_squares
+ifreader._ReadAhead.run = lambda self: None        # the thread compiles nothing
+src = ifreader.IfSource({str(path)!r}, 25e6, 0.0, "iq_int8", check_format=False)
+src.read_stored_power(0, 10_000)                   # schedules the read-ahead of the rest
+print(len(block_sum_squares.signatures))
+"""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert int(res.stdout.split()[-1]) >= 1

@@ -600,6 +600,8 @@ class IfSource:
 
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="if-read-ahead")
         job = _ReadAhead(self, start_sample, n, n_comp)
+        if job.sums is not None:
+            _compile_here()
         self._pool.submit(job.run)
         self._ahead = (start_sample, n, job)
 
@@ -664,6 +666,19 @@ class IfSource:
 
 
 # -- layout heuristic ------------------------------------------------------------------------
+
+def _compile_here() -> None:
+    """Compile (or load from numba's cache) the read-ahead thread's kernel on this thread.
+
+    Numba collects its compiler's warnings with :class:`warnings.catch_warnings`, which
+    swaps process-wide state: compiling on the read-ahead thread while this thread is
+    inside its own ``catch_warnings`` (the deep run's navigation-data warnings, a test's
+    ``pytest.warns``) can take this thread's warnings away. It happened in a clean-clone
+    test run, whose numba cache starts empty: an ``IfFileWarning`` was not seen."""
+    from ._numba_correlate_bits import block_sum_squares
+
+    block_sum_squares(np.zeros(1, np.int8), 1, np.empty(1))
+
 
 class _ReadAhead:
     """One read-ahead of ``[start, start + n)`` of an :class:`IfSource`, in pieces of
