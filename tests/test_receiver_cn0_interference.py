@@ -117,8 +117,14 @@ def test_cn0_follows_the_effective_cn0_under_a_noise_jammer(clean_file, offset_h
     src, prn, z, out, cn0_clean = clean_file
     rng = np.random.default_rng(11)
     pn = float(np.mean(np.abs(z) ** 2))
-    w = np.fft.fft(_cgauss(rng, z.size, 1.0))
-    w[np.abs(np.fft.fftfreq(z.size, 1 / FS) - offset_hz) > bandwidth_hz / 2] = 0.0
+    # band-limited white noise: independent complex Gaussian values on the in-band DFT bins
+    # (the spectrum of white noise, drawn there directly), zero elsewhere
+    n, df = z.size, FS / z.size
+    m = np.arange(math.ceil((offset_hz - bandwidth_hz / 2) / df),
+                  math.floor((offset_hz + bandwidth_hz / 2) / df) + 1)
+    assert m.min() >= -n // 2 and m.max() < n // 2     # inside the sampled band
+    w = np.zeros(n, complex)
+    w[m % n] = _cgauss(rng, m.size, 1.0)
     jam = np.fft.ifft(w)
     j_power = pn * 10 ** (jn_db / 10)
     jam *= math.sqrt(j_power / np.mean(np.abs(jam) ** 2))
