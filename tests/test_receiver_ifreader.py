@@ -466,12 +466,14 @@ def test_read_ahead_of_a_file_cut_short_falls_back_to_the_reads_error(tmp_path, 
 
 
 @pytest.mark.skipif(not hasattr(os, "posix_fadvise"), reason="no posix_fadvise here")
-def test_sequential_reads_release_the_pages_a_window_behind(tmp_path, monkeypatch):
+@pytest.mark.parametrize("fmt", ["iq_int8", "iq_int4"])   # preadv, tables
+def test_sequential_reads_release_the_pages_a_window_behind(tmp_path, monkeypatch, fmt):
     """A front-to-back pass (with the read-ahead, and without) advises every byte but the
     last window's as not needed, and reads the same values as without the advice."""
     from sdr_di.io import page_cache
 
-    n, window = 40_000, 20_000                           # iq_int8: 2 bytes per sample
+    n, window = 40_000, 20_000
+    size = n * get_format(fmt).bytes_per_sample
     monkeypatch.setattr(page_cache.release_read_behind, "__defaults__", (window,))
     advised = []
     real = os.posix_fadvise
@@ -482,13 +484,13 @@ def test_sequential_reads_release_the_pages_a_window_behind(tmp_path, monkeypatc
         real(fd, off, length, adv)
 
     monkeypatch.setattr(os, "posix_fadvise", spy)
-    src, ref = _read_ahead_and_plain(tmp_path / "r.bin", "iq_int8", n, seed=3)
+    src, ref = _read_ahead_and_plain(tmp_path / "r.bin", fmt, n, seed=3)
     for s in range(0, n, 4000):
         np.testing.assert_array_equal(src.read_stored(s, 4000)[0], ref.read_stored(s, 4000)[0])
-    covered = np.zeros(2 * n, bool)
+    covered = np.zeros(size, bool)
     for a, b in advised:
         covered[a:b] = True
-    assert covered[:2 * n - window].all() and not covered[2 * n - window:].any()
+    assert covered[:size - window].all() and not covered[size - window:].any()
 
 
 def test_read_ahead_kernel_is_compiled_on_the_callers_thread(tmp_path):

@@ -575,19 +575,20 @@ class IfSource:
         # one read() into a fresh array: cheaper than mapping the range and copying it
         # (no page faults on a new mapping per chunk)
         bps = fmt.bytes_per_sample
-        if self._tables is not None:
-            byte, _, pairs = self._tables
-            raw = np.fromfile(self.path, dtype=np.uint8, count=n * bps,
-                              offset=start_sample * bps)
-            if bps > 1:
-                raw = raw[byte::bps]
-            out = pairs[raw].view(np.int8)
-        else:
-            dt = self._file_dtype()
-            out = np.fromfile(self.path, dtype=dt, count=n * bps // dt.itemsize,
-                              offset=start_sample * bps)
-            if not out.dtype.isnative:
-                out = out.astype(out.dtype.newbyteorder("="))
+        with open(self.path, "rb") as fh:            # (offsets from its start)
+            if self._tables is not None:
+                byte, _, pairs = self._tables
+                raw = np.fromfile(fh, dtype=np.uint8, count=n * bps, offset=start_sample * bps)
+                if bps > 1:
+                    raw = raw[byte::bps]
+                out = pairs[raw].view(np.int8)
+            else:
+                dt = self._file_dtype()
+                out = np.fromfile(fh, dtype=dt, count=n * bps // dt.itemsize,
+                                  offset=start_sample * bps)
+                if not out.dtype.isnative:
+                    out = out.astype(out.dtype.newbyteorder("="))
+            release_read_behind(fh.fileno(), start_sample * bps, n * bps)
         if out.size != n * n_comp:
             raise SampleFormatError(f"IF file {self.path}: short read at sample {start_sample}")
         return out
