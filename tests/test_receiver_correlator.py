@@ -460,29 +460,31 @@ def test_block_sum_squares_equals_plain_sums():
     np.testing.assert_array_equal(out, want)
 
 
-#: Sums of both correlator kernels (float32 samples, then int8) on fixed random data, printed
-#: as a digest: run by :func:`test_kernels_compiled_here_equal_the_cached_ones`.
+#: Sums of one correlator kernel (``sys.argv[1]``: float32 samples, or int8) on fixed random
+#: data, printed as a digest: run by :func:`test_kernels_compiled_here_equal_the_cached_ones`.
 _KERNEL_DIGEST = """
-import hashlib
+import hashlib, sys
 import numpy as np
 from sdr_di.receiver.correlator import correlate_table, padded_replicas
 rng = np.random.default_rng(3)
 codes = padded_replicas(np.where(rng.random((5, 10230)) < 0.5, -1.0, 1.0))
 z = (rng.normal(size=40000) + 1j * rng.normal(size=40000)) * 20
+x = z.astype(np.complex64) if sys.argv[1] == "float32" else \\
+    np.clip(z.real, -127, 127).astype(np.int8)
 h = hashlib.sha1()
-for x in (z.astype(np.complex64), np.clip(z.real, -127, 127).astype(np.int8)):
-    for k in range(3):
-        r = correlate_table(x, codes, 10230, rng.uniform(0, 10230, 5),
-                            10.23e6 + rng.normal(size=5), rng.random(5),
-                            rng.normal(size=5) * 3000, 25000, 25e6, 0.5,
-                            start_sample=rng.integers(0, 15000, 5))
-        for v in (r.early, r.prompt, r.late):
-            h.update(np.ascontiguousarray(v).tobytes())
+for k in range(3):
+    r = correlate_table(x, codes, 10230, rng.uniform(0, 10230, 5), 10.23e6 + rng.normal(size=5),
+                        rng.random(5), rng.normal(size=5) * 3000, 25000, 25e6, 0.5,
+                        start_sample=rng.integers(0, 15000, 5))
+    for v in (r.early, r.prompt, r.late):
+        h.update(np.ascontiguousarray(v).tobytes())
 print(h.hexdigest())
 """
 
 
-def test_kernels_compiled_here_equal_the_cached_ones(tmp_path):
+@pytest.mark.parametrize("kind, kernel", [("float32", "correlate_epl_float"),
+                                          ("int8", "correlate_epl_int8")])
+def test_kernels_compiled_here_equal_the_cached_ones(tmp_path, kind, kernel):
     """A kernel compiled in this process and the same kernel loaded from numba's cache by the
     next one give the same sums bit for bit, so a run's outputs do not depend on whether it
     is the first after an install (module notes of ``receiver._numba_correlate_bits``:
@@ -494,12 +496,11 @@ def test_kernels_compiled_here_equal_the_cached_ones(tmp_path):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
 
     def digest() -> str:
-        res = subprocess.run([sys.executable, "-c", _KERNEL_DIGEST], capture_output=True,
+        res = subprocess.run([sys.executable, "-c", _KERNEL_DIGEST, kind], capture_output=True,
                              text=True, env=env, timeout=300)
         assert res.returncode == 0, res.stderr
         return res.stdout.strip()
 
     compiled = digest()
-    assert list((tmp_path / "cache").rglob("*correlate_epl_float*.nbi")), "nothing cached"
-    assert list((tmp_path / "cache").rglob("*correlate_epl_int8*.nbi")), "nothing cached"
+    assert list((tmp_path / "cache").rglob(f"*{kernel}*.nbi")), "nothing cached"
     assert digest() == compiled
