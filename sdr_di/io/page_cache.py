@@ -34,6 +34,19 @@ __all__ = ["ReleaseBehind", "release_read_behind"]
 WINDOW_BYTES = 64 << 20
 
 
+def _dont_need(fd: int, start: int, end: int) -> bool:
+    """Advise ``[start, end)`` of ``fd`` as not needed; False where that cannot be done (no
+    ``posix_fadvise`` on the platform, or not a regular file: a pipe)."""
+    if not hasattr(os, "posix_fadvise"):
+        return False
+    if end > start:
+        try:
+            os.posix_fadvise(fd, start, end - start, os.POSIX_FADV_DONTNEED)
+        except OSError:
+            return False
+    return True
+
+
 class ReleaseBehind:
     """Drop a streamed file's pages from the page cache behind the current position.
 
@@ -54,13 +67,8 @@ class ReleaseBehind:
 
     def advance(self, pos: int) -> None:
         """The stream is at byte ``pos``: advise ``[pos - window, pos)`` as not needed."""
-        if not self.enabled or pos <= 0:
-            return
-        start = max(0, pos - self.window)
-        try:
-            os.posix_fadvise(self.fd, start, pos - start, os.POSIX_FADV_DONTNEED)
-        except OSError:          # not a regular file (a pipe): nothing to release
-            self.enabled = False
+        if self.enabled and pos > 0:
+            self.enabled = _dont_need(self.fd, max(0, pos - self.window), pos)
 
 
 def release_read_behind(fd: int, offset: int, n: int, window_bytes: int = WINDOW_BYTES) -> None:
@@ -69,11 +77,5 @@ def release_read_behind(fd: int, offset: int, n: int, window_bytes: int = WINDOW
     not needed (stateless: reads that tile the file advise every byte but its last
     ``window_bytes``, which a reader going back a little, a chunk overlap, still finds
     cached)."""
-    end = offset + int(n) - int(window_bytes)
-    if end <= 0 or not hasattr(os, "posix_fadvise"):
-        return
-    start = max(0, offset - int(window_bytes))
-    try:
-        os.posix_fadvise(fd, start, end - start, os.POSIX_FADV_DONTNEED)
-    except OSError:
-        pass
+    w = int(window_bytes)
+    _dont_need(fd, max(0, offset - w), offset + int(n) - w)
