@@ -85,12 +85,11 @@ def child_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     return env
 
 
-def bytecode_note() -> str:
-    """One line for a benchmark's header when ``PYTHONDONTWRITEBYTECODE`` is set here."""
-    if not os.environ.get("PYTHONDONTWRITEBYTECODE"):
-        return ""
-    return ("PYTHONDONTWRITEBYTECODE is set here: the child processes run without it, so they "
-            "use the package's bytecode as an installed copy does (child_env)")
+def print_bytecode_note() -> None:
+    """A line of a benchmark's header when ``PYTHONDONTWRITEBYTECODE`` is set here."""
+    if os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        print("PYTHONDONTWRITEBYTECODE is set here: the child processes run without it, so "
+              "they use the package's bytecode as an installed copy does (child_env)")
 
 
 def _run_generate(duration: float, out: Path, extra: tuple[str, ...] = ()) -> tuple[float, int]:
@@ -356,8 +355,7 @@ def bench_run(args: argparse.Namespace) -> None:
         print(f"machine: {os.cpu_count()} cores, load average {load:.2f} at start; scalar "
               f"receiver, default scenario, 7 satellites, 25 MHz, {args.bits}-bit iq_int8, "
               "PVT at 5 Hz")
-        if bytecode_note():
-            print(bytecode_note())
+        print_bytecode_note()
         print("x real time: file seconds per wall second of the whole process (imports, "
               "acquisition, tracking, PVT, output); tracking: of the tracking loop alone; "
               "CPU s: the process's user + system time (all threads; on a shared machine the "

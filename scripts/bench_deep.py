@@ -104,7 +104,7 @@ def _one(path: Path, out: Path, filt: str, rate: float, threads: int | None = No
     t0 = time.perf_counter()
     from bench import child_env
 
-    # receiver.threads.ENV_THREADS
+    # SDR_DI_KERNEL_THREADS: receiver.threads.ENV_THREADS
     env = child_env({"SDR_DI_KERNEL_THREADS": str(threads)} if threads else None)
     res = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(out), filt, str(rate),
                           str(latency)], check=False, capture_output=True, text=True, env=env)
@@ -136,10 +136,9 @@ def run(args: argparse.Namespace) -> list[dict]:
               f"{args.filter} at {args.filter_rate:g} Hz; NCO latency "
               f"{' and '.join(map(str, args.nco_latency))} (run column: repeat.latency)")
         print(speed_line("at start"))
-        from bench import bytecode_note
+        from bench import print_bytecode_note
 
-        if bytecode_note():
-            print(bytecode_note())
+        print_bytecode_note()
         print(f"{'run':>3} {'file s':>7} {'wall s':>7} {'CPU s':>6} {'main':>5} {'x RT':>6} {'start-up s':>10} "
               f"{'loop s':>7} {'loop xRT':>8} {'corr%':>6} {'pref%':>6} {'filt%':>6} "
               f"{'ins%':>5} {'nco%':>5} {'read%':>6} {'RSS MiB':>8}")

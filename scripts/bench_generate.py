@@ -224,10 +224,9 @@ def run(args: argparse.Namespace) -> None:
         load = os.getloadavg()[0]
         print(f"machine: {os.cpu_count()} cores, load average {load:.2f} at start; default "
               "scenario, 7 satellites, 25 MHz, 4-bit iq_int8")
-        from bench import bytecode_note
+        from bench import print_bytecode_note
 
-        if bytecode_note():
-            print(bytecode_note())
+        print_bytecode_note()
         print(f"{'variant':>12} {'data s':>6} {'wall s':>7} {'CPU s':>6} {'x real time':>11} "
               f"{'MB/s':>6} {'peak RSS MiB':>12} {'file MiB':>8}")
         variants: list[tuple[str, tuple[str, ...]]] = [("default", ())]
