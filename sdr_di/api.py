@@ -305,7 +305,9 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         raise ValueError("gnss_rate_hz: only with mode loose or tight")
     if nco_latency is not None and mode != "deep":
         raise ValueError("nco_latency: only with mode deep")
-    if nco_latency is not None and (isinstance(nco_latency, bool) or nco_latency not in (0, 1)):
+    from .integration.config import is_nco_latency
+
+    if nco_latency is not None and not is_nco_latency(nco_latency):
         raise ValueError(f"nco_latency must be 0 or 1 (filter intervals), got {nco_latency!r}")
     if approx_pos is not None and (mode != "scalar" or ephemeris is None):
         raise ValueError("approx_pos: only in scalar mode, with ephemeris")

@@ -153,8 +153,10 @@ def loop_config(params: dict, **fixed: Any) -> dict:
 
 def check_nco_latency(exp: str, params: dict) -> None:
     """Reject an ``nco_latency`` other than ``None`` (the receiver's default), 0 or 1."""
+    from ..integration.config import is_nco_latency
+
     v = params.get("nco_latency")
-    if v is not None and (isinstance(v, bool) or v not in (0, 1)):
+    if v is not None and not is_nco_latency(v):
         raise ExperimentError(f"{exp}: nco_latency={v!r}: expected 0 or 1 (filter intervals "
                               "between an update and the NCO commands it first steers)")
 

@@ -13,10 +13,20 @@ import math
 from ..ins.imu import ImuErrorModel
 from ..oscillator import CLOCK_PRESETS, OscillatorSpec
 
-__all__ = ["MODES", "SCALAR_EPOCH_S", "IntegrationConfig"]
+__all__ = ["MODES", "NCO_LATENCIES", "SCALAR_EPOCH_S", "IntegrationConfig", "is_nco_latency"]
 
 #: Coupling modes of :class:`IntegratedReceiver` (receiver notes).
 MODES = ("deep", "loose", "tight")
+#: Deep mode's NCO latencies [filter intervals] (:attr:`IntegrationConfig.nco_latency`).
+NCO_LATENCIES = (0, 1)
+
+
+def is_nco_latency(v) -> bool:
+    """Whether ``v`` is an NCO latency (:data:`NCO_LATENCIES`; a bool is not): the one test
+    of the configuration, the API and the experiments' parameters."""
+    return not isinstance(v, bool) and v in NCO_LATENCIES
+
+
 #: Interval of the scalar start-up's output epochs (the hand-over rule runs on them) [s].
 SCALAR_EPOCH_S = 0.1
 
@@ -160,7 +170,7 @@ class IntegrationConfig:
         v = self.iono_wait_s
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise ValueError(f"iono_wait_s must be >= 0, got {v!r}")
-        if isinstance(self.nco_latency, bool) or self.nco_latency not in (0, 1):
+        if not is_nco_latency(self.nco_latency):
             raise ValueError(f"nco_latency must be 0 or 1 (filter intervals), got "
                              f"{self.nco_latency!r}")
         if self.mode != "deep" and self.nco_latency:
