@@ -85,6 +85,26 @@ def child_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     return env
 
 
+def stolen_s() -> float | None:
+    """CPU seconds the hypervisor took from this virtual machine since boot, all cores
+    together (the ``steal`` column of Linux's ``/proc/stat``); None elsewhere. A benchmark
+    prints the difference over each run: on the shared 2-core VM it was 0.01-0.2 s in most
+    40 s deep runs and up to 4.4 s in others (docs/notes/speed.md, session 17), and such runs
+    are not comparable with the rest."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK") if fields[0] == "cpu" else None
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def stolen_between(before: float | None) -> float | None:
+    """:func:`stolen_s` now minus ``before`` (None when either is unknown)."""
+    now = stolen_s()
+    return None if before is None or now is None else now - before
+
+
 def print_bytecode_note() -> None:
     """A line of a benchmark's header when ``PYTHONDONTWRITEBYTECODE`` is set here."""
     if os.environ.get("PYTHONDONTWRITEBYTECODE"):
@@ -141,6 +161,12 @@ print("RESULT", json.dumps({"profile": prof, "processed_s": res.processed_s,
 _STAGES = ("acquisition", "read", "correlate", "channels", "callback")
 
 
+def stolen_note(r: dict) -> str:
+    """``; the VM lost X s to its host`` for a run's ``stolen_s`` (empty when unknown)."""
+    st = r.get("stolen_s")
+    return "" if st is None else f"; CPU the host took from the VM during the run: {st:.2f} s"
+
+
 def _run_receiver(path: Path, out: Path, search: str) -> dict:
     """``run_scalar`` (what ``sdr-di run --mode scalar`` runs) in a fresh process: the
     process wall time and peak RSS, the receiver's profile. ``search``: ``assisted`` (the
@@ -149,16 +175,19 @@ def _run_receiver(path: Path, out: Path, search: str) -> dict:
     import resource
 
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    st0 = stolen_s()
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", _RUN_CHILD, str(path), str(out), search],
                          check=False, capture_output=True, text=True, env=child_env())
     wall = time.perf_counter() - t0
+    stolen = stolen_between(st0)
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if res.returncode != 0:
         raise SystemExit(f"run failed: {res.stderr.strip()}")
     line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
     r = json.loads(line[len("RESULT "):])
     r["process_wall_s"] = wall
+    r["stolen_s"] = stolen
     r["cpu_s"] = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     return r
 
@@ -402,7 +431,7 @@ def bench_run(args: argparse.Namespace) -> None:
                     print(f"{'':>8} main thread over run_scalar: {ms['wall']:.2f} s wall = "
                           f"{ms['cpu']:.2f} s on a core + {ms['runnable']:.2f} s waiting for "
                           f"a core (load) + {ms['wall'] - ms['cpu'] - ms['runnable']:.2f} s "
-                          "sleeping (kernel worker, GIL, reads)")
+                          "sleeping (kernel worker, GIL, reads)" + stolen_note(r))
                 if search == "assisted" and (f not in best or wall < best[f]["wall"]):
                     best[f] = {"wall": wall, "cpu": r["cpu_s"], "d": d, "shares": shares,
                                "idle": r["cpu_main"] + r["split"]["wait_cpu_s"]}

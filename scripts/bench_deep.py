@@ -100,20 +100,24 @@ def _one(path: Path, out: Path, filt: str, rate: float, threads: int | None = No
          latency: int = 0) -> dict:
     import resource
 
+    from bench import child_env, stolen_between, stolen_s
+
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    st0 = stolen_s()
     t0 = time.perf_counter()
-    from bench import child_env
 
     # SDR_DI_KERNEL_THREADS: receiver.threads.ENV_THREADS
     env = child_env({"SDR_DI_KERNEL_THREADS": str(threads)} if threads else None)
     res = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(out), filt, str(rate),
                           str(latency)], check=False, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
+    stolen = stolen_between(st0)
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if res.returncode != 0:
         raise SystemExit(f"deep run failed: {res.stderr.strip()[-2000:]}")
     d = json.loads(next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT"))[7:])
     d["process_wall"] = wall
+    d["stolen_s"] = stolen
     d["cpu_s"] = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     return d
 
@@ -136,7 +140,7 @@ def run(args: argparse.Namespace) -> list[dict]:
               f"{args.filter} at {args.filter_rate:g} Hz; NCO latency "
               f"{' and '.join(map(str, args.nco_latency))} (run column: repeat.latency)")
         print(speed_line("at start"))
-        from bench import print_bytecode_note
+        from bench import print_bytecode_note, stolen_note
 
         print_bytecode_note()
         print(f"{'run':>3} {'file s':>7} {'wall s':>7} {'CPU s':>6} {'main':>5} {'x RT':>6} {'start-up s':>10} "
@@ -170,7 +174,8 @@ def run(args: argparse.Namespace) -> list[dict]:
                       "threads' CPU: " + ", ".join(f"{k} {v:.2f} s" for k, v in sorted(
                           d.get("threads", {}).items()) if v >= 0.05)
                       + f", the rest (IF read-ahead, ended threads) "
-                      f"{d['cpu_s'] - d['cpu_main'] - sum(d.get('threads', {}).values()):.2f} s")
+                      f"{d['cpu_s'] - d['cpu_main'] - sum(d.get('threads', {}).values()):.2f} s"
+                      + stolen_note(d))
             rows.append(d)
         for lat in args.nco_latency:
             _best_line([r for r in rows if r["latency"] == lat], lat)
