@@ -162,7 +162,8 @@ _STAGES = ("acquisition", "read", "correlate", "channels", "callback")
 
 
 def stolen_note(r: dict) -> str:
-    """``; the VM lost X s to its host`` for a run's ``stolen_s`` (empty when unknown)."""
+    """The end of a run's line: the CPU the host took from the VM over the run (its
+    ``stolen_s``, :func:`stolen_s`); empty when unknown."""
     st = r.get("stolen_s")
     return "" if st is None else f"; CPU the host took from the VM during the run: {st:.2f} s"
 
