@@ -105,7 +105,6 @@ def _one(path: Path, out: Path, filt: str, rate: float, threads: int | None = No
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     st0 = stolen_s()
     t0 = time.perf_counter()
-
     # SDR_DI_KERNEL_THREADS: receiver.threads.ENV_THREADS
     env = child_env({"SDR_DI_KERNEL_THREADS": str(threads)} if threads else None)
     res = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(out), filt, str(rate),
