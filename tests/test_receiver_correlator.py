@@ -6,11 +6,13 @@ import pytest
 from sdr_di.errors import UnknownPrnError
 from sdr_di.receiver import _numba_correlate_bits
 from sdr_di.receiver._numba_correlate_bits import correlate_epl_bits, mean_power
+from sdr_di.receiver._numba_correlate_int import ROT_SCALE
 from sdr_di.receiver.correlator import (
     CARRIER_BLOCK,
     CODE_PAD,
     Correlator,
     bit_windows,
+    carrier_rotation,
     correlate,
     padded_replicas,
 )
@@ -247,6 +249,32 @@ def test_bit_windows_match_their_definition():
         assert int(bits[0, j]) == want
         assert int(bits[1, j]) == sum(int(neg[1, j + b]) << b for b in range(64))
     np.testing.assert_array_equal(bit_windows(tab[1]), bits[1:])
+
+
+def test_carrier_rotation_tables_are_the_rounded_phasors():
+    """The tables (angle addition between exactly evaluated columns) lie within half a float32
+    ulp of the phasors of the reduced phase, up to the float64 phase's own uncertainty (the
+    reduction of ``m dphi`` leaves ~256 * 0.5 * 2^-52 cycle, 2e-13 rad, which matters only
+    where a value is near 0 and its float32 ulp is smaller still), differ from their
+    directly rounded values in at most a few entries in a million, and round to the integer
+    kernel's tables ``rint(127 v)`` exactly as the directly rounded values do."""
+    rng = np.random.default_rng(12)
+    dphi = np.concatenate([rng.uniform(-0.5, 0.5, 1500), (1.5e6 + rng.normal(0, 5e3, 500)) / 25e6,
+                           [0.0, 1e-9, -0.25, 0.125]])
+    rot_re, rot_im = carrier_rotation(dphi)
+    assert rot_re.shape == rot_im.shape == (dphi.size, CARRIER_BLOCK)
+    assert rot_re.dtype == rot_im.dtype == np.float32
+    arg = np.multiply.outer(dphi, np.arange(CARRIER_BLOCK, dtype=float))
+    arg = 2 * np.pi * (arg - np.floor(arg))
+    exact_re, exact_im = np.cos(arg), -np.sin(arg)
+    for got, exact in ((rot_re, exact_re), (rot_im, exact_im)):
+        half_ulp = 0.5 * np.spacing(np.abs(exact).astype(np.float32)).astype(float)
+        assert np.all(np.abs(got - exact) <= half_ulp * (1 + 1e-6) + 2e-13)
+        direct = exact.astype(np.float32)
+        assert np.count_nonzero(got != direct) <= 5e-6 * got.size
+        np.testing.assert_array_equal(np.rint(ROT_SCALE * got.astype(float)),
+                                      np.rint(ROT_SCALE * direct.astype(float)))
+    assert rot_re[:, 0].tolist() == [1.0] * dphi.size and not np.any(rot_im[:, 0])
 
 
 def test_correlator_keeps_bit_windows_per_prn_list():
