@@ -28,10 +28,47 @@ BLOCK = (16.0, 22.0)          # 4 of 7 satellites blocked [s]
 COL = {c: i for i, c in enumerate(DEEP_COLUMNS)}
 
 
+class _Runs(dict):
+    """The generated file's paths (``runs["paths"]``) and each mode's CLI run, made when a
+    test first asks for it (``runs[mode]``: rows of the CSV and the summary), so that the
+    suite's slowest item is the generation or one run, not the generation and both runs.
+    The CLI's receivers keep their scalar run (``keep_start``, which changes nothing else):
+    :meth:`kept` gives a mode's receiver and result, for
+    :func:`test_a_loop_over_a_kept_scalar_run_gives_the_rows_of_its_own_run`."""
+
+    def __init__(self, folder, paths) -> None:
+        super().__init__(paths=paths)
+        self.folder = folder
+        self._kept: dict = {}
+
+    def __missing__(self, mode: str):
+        from sdr_di.integration.receiver import IntegratedReceiver
+
+        real_run = IntegratedReceiver.run
+
+        def keeping(rx, *args, **kw):
+            res = real_run(rx, *args, **{**kw, "keep_start": True})
+            self._kept[rx.config.mode] = (rx, res)
+            return res
+
+        d = self.folder
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(IntegratedReceiver, "run", keeping)
+            rc = main(["run", str(self["paths"]["if"]), "--mode", mode, "--filter", "ekf",
+                       "--no-progress", "--out", str(d / mode)])
+        assert rc == 0
+        self[mode] = (np.loadtxt(d / mode / f"default_{mode}.csv", delimiter=",", skiprows=2),
+                      json.loads((d / mode / f"default_{mode}_summary.json").read_text()))
+        return self[mode]
+
+    def kept(self, mode: str):
+        self[mode]                                   # noqa: B018 - made if not yet
+        return self._kept[mode]
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     from sdr_di.experiments._deep import ranked_prns, with_outages
-    from sdr_di.integration.receiver import IntegratedReceiver
     from sdr_di.scenario import DEFAULT_SCENARIO, load_scenario
     from sdr_di.sim.generate import generate_files
 
@@ -41,29 +78,7 @@ def runs(tmp_path_factory):
     assert len(prns) == 7
     sc = with_outages(sc, [{"prn": p, "start_s": BLOCK[0], "end_s": BLOCK[1], "blockage": True}
                            for p in prns[3:]])
-    paths = generate_files(sc, d, progress=False)
-    out = {"paths": paths}
-    # the CLI's receivers keep their scalar run (``keep_start``, which changes nothing else),
-    # for test_a_loop_over_a_kept_scalar_run_gives_the_rows_of_its_own_run
-    real_run = IntegratedReceiver.run
-    kept = {}
-
-    def keeping(self, *args, **kw):
-        res = real_run(self, *args, **{**kw, "keep_start": True})
-        kept[self.config.mode] = (self, res)
-        return res
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(IntegratedReceiver, "run", keeping)
-        for mode in ("loose", "tight"):
-            rc = main(["run", str(paths["if"]), "--mode", mode, "--filter", "ekf",
-                       "--no-progress", "--out", str(d / mode)])
-            assert rc == 0
-            out[mode] = (np.loadtxt(d / mode / f"default_{mode}.csv", delimiter=",",
-                                    skiprows=2),
-                         json.loads((d / mode / f"default_{mode}_summary.json").read_text()))
-    out["kept"] = kept
-    return out
+    return _Runs(d, generate_files(sc, d, progress=False))
 
 
 @pytest.mark.slow
@@ -146,7 +161,7 @@ def test_a_loop_over_a_kept_scalar_run_gives_the_rows_of_its_own_run(runs):
     src = open_source(paths["if"])
     imu = read_imu(paths["imu"])
     truth = read_truth(paths["truth"])[0]
-    first, a = runs["kept"]["tight"]
+    first, a = runs.kept("tight")
     rec = first.scalar_record
     assert isinstance(rec, ScalarRecord) and first.deep_start is None
     # what `sdr-di run` gave the receiver (a record is taken with the navigation data it was
