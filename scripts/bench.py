@@ -212,20 +212,24 @@ print("RESULT", json.dumps({"profile": prof, "handover_s": res.result.handover_s
 
 def _run_mode(path: Path, out: Path, mode: str, filt: str) -> dict:
     """``sdr-di run --mode MODE`` (``run_deep``) in a fresh process: process wall and CPU
-    time, the receiver's profile, hand-over time, peak RSS."""
+    time, the CPU the host took from the VM meanwhile (``stolen_s``), the receiver's
+    profile, hand-over time, peak RSS."""
     import resource
 
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    st0 = stolen_s()
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", _MODE_CHILD, str(path), str(out), mode, filt],
                          check=False, capture_output=True, text=True, env=child_env())
     wall = time.perf_counter() - t0
+    stolen = stolen_between(st0)
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if res.returncode != 0:
         raise SystemExit(f"run --mode {mode} failed: {res.stderr.strip()}")
     line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
     r = json.loads(line[len("RESULT "):])
     r["process_wall_s"] = wall
+    r["stolen_s"] = stolen
     r["cpu_s"] = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     return r
 
@@ -259,7 +263,7 @@ def _bench_modes(files: list[Path], modes: tuple[str, ...], args: argparse.Names
                 print(f"{mode:>6} {d:6.1f} {wall:7.2f} {r['cpu_s']:6.1f} {d / wall:11.2f} "
                       f"{d / cpu:9.2f} {100 * p['scalar'] / tot:6.1f}% "
                       f"{100 * p['loop'] / tot:5.1f}% {lcpu} {tail} {r['handover_s']:11.2f} "
-                      f"{r['maxrss'] / 2**20:12.1f}")
+                      f"{r['maxrss'] / 2**20:12.1f}" + stolen_note(r))
                 b = best.setdefault(f, {})
                 if mode not in b or wall < b[mode]["wall"]:
                     b[mode] = {"wall": wall, "cpu": r["cpu_s"], "profile": p,
