@@ -59,3 +59,67 @@ def test_generator_writes_the_same_bytes_and_advises_every_one(tmp_path, monkeyp
     for a, b in calls:
         covered[a:b] = True
     assert covered.all() and max(b for _, b in calls) == len(data)
+
+
+# ---- uncached (O_DIRECT) reads --------------------------------------------------------------
+def _file_and_fd(tmp_path, size, seed=1):
+    from sdr_di.io.page_cache import open_uncached
+
+    data = np.random.default_rng(seed).integers(0, 256, size, dtype=np.uint8)
+    path = tmp_path / "u.bin"
+    path.write_bytes(data.tobytes())
+    fd = open_uncached(path)
+    if fd is None:
+        pytest.skip("no O_DIRECT on this file system")
+    return data, fd
+
+
+@pytest.mark.parametrize("aligned", [True, False])
+def test_uncached_reads_give_the_files_bytes(tmp_path, aligned):
+    """Any offset and length, across the bounce buffer's size and the file's unaligned end:
+    the file's bytes, and fewer only at its end."""
+    from sdr_di.io.page_cache import BOUNCE_BYTES, DIRECT_ALIGN, aligned_empty, pread_uncached
+
+    size = 3 * BOUNCE_BYTES + 1234
+    data, fd = _file_and_fd(tmp_path, size)
+    try:
+        for off in (0, 1, DIRECT_ALIGN - 1, DIRECT_ALIGN, 5000, BOUNCE_BYTES - 3, size - 10):
+            for n in (0, 1, DIRECT_ALIGN, 10_000, BOUNCE_BYTES + 5000, 2 * BOUNCE_BYTES):
+                out = aligned_empty(n, off) if aligned else aligned_empty(n + 1, off)[1:]
+                want = max(0, min(n, size - off))
+                got = pread_uncached(fd, out, off)
+                assert got == want, (off, n)
+                np.testing.assert_array_equal(out[:got], data[off:off + got])
+    finally:
+        os.close(fd)
+
+
+def test_uncached_read_into_an_aligned_array_goes_straight_into_it(tmp_path, monkeypatch):
+    """Only the unaligned head and tail (less than one block each) pass the bounce buffer
+    when the array is aligned with the file offset; all of it when it is not."""
+    from sdr_di.io import page_cache
+
+    data, fd = _file_and_fd(tmp_path, 1 << 20)
+    bounced = []
+    real = page_cache._pread_bounced
+
+    def spy(fd_, out, off):
+        bounced.append(out.size)
+        return real(fd_, out, off)
+
+    monkeypatch.setattr(page_cache, "_pread_bounced", spy)
+    try:
+        off, n = 1000, 600_000
+        out = page_cache.aligned_empty(n, off)
+        assert (out.ctypes.data - off) % page_cache.DIRECT_ALIGN == 0
+        assert page_cache.pread_uncached(fd, out, off) == n
+        np.testing.assert_array_equal(out, data[off:off + n])
+        assert 0 < sum(bounced) < 2 * page_cache.DIRECT_ALIGN
+        bounced.clear()
+        out = page_cache.aligned_empty(n + 1, off)[1:]           # one byte off the alignment
+        assert page_cache.pread_uncached(fd, out, off) == n
+        np.testing.assert_array_equal(out, data[off:off + n])
+        assert sum(bounced) == n
+    finally:
+        os.close(fd)
+

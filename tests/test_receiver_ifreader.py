@@ -516,3 +516,42 @@ print(len(block_sum_squares.signatures))
                          timeout=300)
     assert res.returncode == 0, res.stderr
     assert int(res.stdout.split()[-1]) >= 1
+
+
+@pytest.mark.parametrize("fmt", ["iq_int8", "iq_int16"])
+def test_read_ahead_reads_past_the_page_cache_or_falls_back(tmp_path, monkeypatch, fmt):
+    """The read-ahead's straight reads bypass the page cache where the file system allows
+    it (``uncached`` stays set), and fall back to reads through the cache, with the same
+    values, where the file cannot be opened so (``open_uncached`` None) or a read is
+    refused (``EINVAL``)."""
+    import errno
+
+    from sdr_di.io.page_cache import open_uncached
+    from sdr_di.receiver import ifreader
+
+    def chunks(src):
+        return [src.read_stored(s, 4000)[0] for s in range(0, 36_000, 3500)]
+
+    src, ref = _read_ahead_and_plain(tmp_path / "r.bin", fmt, 40_000, seed=8)
+    want = chunks(ref)
+    calls = []
+    real = ifreader.pread_uncached
+    with monkeypatch.context() as mp:
+        mp.setattr(ifreader, "pread_uncached", lambda *a: calls.append(1) or real(*a))
+        for got, exp in zip(chunks(src), want):
+            np.testing.assert_array_equal(got, exp)
+    fd = open_uncached(src.path)
+    if fd is not None:
+        os.close(fd)
+        assert calls and src.uncached           # used, and not silently dropped
+
+    def refused(*a):
+        raise OSError(errno.EINVAL, "Invalid argument")
+
+    for name, fake in (("open_uncached", lambda path: None), ("pread_uncached", refused)):
+        with monkeypatch.context() as mp:
+            mp.setattr(ifreader, name, fake)
+            src = IfSource(tmp_path / "r.bin", 25e6, 0.0, fmt, check_format=False)
+            for got, exp in zip(chunks(src), want):
+                np.testing.assert_array_equal(got, exp)
+            assert not src.uncached
