@@ -22,6 +22,14 @@ reading it from the cache), at 1.1 s of wall time (the read-ahead thread's). A f
 again later comes from the disk, not the cache; files shorter than the window keep every
 page. Advice only: no byte of any file changes, and it is skipped where the platform has no
 ``posix_fadvise`` or the file does not support it (a pipe).
+
+The IF reader's read-ahead goes further and reads past the cache altogether
+(:func:`open_uncached`, :func:`pread_uncached`: ``O_DIRECT``), straight into buffers whose
+address is aligned with the file offset (:func:`aligned_empty`); only the unaligned ends of a
+range pass a small per-thread bounce buffer. On the same VM that took 0.58 s of system time
+off a scalar run of the 40 s default file (1.07-1.26 s against 1.55-1.94 s, six interleaved
+pairs; the outputs are the same bytes). Where the platform or file system refuses it, the
+reader reads through the cache as above.
 """
 
 from __future__ import annotations

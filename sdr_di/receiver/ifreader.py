@@ -550,9 +550,9 @@ class IfSource:
         A straight read bypasses the page cache where the file system allows it
         (:attr:`uncached`; :func:`~sdr_di.io.page_cache.pread_uncached`: ``O_DIRECT``, the
         disk's data straight into ``out`` when its address is aligned with the file offset,
-        as :class:`_ReadAhead`'s buffers are). On the 2-core VM that took 0.55 s of system
-        time off a scalar run of the 40 s default file (1.12-1.19 s against 1.62-1.85 s,
-        four interleaved pairs). Where it is refused (tmpfs), it reads through the cache
+        as :class:`_ReadAhead`'s buffers are). On the 2-core VM that took 0.58 s of system
+        time off a scalar run of the 40 s default file (1.07-1.26 s against 1.55-1.94 s, six
+        interleaved pairs). Where it is refused, it reads through the cache
         (``os.preadv``) and the pages it leaves 64 MiB behind leave the cache
         (:func:`~sdr_di.io.page_cache.release_read_behind`): on the same VM a 2 GB file
         read from disk cost 4.4 s of system time into fresh cache pages, 0.3 s with them
