@@ -400,10 +400,11 @@ def test_read_stored_power_equals_mean_power_of_the_values(tmp_path, fmt, monkey
 
 def test_read_ahead_pieces_wait_for_split_calls_and_the_caller_reads_the_rest(tmp_path,
                                                                                monkeypatch):
-    """The read-ahead reads a piece at a time and only while no split kernel call runs
-    (receiver.threads.wait_for_split_calls): with a split call in progress and no timeout,
-    the caller that needs the values reads every piece itself, and gets the values and
-    block sums of a synchronous read; the background thread then finds nothing left."""
+    """Through the page cache, the read-ahead reads a piece at a time and only while no
+    split kernel call runs (receiver.threads.wait_for_split_calls): with a split call in
+    progress and no timeout, the caller that needs the values reads every piece itself, and
+    gets the values and block sums of a synchronous read; the background thread then finds
+    nothing left."""
     import threading
 
     from sdr_di.receiver import ifreader, threads
@@ -414,6 +415,7 @@ def test_read_ahead_pieces_wait_for_split_calls_and_the_caller_reads_the_rest(tm
     monkeypatch.setattr(ifreader, "_SPLIT_WAIT_S", 30.0)
     n = 6000
     src, ref = _read_ahead_and_plain(tmp_path / "w.bin", "iq_int8", n, seed=11)
+    src.uncached = False                         # (uncached reads are not held back)
     readers = []
     real = ifreader.IfSource._read_stored_into
 
@@ -454,6 +456,7 @@ def test_read_ahead_of_a_file_cut_short_falls_back_to_the_reads_error(tmp_path, 
     monkeypatch.setattr(ifreader, "_SPLIT_WAIT_S", 30.0)
     path = tmp_path / "cut.bin"
     src, _ = _read_ahead_and_plain(path, fmt, 20_000, seed=13)
+    src.uncached = False                         # held back: read through the cache
     threads._split_call(True)
     try:
         src.read_stored(0, 4000)
@@ -555,3 +558,40 @@ def test_read_ahead_reads_past_the_page_cache_or_falls_back(tmp_path, monkeypatc
             for got, exp in zip(chunks(src), want):
                 np.testing.assert_array_equal(got, exp)
             assert not src.uncached
+
+
+def test_uncached_read_ahead_is_not_held_back_by_split_calls(tmp_path, monkeypatch):
+    """Uncached reads cost next to no CPU: the read-ahead thread reads every piece while a
+    split kernel call runs, and the caller reads none itself."""
+    import threading
+
+    from sdr_di.io.page_cache import open_uncached
+    from sdr_di.receiver import ifreader, threads
+
+    monkeypatch.setattr(ifreader, "_POWER_BLOCK", 64)
+    monkeypatch.setattr(ifreader, "_PIECE_BLOCKS", 2)        # pieces of 64 samples
+    monkeypatch.setattr(ifreader, "_SPLIT_WAIT_S", 30.0)
+    src, ref = _read_ahead_and_plain(tmp_path / "w.bin", "iq_int8", 6000, seed=11)
+    fd = open_uncached(src.path)
+    if fd is None:
+        pytest.skip("no O_DIRECT on this file system")
+    os.close(fd)
+    readers = []
+    real = ifreader.IfSource._read_stored_into
+
+    def recording(self, out, s, m, c):
+        readers.append(threading.current_thread() is threading.main_thread())
+        return real(self, out, s, m, c)
+
+    monkeypatch.setattr(ifreader.IfSource, "_read_stored_into", recording)
+    threads._split_call(True)
+    try:
+        src.read_stored(0, 1000)                 # schedules [500, 2000)
+        ahead = src._ahead[2]
+        with ahead._cond:                        # the background thread reads them all
+            ahead._cond.wait_for(lambda: not ahead._left() and ahead._busy == 0, 30.0)
+        got, _ = src.read_stored(1000, 900)
+    finally:
+        threads._split_call(False)
+    np.testing.assert_array_equal(got, ref.read_stored(1000, 900)[0])
+    assert src.uncached and readers[:24] == [False] * 24
