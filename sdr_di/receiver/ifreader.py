@@ -716,11 +716,6 @@ class _ReadAhead:
     (:func:`~sdr_di.receiver.threads.wait_for_split_calls`, at most
     :data:`_SPLIT_WAIT_S` per piece): during one, both cores are busy with the calling
     thread and the kernel worker the caller waits for, and a read there delayed the worker.
-    An uncached read (:attr:`IfSource.uncached`) costs next to no CPU (the disk's data go
-    straight into the buffer) and is not held back: held back, it left the caller more
-    pieces to read itself at the disk's pace (its read stage 0.61-0.76 s per 40 s deep run,
-    against 0.36-0.38 s with reads through the cache, and 0.15-0.26 s not held back; three
-    interleaved sets, 2026-12-04).
     On the 2-core machine (40 s default file, deep run, interleaved runs, 2026-12-04) the
     main thread's waits on the kernel worker were 0.79-1.17 s per run with each chunk read
     at once, whenever asked, and 0.53-0.81 s with the pieces held back (0.38-0.70 s with the
@@ -729,6 +724,12 @@ class _ReadAhead:
     (:meth:`result`) reads the pieces not yet taken itself, so it waits for no more than the
     pieces being read, and nothing is starved when the kernels never stop (several
     receivers in threads of one process).
+
+    An uncached read (:attr:`IfSource.uncached`) costs next to no CPU (the disk's data go
+    straight into the buffer) and is not held back. Held back, it left the caller more
+    pieces to read itself, at the disk's pace: the deep loop's read stage took 0.61-0.76 s
+    per 40 s run, against 0.36-0.38 s with reads through the cache, and 0.15-0.26 s not
+    held back (three interleaved sets, 2026-12-04).
     """
 
     def __init__(self, src: IfSource, start: int, n: int, n_comp: int) -> None:
