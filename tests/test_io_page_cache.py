@@ -122,4 +122,3 @@ def test_uncached_read_into_an_aligned_array_goes_straight_into_it(tmp_path, mon
         assert sum(bounced) == n
     finally:
         os.close(fd)
-
