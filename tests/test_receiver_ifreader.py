@@ -398,24 +398,18 @@ def test_read_stored_power_equals_mean_power_of_the_values(tmp_path, fmt, monkey
     assert summed_ahead == (3 if get_format(fmt).name in ("iq_int8", "iq_int4") else 0)
 
 
-def test_read_ahead_pieces_wait_for_split_calls_and_the_caller_reads_the_rest(tmp_path,
-                                                                               monkeypatch):
-    """Through the page cache, the read-ahead reads a piece at a time and only while no
-    split kernel call runs (receiver.threads.wait_for_split_calls): with a split call in
-    progress and no timeout, the caller that needs the values reads every piece itself, and
-    gets the values and block sums of a synchronous read; the background thread then finds
-    nothing left."""
+def _small_pieces_with_readers(tmp_path, monkeypatch):
+    """A 6000-sample ``iq_int8`` file read with the read-ahead (``src``) and without
+    (``ref``), in pieces of 64 samples that wait up to 30 s for split calls, and the list
+    that records, per ``_read_stored_into`` call, whether the main thread made it."""
     import threading
 
-    from sdr_di.receiver import ifreader, threads
-    from sdr_di.receiver._numba_correlate_bits import mean_power
+    from sdr_di.receiver import ifreader
 
     monkeypatch.setattr(ifreader, "_POWER_BLOCK", 64)
     monkeypatch.setattr(ifreader, "_PIECE_BLOCKS", 2)        # pieces of 64 samples
     monkeypatch.setattr(ifreader, "_SPLIT_WAIT_S", 30.0)
-    n = 6000
-    src, ref = _read_ahead_and_plain(tmp_path / "w.bin", "iq_int8", n, seed=11)
-    src.uncached = False                         # (uncached reads are not held back)
+    src, ref = _read_ahead_and_plain(tmp_path / "w.bin", "iq_int8", 6000, seed=11)
     readers = []
     real = ifreader.IfSource._read_stored_into
 
@@ -424,6 +418,21 @@ def test_read_ahead_pieces_wait_for_split_calls_and_the_caller_reads_the_rest(tm
         return real(self, out, s, m, c)
 
     monkeypatch.setattr(ifreader.IfSource, "_read_stored_into", recording)
+    return src, ref, readers
+
+
+def test_read_ahead_pieces_wait_for_split_calls_and_the_caller_reads_the_rest(tmp_path,
+                                                                               monkeypatch):
+    """Through the page cache, the read-ahead reads a piece at a time and only while no
+    split kernel call runs (receiver.threads.wait_for_split_calls): with a split call in
+    progress and no timeout, the caller that needs the values reads every piece itself, and
+    gets the values and block sums of a synchronous read; the background thread then finds
+    nothing left."""
+    from sdr_di.receiver import threads
+    from sdr_di.receiver._numba_correlate_bits import mean_power
+
+    src, ref, readers = _small_pieces_with_readers(tmp_path, monkeypatch)
+    src.uncached = False                         # (uncached reads are not held back)
     threads._split_call(True)
     try:
         src.read_stored(0, 1000)                 # schedules [500, 2000)
@@ -563,27 +572,14 @@ def test_read_ahead_reads_past_the_page_cache_or_falls_back(tmp_path, monkeypatc
 def test_uncached_read_ahead_is_not_held_back_by_split_calls(tmp_path, monkeypatch):
     """Uncached reads cost next to no CPU: the read-ahead thread reads every piece while a
     split kernel call runs, and the caller reads none itself."""
-    import threading
-
     from sdr_di.io.page_cache import open_uncached
-    from sdr_di.receiver import ifreader, threads
+    from sdr_di.receiver import threads
 
-    monkeypatch.setattr(ifreader, "_POWER_BLOCK", 64)
-    monkeypatch.setattr(ifreader, "_PIECE_BLOCKS", 2)        # pieces of 64 samples
-    monkeypatch.setattr(ifreader, "_SPLIT_WAIT_S", 30.0)
-    src, ref = _read_ahead_and_plain(tmp_path / "w.bin", "iq_int8", 6000, seed=11)
+    src, ref, readers = _small_pieces_with_readers(tmp_path, monkeypatch)
     fd = open_uncached(src.path)
     if fd is None:
         pytest.skip("no O_DIRECT on this file system")
     os.close(fd)
-    readers = []
-    real = ifreader.IfSource._read_stored_into
-
-    def recording(self, out, s, m, c):
-        readers.append(threading.current_thread() is threading.main_thread())
-        return real(self, out, s, m, c)
-
-    monkeypatch.setattr(ifreader.IfSource, "_read_stored_into", recording)
     threads._split_call(True)
     try:
         src.read_stored(0, 1000)                 # schedules [500, 2000)
