@@ -170,28 +170,38 @@ def stolen_note(r: dict) -> str:
     return "" if st is None else f"; CPU the host took from the VM during the run: {st:.2f} s"
 
 
-def _run_receiver(path: Path, out: Path, search: str) -> dict:
-    """``run_scalar`` (what ``sdr-di run --mode scalar`` runs) in a fresh process: the
-    process wall time and peak RSS, the receiver's profile. ``search``: ``assisted`` (the
-    sidecar's satellites around their Doppler: ``sdr-di run``) or ``cold`` (all 63 PRNs over
-    +-5 kHz: ``sdr-di run --cold``)."""
+def run_result_child(code: str, argv: list[str], failed: str, env: dict | None = None,
+                     err_tail: int | None = None) -> tuple[dict, float, float | None, float]:
+    """``python -c code argv`` in a fresh process (:func:`child_env` unless ``env``): the
+    JSON of its ``RESULT`` line, its wall time [s], the CPU the host took from the VM
+    meanwhile (:func:`stolen_between`) and its user + system CPU time [s]. A failed child
+    ends the benchmark with ``failed: <its stderr>`` (the last ``err_tail`` characters)."""
     import resource
 
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     st0 = stolen_s()
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", _RUN_CHILD, str(path), str(out), search],
-                         check=False, capture_output=True, text=True, env=child_env())
+    res = subprocess.run([sys.executable, "-c", code, *argv], check=False, capture_output=True,
+                         text=True, env=child_env() if env is None else env)
     wall = time.perf_counter() - t0
     stolen = stolen_between(st0)
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if res.returncode != 0:
-        raise SystemExit(f"run failed: {res.stderr.strip()}")
+        err = res.stderr.strip()
+        raise SystemExit(f"{failed}: {err if err_tail is None else err[-err_tail:]}")
     line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
-    r = json.loads(line[len("RESULT "):])
-    r["process_wall_s"] = wall
-    r["stolen_s"] = stolen
-    r["cpu_s"] = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+    cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+    return json.loads(line[len("RESULT "):]), wall, stolen, cpu
+
+
+def _run_receiver(path: Path, out: Path, search: str) -> dict:
+    """``run_scalar`` (what ``sdr-di run --mode scalar`` runs) in a fresh process: the
+    process wall time and peak RSS, the receiver's profile. ``search``: ``assisted`` (the
+    sidecar's satellites around their Doppler: ``sdr-di run``) or ``cold`` (all 63 PRNs over
+    +-5 kHz: ``sdr-di run --cold``)."""
+    r, wall, stolen, cpu = run_result_child(
+        _RUN_CHILD, [str(path), str(out), search], "run failed")
+    r.update(process_wall_s=wall, stolen_s=stolen, cpu_s=cpu)
     return r
 
 
@@ -216,23 +226,9 @@ def _run_mode(path: Path, out: Path, mode: str, filt: str) -> dict:
     """``sdr-di run --mode MODE`` (``run_deep``) in a fresh process: process wall and CPU
     time, the CPU the host took from the VM meanwhile (``stolen_s``), the receiver's
     profile, hand-over time, peak RSS."""
-    import resource
-
-    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    st0 = stolen_s()
-    t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-c", _MODE_CHILD, str(path), str(out), mode, filt],
-                         check=False, capture_output=True, text=True, env=child_env())
-    wall = time.perf_counter() - t0
-    stolen = stolen_between(st0)
-    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if res.returncode != 0:
-        raise SystemExit(f"run --mode {mode} failed: {res.stderr.strip()}")
-    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
-    r = json.loads(line[len("RESULT "):])
-    r["process_wall_s"] = wall
-    r["stolen_s"] = stolen
-    r["cpu_s"] = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+    r, wall, stolen, cpu = run_result_child(
+        _MODE_CHILD, [str(path), str(out), mode, filt], f"run --mode {mode} failed")
+    r.update(process_wall_s=wall, stolen_s=stolen, cpu_s=cpu)
     return r
 
 

@@ -39,13 +39,10 @@ one interval ahead*) and closes with the best run of each.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -98,26 +95,14 @@ TARGET_RT = 3.0
 
 def _one(path: Path, out: Path, filt: str, rate: float, threads: int | None = None,
          latency: int = 0) -> dict:
-    import resource
+    from bench import child_env, run_result_child
 
-    from bench import child_env, stolen_between, stolen_s
-
-    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    st0 = stolen_s()
-    t0 = time.perf_counter()
     # SDR_DI_KERNEL_THREADS: receiver.threads.ENV_THREADS
     env = child_env({"SDR_DI_KERNEL_THREADS": str(threads)} if threads else None)
-    res = subprocess.run([sys.executable, "-c", _CHILD, str(path), str(out), filt, str(rate),
-                          str(latency)], check=False, capture_output=True, text=True, env=env)
-    wall = time.perf_counter() - t0
-    stolen = stolen_between(st0)
-    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if res.returncode != 0:
-        raise SystemExit(f"deep run failed: {res.stderr.strip()[-2000:]}")
-    d = json.loads(next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT"))[7:])
-    d["process_wall"] = wall
-    d["stolen_s"] = stolen
-    d["cpu_s"] = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
+    d, wall, stolen, cpu = run_result_child(
+        _CHILD, [str(path), str(out), filt, str(rate), str(latency)], "deep run failed",
+        env=env, err_tail=2000)
+    d.update(process_wall=wall, stolen_s=stolen, cpu_s=cpu)
     return d
 
 
