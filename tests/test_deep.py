@@ -363,12 +363,15 @@ def test_deep_ekf_position_is_unbiased(ekf_run):
 
 
 @pytest.mark.slow
-def test_deep_run_is_the_same_on_one_thread_and_split(gen26, tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("latency", ["0", "1"])
+def test_deep_run_is_the_same_on_one_thread_and_split(gen26, tmp_path, monkeypatch, capsys,
+                                                      latency):
     """The kernel calls split between the caller and the worker thread, with the channels
     of the caller's part (scalar start-up: their loops; vector loop: their pre-filters,
     with the filter's predict) worked on while the worker correlates the rest
     (receiver.threads notes), give the solution file of the run on one thread, byte for
-    byte."""
+    byte. With the NCOs one interval ahead the worker's part is also left running while
+    the caller commands the next interval (receiver.threads, *Calls left running*)."""
     from sdr_di.receiver.threads import ENV_THREADS, KernelThreads
 
     if KernelThreads().max_threads < 2:
@@ -378,7 +381,7 @@ def test_deep_run_is_the_same_on_one_thread_and_split(gen26, tmp_path, monkeypat
         monkeypatch.setenv(ENV_THREADS, threads)
         out = tmp_path / f"t{threads}"
         rc = main(["run", str(gen26 / "default.bin"), "--mode", "deep", "--no-progress",
-                   "--out", str(out)])
+                   "--nco-latency", latency, "--out", str(out)])
         assert rc == 0, capsys.readouterr().out
         csv[threads] = (out / "default_deep.csv").read_bytes()
     assert csv["1"] == csv["2"]

@@ -396,6 +396,85 @@ def test_split_call_holds_background_work_until_its_workers_end():
     assert wait_for_split_calls(0.0)        # released on failure too
 
 
+def _burn(seconds: float) -> None:
+    """Spend ``seconds`` of this thread's CPU time."""
+    import time
+
+    t = time.thread_time()
+    while time.thread_time() - t < seconds:
+        pass
+
+
+def test_detached_call_leaves_the_workers_part_running_until_waited():
+    """start_rows(detach=True) returns when the caller's part and `before` are done, the
+    worker's part still running (held here until released); the split call counts as
+    running until the worker ends, and wait() gives the thread count once its rows are
+    final (receiver.threads, *Calls left running*). A worker's exception is raised by
+    wait()."""
+    import threading
+
+    import numba
+
+    from sdr_di.receiver.threads import KernelThreads, wait_for_split_calls
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two numba threads")
+    me = threading.get_ident()
+    release = threading.Event()
+    done = np.zeros(10, bool)
+
+    def part(a, b):
+        if threading.get_ident() != me:
+            assert release.wait(30)
+        done[a:b] = True
+
+    rc = KernelThreads(2).start_rows(part, np.ones(10), before=lambda n: None, detach=True)
+    assert 0 < done.sum() < 10          # the caller's part only
+    assert not wait_for_split_calls(0.0)
+    release.set()
+    assert rc.wait() == 2 and rc.wait() == 2
+    assert done.all() and wait_for_split_calls(0.0)
+
+    def failing(a, b):
+        if threading.get_ident() != me:
+            raise RuntimeError("kernel failed")
+
+    rc = KernelThreads(2).start_rows(failing, np.ones(10), detach=True)
+    with pytest.raises(RuntimeError, match="kernel failed"):
+        rc.wait()
+    assert wait_for_split_calls(0.0)
+
+
+def test_detached_calls_give_the_worker_the_callers_work_between_them():
+    """Between detached calls the caller's CPU time (here 1 ms, the time of 10 of the 40
+    rows) shortens its next part (K - T_g) / 2, from 20 rows to about 15, so the worker's
+    part ends with it; a call that is not detached splits evenly again."""
+    import threading
+
+    import numba
+
+    from sdr_di.receiver.threads import KernelThreads
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("needs two numba threads")
+    me = threading.get_ident()
+    mine = []
+
+    def part(a, b):
+        if threading.get_ident() == me:
+            mine.append(b - a)
+        _burn(1e-4 * (b - a))           # 0.1 ms of CPU a row
+
+    kt = KernelThreads(2)
+    for _ in range(5):
+        rc = kt.start_rows(part, np.ones(40), detach=True)
+        _burn(1e-3)
+        rc.wait()
+    kt.run_rows(part, np.ones(40))
+    assert mine[0] == 20 and mine[-1] == 20
+    assert all(12 <= m <= 17 for m in mine[1:-1]), mine
+
+
 def test_thread_choice_is_made_per_call_size(monkeypatch):
     """KernelThreads keeps its costs per size class of the call: one thread measured cheaper
     on small calls (a worker's wake-up weighs on 1 ms blocks) does not decide the large

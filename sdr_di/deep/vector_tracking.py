@@ -257,8 +257,9 @@ class VectorTracking:
         if not self.load_samples(rows):
             return False
         pred = self._pred
-        epl = self.correlate(rows, before=None if work is None else (lambda done, epl: work()))
-        self._launched = (iv, rows, pred, epl)
+        epl, pending = self.correlate(
+            rows, before=None if work is None else (lambda done, epl: work()), detach=True)
+        self._launched = (iv, rows, pred, epl, pending)
         return True
 
     def measure_launched(self, loop: IntegrationLoop, iv: Interval) -> Measurements:
@@ -266,9 +267,12 @@ class VectorTracking:
         Each pre-filter is first moved by the NCO step at the interval's end, which the
         feedback of the filter's prediction to ``k1`` made while the interval was being
         correlated (:meth:`feed_back_ahead`), so that ``z`` refers to the corrected INS."""
-        iv_l, rows, pred, epl = self._launched
+        iv_l, rows, pred, epl, pending = self._launched
         if iv_l is not iv:
             raise RuntimeError("measure_launched: interval was not the one launched")
+        tw = time.perf_counter()
+        pending.wait()               # the kernel worker's part of the rows (correlate)
+        self.profile["correlate"] += time.perf_counter() - tw
         pf = _ChannelPass(self, iv, rows, pred)
         pf.run(rows.starts.size, epl)
         self._shift_end = None
@@ -333,7 +337,7 @@ class VectorTracking:
         self.profile["read"] += time.perf_counter() - tc
         return True
 
-    def correlate(self, rows: _EpochRows, before=None) -> np.ndarray:
+    def correlate(self, rows: _EpochRows, before=None, detach: bool = False):
         """Early, prompt, late of every epoch of every channel: one call of the receiver's
         kernel on the stored samples (bit-window replicas, one rotation row per epoch).
         The same call runs each epoch's noise correlator (its first ``NOISE_SAMPLES``
@@ -343,7 +347,10 @@ class VectorTracking:
         does). ``before(epochs_done, epl)``: work for this thread while the kernel's worker
         ends its part, when the rows of the first ``epochs_done`` epochs are final
         (:meth:`~sdr_di.receiver.threads.KernelThreads.run_rows`; its time is not counted
-        here)."""
+        here). ``detach``: return ``(epl, pending)`` as soon as this thread's part and
+        ``before`` are done, the kernel worker's part left running until ``pending.wait()``
+        (:meth:`~sdr_di.receiver.threads.KernelThreads.start_rows`: the NCOs one interval
+        ahead, :meth:`launch`)."""
         td = time.perf_counter()
         t_before = [0.0]
 
@@ -384,9 +391,13 @@ class VectorTracking:
                                dphi[a:b], rot_re, rot_im, rot_idx[a:b] - e0, spacing, 1,
                                out[a:b])
 
-        self.kthreads.run_rows(rows_ab, nsamp, None if before is None else timed_before)
+        pending = self.kthreads.start_rows(rows_ab, nsamp,
+                                           None if before is None else timed_before,
+                                           detach=detach)
+        if not detach:
+            pending.wait()
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
-        return epl
+        return (epl, pending) if detach else epl
 
     def prefilter(self, iv: Interval, c: _Chan, E, P, L, nsamp, epochs, noise) -> bool:
         """Channel ``c``'s epochs of the interval (NH wiped off; their sample counts and
@@ -498,7 +509,7 @@ class VectorTracking:
 
     def geometry_of(self, iv: Interval) -> None:
         """Lines of sight of launched interval ``iv`` for :meth:`restart_prefilters`."""
-        iv_l, _, pred, _ = self._launched
+        iv_l, _, pred, _, _ = self._launched
         self.meas_all.set_geometry(iv.nav1.llh, pred.U[:, 0])
 
     def feed_back_ahead(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
