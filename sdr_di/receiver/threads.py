@@ -388,8 +388,10 @@ class RowsCall:
         cpu = time.thread_time() - self.cpu0
         worker_cpu = []
         try:
-            futures_wait(self.futures)
             worker_cpu = [f.result() for f in self.futures]
+        except BaseException:
+            futures_wait(self.futures)      # the other parts end before the release below
+            raise
         finally:
             self._waited = self.threads
             # every part submitted has ended: release what a part never submitted holds
