@@ -279,7 +279,7 @@ class KernelThreads:
             call(0, n)
             if before is not None:
                 before(n)
-            rc = RowsCall(self, threads, cost, ns, t0, cpu0, [], 0.0, None)
+            rc = RowsCall(self, threads, cost, ns, cpu0, None)
         else:
             tot = max(float(ns.sum()), 1.0)
             # the caller's part: with `before` (T_b), the caller's work between detached
@@ -295,7 +295,7 @@ class KernelThreads:
             pool = _pool(threads - 1)
             parts = [(cuts[j], cuts[j + 1]) for j in range(1, threads)
                      if cuts[j + 1] > cuts[j]]
-            rc = RowsCall(self, threads, cost, ns, t0, cpu0, [], 0.0, len(parts) + 1)
+            rc = RowsCall(self, threads, cost, ns, cpu0, len(parts) + 1)
             _split_call(True)
             try:
                 rc.futures.extend(pool.submit(rc.worker_part, call, a, b) for a, b in parts)
@@ -348,12 +348,12 @@ class RowsCall:
     """
 
     def __init__(self, kt: KernelThreads, threads: int, costs: dict, nsamp: np.ndarray,
-                 t0: float, cpu0: float, futures: list, main_cpu: float,
-                 parts: int | None) -> None:
-        self.kt, self.threads, self.costs = kt, threads, costs
+                 cpu0: float, parts: int | None) -> None:
+        self.kt, self.threads, self.costs = kt, threads, costs   # costs: the size class's
         self.work = max(float(nsamp.sum()), 1.0)
-        self.t0, self.cpu0 = t0, cpu0
-        self.futures, self.main_cpu = futures, main_cpu
+        self.cpu0 = cpu0                 # the caller's thread time at the call's start [s]
+        self.futures: list = []
+        self.main_cpu = 0.0
         self.start_wall = 0.0
         self._parts = parts            # parts still running, the caller's counted (None: no split)
         self._lock = threading.Lock()
