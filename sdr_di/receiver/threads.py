@@ -33,7 +33,7 @@ the caller runs what must come between two calls. In the deep loop with the NCOs
 interval ahead that is the INS propagation and the NCO commands of the next interval (1.1
 ms of the 4.7 ms an interval took on the 2-core machine), and the main thread, not the
 kernel, bounded the run: over the 40 s default file it used 10.3 CPU-s of the 11.2 s wall
-(its own kernel parts included), the worker 4.6 CPU-s. :meth:`KernelThreads.start_rows`
+(its own kernel parts included), the worker 4.7 CPU-s. :meth:`KernelThreads.start_rows`
 with ``detach=True`` returns once the caller's part and ``before`` are done; the worker's
 part goes on while the caller prepares the next call, and the caller waits for it only
 where it needs the rows (:meth:`RowsCall.wait`). The caller's part is then shortened by its
