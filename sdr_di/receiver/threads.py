@@ -30,7 +30,7 @@ Calls left running
 ------------------
 :meth:`KernelThreads.run_rows` returns when every part is done, so the worker is idle while
 the caller runs what must come between two calls. In the deep loop with the NCOs one
-interval ahead that is the INS propagation and the NCO commands of the next interval (1.1
+interval ahead that is the INS propagation and the NCO commands of the next interval (0.9
 ms of the 4.7 ms an interval took on the 2-core machine), and the main thread, not the
 kernel, bounded the run: over the 40 s default file it used 10.3 CPU-s of the 11.2 s wall
 (its own kernel parts included), the worker 4.7 CPU-s. :meth:`KernelThreads.start_rows`
