@@ -43,7 +43,7 @@ from ..receiver.lock import NOISE_SAMPLES, PostCorrelationNoise, noise_code_phas
 from ..receiver.navdata import NavDataInForce
 from ..receiver.observables import ReceiverTime
 from ..receiver.scalar import ScalarReceiver
-from ..receiver.threads import KernelThreads
+from ..receiver.threads import KernelThreads, RowsCall
 from ..signal.codes import NH20, b3i_code
 from ._numba_epoch_rows import epoch_rows
 from .bit_power import BitPower
@@ -242,7 +242,7 @@ class VectorTracking:
             # correlates the rest (receiver.threads notes)
             loop.predict_filter(iv)
             pf.run(epochs_done, epl)
-        epl = self.correlate(rows, before=before)
+        epl, _ = self.correlate(rows, before=before)
         pf.run(rows.starts.size, epl)
         return pf.measurements()
 
@@ -337,18 +337,20 @@ class VectorTracking:
         self.profile["read"] += time.perf_counter() - tc
         return True
 
-    def correlate(self, rows: _EpochRows, before=None, detach: bool = False):
+    def correlate(self, rows: _EpochRows, before=None,
+                  detach: bool = False) -> tuple[np.ndarray, RowsCall]:
         """Early, prompt, late of every epoch of every channel: one call of the receiver's
         kernel on the stored samples (bit-window replicas, one rotation row per epoch).
         The same call runs each epoch's noise correlator (its first ``NOISE_SAMPLES``
         samples, far from the prompt's code phase: :mod:`~sdr_di.receiver.lock` notes).
-        Returns ``epl`` complex (2 n_epochs, 3): E, P, L of epoch ``e`` in row ``2 e``, of
-        its noise correlator in row ``2 e + 1`` (NH code not wiped off: :class:`_ChannelPass`
-        does). ``before(epochs_done, epl)``: work for this thread while the kernel's worker
-        ends its part, when the rows of the first ``epochs_done`` epochs are final
+        Returns ``(epl, pending)``: ``epl`` complex (2 n_epochs, 3), E, P, L of epoch ``e``
+        in row ``2 e``, of its noise correlator in row ``2 e + 1`` (NH code not wiped off:
+        :class:`_ChannelPass` does), and the kernel call (its rows final on return unless
+        ``detach``). ``before(epochs_done, epl)``: work for this thread while the kernel's
+        worker ends its part, when the rows of the first ``epochs_done`` epochs are final
         (:meth:`~sdr_di.receiver.threads.KernelThreads.run_rows`; its time is not counted
-        here). ``detach``: return ``(epl, pending)`` as soon as this thread's part and
-        ``before`` are done, the kernel worker's part left running until ``pending.wait()``
+        here). ``detach``: return as soon as this thread's part and ``before`` are done,
+        the kernel worker's part left running until ``pending.wait()``
         (:meth:`~sdr_di.receiver.threads.KernelThreads.start_rows`: the NCOs one interval
         ahead, :meth:`launch`)."""
         td = time.perf_counter()
@@ -397,7 +399,7 @@ class VectorTracking:
         if not detach:
             pending.wait()
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
-        return (epl, pending) if detach else epl
+        return epl, pending
 
     def prefilter(self, iv: Interval, c: _Chan, E, P, L, nsamp, epochs, noise) -> bool:
         """Channel ``c``'s epochs of the interval (NH wiped off; their sample counts and

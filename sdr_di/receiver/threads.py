@@ -100,9 +100,9 @@ def split_stats() -> dict:
     ``calls``, ``caller_cpu_s`` (the caller's part and its ``before`` work), ``worker_cpu_s``
     (the workers' parts) and ``wait_cpu_s``, the sum over calls of the slowest worker's CPU
     time beyond the caller's from the call's start to its wait (a detached call's includes
-    the caller's work between the calls): what the caller waits on idle cores. The main thread's CPU time
-    plus ``wait_cpu_s`` estimates a run's wall time on idle cores, whatever the load it was
-    measured under."""
+    the caller's work between the calls): what the caller waits on idle cores. The main
+    thread's CPU time plus ``wait_cpu_s`` estimates a run's wall time on idle cores, whatever
+    the load it was measured under."""
     return dict(_STATS)
 
 
