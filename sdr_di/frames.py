@@ -45,7 +45,6 @@ def ecef_to_llh(r_e) -> np.ndarray:
     lon = np.arctan2(y, x)
     p = np.hypot(x, y)
     lat = np.arctan2(z, p * (1.0 - E2_CGCS))
-    h = np.zeros_like(p)
     for _ in range(10):
         sl = np.sin(lat)
         N = A_CGCS / np.sqrt(1.0 - E2_CGCS * sl * sl)

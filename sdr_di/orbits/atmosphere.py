@@ -83,7 +83,8 @@ def klobuchar_delay(iono: Klobuchar, lat, lon, el, az, t_sow) -> np.ndarray:
     ndarray
         Slant delay [s] (>= 5 ns times the obliquity factor). Non-positive elevations give 0.
     """
-    lat, lon, el, az, t = np.broadcast_arrays(*(np.asarray(a, float) for a in (lat, lon, el, az, t_sow)))
+    # (the ufuncs broadcast: no np.broadcast_arrays, which cost a third of the call)
+    lat, lon, el, az, t = (np.asarray(a, float) for a in (lat, lon, el, az, t_sow))
     R, h = KLOBUCHAR_R_M, KLOBUCHAR_H_M
     el_c = np.maximum(el, 0.0)
     ratio = R / (R + h) * np.cos(el_c)
@@ -130,6 +131,7 @@ def saastamoinen_delay(lat, h, el, humidity: float = 0.5) -> np.ndarray:
     ndarray
         Slant delay [m] (hydrostatic + wet), same shape as the broadcast inputs.
     """
+    # broadcast first: numpy's power of an array and of one value may differ in the last bit
     lat, h, el = np.broadcast_arrays(*(np.asarray(a, float) for a in (lat, h, el)))
     hc = np.clip(h, 0.0, 11000.0)
     P = 1013.25 * (1.0 - 2.2557e-5 * hc) ** 5.2568          # hPa

@@ -68,7 +68,7 @@ def kepler_E(M: np.ndarray, e, tol: float = 1e-15, max_iter: int = 30) -> np.nda
     for _ in range(max_iter):
         dE = (E - e * np.sin(E) - M) / (1.0 - e * np.cos(E))
         E = np.where(active.reshape((-1,) + (1,) * (M.ndim - 1)), E - dE, E)
-        active &= ~np.all(np.abs(dE) < tol, axis=tuple(range(1, M.ndim)))
+        active &= ~(np.abs(dE) < tol).all(axis=tuple(range(1, M.ndim)))
         if not active.any():
             break
     return E
@@ -236,8 +236,10 @@ def sat_pos_vel_clock_stacked(stack: EphemerisStack, t_sow, week: int | None = N
     Xd = xp_dot * cO - yp_dot * ci * sO + yp * si * sO * ik_dot - Om_dot * Y
     Yd = xp_dot * sO + yp_dot * ci * cO - yp * si * cO * ik_dot + Om_dot * X
     Zd = yp_dot * si + yp * ci * ik_dot
-    r = np.stack([X, Y, Z], axis=-1)
-    v = np.stack([Xd, Yd, Zd], axis=-1)
+    r = np.empty(X.shape + (3,))        # filled in place: cheaper than np.stack
+    v = np.empty(X.shape + (3,))
+    r[..., 0], r[..., 1], r[..., 2] = X, Y, Z
+    v[..., 0], v[..., 1], v[..., 2] = Xd, Yd, Zd
 
     if s.geo.any():
         g = np.flatnonzero(s.geo)

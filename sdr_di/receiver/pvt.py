@@ -378,8 +378,10 @@ def satellite_states(obs: Observables, ephemerides: Mapping[int, Ephemeris] | An
 def _rot_z(vec: np.ndarray, theta: np.ndarray) -> np.ndarray:
     """Rows of ``vec`` (n, 3) times R_z(theta) = [[c, s, 0], [-s, c, 0], [0, 0, 1]]."""
     c, s = np.cos(theta), np.sin(theta)
-    return np.stack([c * vec[:, 0] + s * vec[:, 1], -s * vec[:, 0] + c * vec[:, 1], vec[:, 2]],
-                    axis=-1)
+    out = np.empty(vec.shape)       # filled in place: np.stack costs as much as the rotation
+    x, y = vec[:, 0], vec[:, 1]
+    out[:, 0], out[:, 1], out[:, 2] = c * x + s * y, -s * x + c * y, vec[:, 2]
+    return out
 
 
 def _drot_z(vec: np.ndarray, theta: np.ndarray) -> np.ndarray:
