@@ -20,6 +20,7 @@ from sdr_di.receiver.lock import (
     NOISE_MIN_LAG_CHIPS,
     PostCorrelationNoise,
     noise_code_phase,
+    noise_values,
 )
 from sdr_di.receiver.scalar import ScalarReceiver
 from sdr_di.receiver.tracking import ChannelState
@@ -190,3 +191,21 @@ def test_noise_sums_made_when_asked_equal_sums_after_every_add():
     assert lazy.per_sample() == eager.per_sample()
     held = eager._v[:eager.count]
     assert eager.per_sample() == float(np.sum(held)) / eager.count
+
+
+def test_noise_values_are_the_values_add_keeps():
+    """The deep loop's path (:func:`noise_values` of every channel's epochs at once, then
+    ``add_values``) keeps the values ``add`` keeps, bit for bit: a channel's short blocks
+    (plain Python), long ones (numpy) and sums of no sample left out."""
+    rng = np.random.default_rng(12)
+    by_add, by_values = PostCorrelationNoise(n_values=200), PostCorrelationNoise(n_values=200)
+    for m in (5, 20, 33, 80, 300):
+        e, p, l = (_cgauss(rng, m, 1024.0) for _ in range(3))
+        n = rng.integers(0, 1025, m)
+        n[::7] = 0
+        by_add.add(list(e), list(p), list(l), list(n))
+        ok = n > 0
+        by_values.add_values(noise_values(e[ok], p[ok], l[ok], n[ok]))
+        assert by_add.count == by_values.count
+        assert np.array_equal(by_add._v, by_values._v)
+        assert by_add.noise_power(0.9) == by_values.noise_power(0.9)

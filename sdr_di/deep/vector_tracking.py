@@ -39,7 +39,8 @@ from ..receiver.correlator import (
     reduce_code_phase,
 )
 from ..receiver.ifreader import IfSource
-from ..receiver.lock import NOISE_SAMPLES, PostCorrelationNoise, noise_code_phases
+from ..receiver.lock import (NOISE_SAMPLES, PostCorrelationNoise, noise_code_phases,
+                             noise_values)
 from ..receiver.navdata import NavDataInForce
 from ..receiver.observables import ReceiverTime
 from ..receiver.scalar import ScalarReceiver
@@ -403,14 +404,14 @@ class VectorTracking:
 
     def prefilter(self, iv: Interval, c: _Chan, E, P, L, nsamp, epochs, noise) -> bool:
         """Channel ``c``'s epochs of the interval (NH wiped off; their sample counts and
-        epoch numbers): its noise-correlator sums ``noise`` (E, P, L, samples: lists) to its
-        :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, C/N0 tests and navigation
-        decoding, pre-filter over its epochs (coherent blocks, module notes); returns the
-        measurement-vector gate (:meth:`_usable`)."""
+        epoch numbers): its noise-correlator values ``noise`` (:func:`~sdr_di.receiver.lock.
+        noise_values`) to its :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, C/N0
+        tests and navigation decoding, pre-filter over its epochs (coherent blocks, module
+        notes); returns the measurement-vector gate (:meth:`_usable`)."""
         cnt = nsamp.size
         if cnt:
             fs = self.fs
-            c.noise.add(*noise)
+            c.noise.add_values(noise)
             self._test_channel(c, P, nsamp, epochs, iv.k1 / fs)
             cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
             self.pre.process(c.idx, E, P, L, nsamp / fs, cn0_lin,
@@ -587,12 +588,15 @@ class _ChannelPass:
             j += 1
         if j > self.next:
             # the outputs of these channels' epochs at once, each channel then a slice: NH
-            # wiped off, noise sums as Python numbers (cheaper per value)
+            # wiped off, the noise correlators' values (epochs of no sample left out)
             ep, nz = epl[2 * a0:2 * a1:2], epl[2 * a0 + 1:2 * a1:2]
             nh = rows.nh[a0:a1]
             E, P, L = ep[:, 0] * nh, ep[:, 1] * nh, ep[:, 2] * nh
-            noise = (nz[:, 0].tolist(), nz[:, 1].tolist(), nz[:, 2].tolist(),
-                     np.minimum(rows.nsamp[a0:a1], NOISE_SAMPLES).tolist())
+            n_nz = np.minimum(rows.nsamp[a0:a1], NOISE_SAMPLES)
+            ok = n_nz > 0
+            every = bool(ok.all())
+            noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], n_nz if every else
+                                 np.where(ok, n_nz, 1))
             s = 0
             for k in range(self.next, j):
                 c, cnt = vt.chans[k], reps[k]
@@ -600,7 +604,7 @@ class _ChannelPass:
                 good = vt.prefilter(self.iv, c, E[sl], P[sl], L[sl],
                                     rows.nsamp[a0 + s:a0 + s + cnt],
                                     rows.epoch[a0 + s:a0 + s + cnt],
-                                    tuple(v[sl] for v in noise))
+                                    noise[sl] if every else noise[sl][ok[sl]])
                 self.use.append(good)
                 if good:
                     dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)

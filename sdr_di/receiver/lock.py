@@ -75,6 +75,7 @@ __all__ = [
     "m2m4_powers",
     "noise_code_phase",
     "noise_code_phases",
+    "noise_values",
     "prompt_signal_power",
 ]
 
@@ -248,6 +249,16 @@ def noise_code_phases(theta: np.ndarray, epoch: np.ndarray) -> np.ndarray:
     return np.where(t >= CODE_LENGTH_B3I, t - CODE_LENGTH_B3I, t)
 
 
+def noise_values(early, prompt, late, n_samples) -> np.ndarray:
+    """Noise power per sample of noise-correlator sums, ``(|E|^2 + |P|^2 + |L|^2) / (3 n)``
+    (complex arrays, ``n`` > 0 samples each) [stored units^2]: the values
+    :class:`PostCorrelationNoise` keeps (the same operations, in the same order, as its
+    :meth:`~PostCorrelationNoise.add` on a channel's block)."""
+    e, p, l = early, prompt, late
+    return (e.real ** 2 + e.imag ** 2 + p.real ** 2 + p.imag ** 2 + l.real ** 2
+            + l.imag ** 2) / (3.0 * np.asarray(n_samples, float))
+
+
 def _is_scalar(x) -> bool:
     """``np.ndim(x) == 0`` without converting a list to an array."""
     return x.ndim == 0 if isinstance(x, np.ndarray) else not hasattr(x, "__len__")
@@ -297,14 +308,15 @@ class PostCorrelationNoise:
                      + l.real * l.real + l.imag * l.imag) / (3.0 * n)
                     for e, p, l, n in zip(early, prompt, late, n_samples) if n > 0]
         else:
-            e = np.asarray(early, np.complex128)
-            p = np.asarray(prompt, np.complex128)
-            l = np.asarray(late, np.complex128)
             n = np.asarray(n_samples, float)
             ok = n > 0
-            e, p, l, n = e[ok], p[ok], l[ok], n[ok]
-            vals = (e.real ** 2 + e.imag ** 2 + p.real ** 2 + p.imag ** 2 + l.real ** 2
-                    + l.imag ** 2) / (3.0 * n)
+            vals = noise_values(*(np.asarray(a, np.complex128)[ok]
+                                  for a in (early, prompt, late)), n[ok])
+        self.add_values(vals)
+
+    def add_values(self, vals) -> None:
+        """Add noise powers per sample (:func:`noise_values` of sums of at least one
+        sample) [stored units^2]."""
         m = len(vals)
         if m == 0:
             return
