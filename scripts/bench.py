@@ -118,10 +118,11 @@ def _run_generate(duration: float, out: Path, extra: tuple[str, ...] = ()) -> tu
     """Run one generation in a child process (``extra``: more ``sdr-di generate`` options);
     return (wall s, peak RSS bytes of the child)."""
     code = (
-        "import resource, sys; from sdr_di.cli import main; "
+        "import resource, sys; from sdr_di.cli import exit_program, main; "
         f"rc = main(['generate', '--duration', '{duration}', '--out', r'{out}', "
         f"'--name', 'bench', '--no-progress'] + {list(extra)!r}); "
-        "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss); sys.exit(rc)"
+        "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss); "
+        "exit_program(rc)"
     )
     t0 = time.perf_counter()
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -157,6 +158,8 @@ print("RESULT", json.dumps({"profile": prof, "processed_s": res.processed_s,
       {"wall": wall, "cpu": s1[0] - s0[0], "runnable": s1[1] - s0[1]},
       "run_wall_s": res.wall_s, "cpu_main": time.thread_time(), "split": split_stats(),
       "maxrss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+from sdr_di.cli import exit_program   # the program's own exit (its teardown counted)
+exit_program(0)
 """
 
 #: Stages of ``ScalarReceiver.profile`` printed as shares of the receiver's wall time.
@@ -219,6 +222,8 @@ prof = {k: v for k, v in res.result.profile.items() if isinstance(v, (int, float
 print("RESULT", json.dumps({"profile": prof, "handover_s": res.result.handover_s,
       "cpu_main": time.thread_time() - c0, "split": split_stats(),
       "maxrss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}))
+from sdr_di.cli import exit_program
+exit_program(0)
 """
 
 

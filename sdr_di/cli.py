@@ -10,6 +10,7 @@ import argparse
 import re
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 from .errors import SdrDiError
 
@@ -926,5 +927,26 @@ def _quiet_after_interrupt() -> None:
     warnings.filterwarnings("ignore")
 
 
+def exit_program(status: int) -> NoReturn:
+    """End the process with ``status`` after :func:`main`: the console script, ``python -m
+    sdr_di.cli`` and the benchmarks' child processes end this way.
+
+    The objects still alive are first moved out of the garbage collector's reach
+    (:func:`gc.freeze`): the interpreter's teardown then frees them by reference counts
+    alone instead of searching numba's and LLVM's large object graphs for cycles, which
+    took 0.22 s of a 40 s deep run's wall time (0.03 s frozen, 2-core VM, 2026-12-04).
+    The outputs are written and closed before :func:`main` returns, so nothing waits on a
+    cycle's finalizer."""
+    import gc
+
+    gc.freeze()
+    sys.exit(status)
+
+
+def console_main() -> NoReturn:
+    """The ``sdr-di`` program: :func:`main` on the command line, then :func:`exit_program`."""
+    exit_program(main())
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    console_main()

@@ -149,6 +149,24 @@ def test_console_script_exit_status(tmp_path):
     assert res.returncode == 2 and res.stderr.count("\n") == 1 and "C99" in res.stderr
 
 
+def test_console_script_is_console_main_and_exits_frozen(tmp_path):
+    """The ``sdr-di`` script runs :func:`~sdr_di.cli.console_main`, which ends through
+    ``exit_program``: the status of ``main``, the objects frozen out of the garbage
+    collector before the interpreter's teardown (what saves its cycle search), and the
+    output flushed."""
+    import tomllib
+    from pathlib import Path
+
+    meta = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    assert meta["project"]["scripts"]["sdr-di"] == "sdr_di.cli:console_main"
+    code = ("import atexit, gc, sys; from sdr_di import cli; "
+            "atexit.register(lambda: print('frozen', gc.get_freeze_count() > 0)); "
+            "cli.main = lambda: (print('ran', sys.argv[1:]), 3)[1]; cli.console_main()")
+    res = subprocess.run([sys.executable, "-c", code, "x"], capture_output=True, text=True)
+    assert res.returncode == 3
+    assert res.stdout.split("\n")[:2] == ["ran ['x']", "frozen True"]
+
+
 @pytest.mark.slow
 def test_generated_message_switches_to_the_new_upload_and_the_receiver_takes_it(tmp_path):
     """A file across an upload (07:00 records on the air from 07:00:18): the message carries
