@@ -634,3 +634,33 @@ def test_compare_nco_latency_table_applies_the_stated_criterion():
         rows(lambda k, s: 0.88 + 0.002 * (s - 1.5) if k == "nees_pos" else 1.0), args)
     assert not ok and next(ln for ln in text.splitlines()
                            if ln.startswith("| NEES position")).endswith("FAIL |")
+
+
+def test_bit_power_is_the_same_with_integer_counts_and_equals_cn0_known_noise():
+    """The loop passes sample counts as int64 (their sums are exact either way) and
+    :meth:`BitPower.cn0_dbhz` skips :func:`cn0_known_noise`'s argument checks: the ring, the
+    carried bit and the estimates are those of float counts and of the checked function,
+    bit for bit."""
+    from sdr_di.receiver.lock import cn0_known_noise
+
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        a = BitPower(int(rng.integers(1, 12)))
+        b = BitPower(a.p.size)
+        bit_ms, e = int(rng.choice([2, 20])), int(rng.integers(0, 40))
+        for _ in range(int(rng.integers(1, 20))):
+            m = int(rng.integers(0, 45))
+            ep = e + np.arange(m)
+            e += m
+            p = (rng.normal(size=m) + 1j * rng.normal(size=m)) * 10 ** rng.uniform(-3, 5)
+            n = rng.integers(24000, 26000, size=m)
+            a.add(p, n.astype(float), ep % bit_ms == 0)
+            b.add(p, n, ep % bit_ms == 0)
+            assert (a.count, a.new, a._acc_p, a._acc_n) == (b.count, b.new, b._acc_p, b._acc_n)
+            assert np.array_equal(a.p, b.p) and np.array_equal(a.n, b.n)
+            for last in (None, 3, 1):
+                k = b.count if last is None else min(last, b.count)
+                got = b.cn0_dbhz(2.5, 25e6, last)
+                want = (cn0_known_noise(b.p[-k:], 2.5 * b.n[-k:], b.n[-k:] / 25e6) if k
+                        else math.nan)
+                assert got == want or (math.isnan(got) and math.isnan(want))

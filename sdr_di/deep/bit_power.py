@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from ..receiver.lock import cn0_known_noise
+from ..receiver.lock import cn0_of_sums
 
 __all__ = ["BitPower"]
 
@@ -82,6 +82,17 @@ class BitPower:
         self.count = min(self.count + m, self.p.size)
         self.new += m
 
+    def _push_one(self, p: complex, n: float) -> None:
+        """:meth:`_push` of one sum (the bit completed by the first edge of an
+        :meth:`add`), without making arrays of it."""
+        if self.p.size > 1:
+            self.p[:-1] = self.p[1:]
+            self.n[:-1] = self.n[1:]
+        self.p[-1] = p
+        self.n[-1] = n
+        self.count = min(self.count + 1, self.p.size)
+        self.new += 1
+
     def add(self, prompts: np.ndarray, n_samples: np.ndarray, bit_start: np.ndarray) -> None:
         """Add consecutive 1 ms prompts (data sign of NH already wiped off).
 
@@ -98,10 +109,12 @@ class BitPower:
         """
         self.new = 0
         p = np.asarray(prompts, np.complex128)
-        n = np.asarray(n_samples, float)
+        n = np.asarray(n_samples)
         if p.size == 0:
             return
-        idx = np.flatnonzero(np.asarray(bit_start, bool))
+        # sample counts are whole numbers: their sums are exact in int64 as in float64
+        n = n.astype(float) if n.dtype.kind not in "iu" else n
+        idx = np.asarray(bit_start, bool).nonzero()[0]
         if idx.size == 0:
             self._acc_p += complex(p.sum())
             self._acc_n += float(n.sum())
@@ -110,9 +123,13 @@ class BitPower:
         self._acc_p += complex(p[:head].sum())
         self._acc_n += float(n[:head].sum())
         if self._acc_n > 0.0:
-            self._push(np.array([self._acc_p]), np.array([self._acc_n]))
-        ps = np.add.reduceat(p, idx)
-        ns = np.add.reduceat(n, idx)
+            self._push_one(self._acc_p, self._acc_n)
+        ps = np.add.reduceat(p, idx)         # (not p[a:b].sum(): another order)
+        if idx.size == 1:        # one edge (the usual interval): the tail is the bit carried
+            self._acc_p = complex(ps[0])
+            self._acc_n = float(n[head:].sum())
+            return
+        ns = np.add.reduceat(n, idx).astype(float)
         self._push(ps[:-1], ns[:-1])
         self._acc_p = complex(ps[-1])
         self._acc_n = float(ns[-1])
@@ -133,4 +150,5 @@ class BitPower:
         if k <= 0 or not noise_power > 0.0:
             return math.nan
         n = self.n[-k:]
-        return cn0_known_noise(self.p[-k:], noise_power * n, n / fs)
+        # (cn0_known_noise less its argument checks: twice per channel and interval)
+        return cn0_of_sums(self.p[-k:], noise_power * n, n / fs)

@@ -229,23 +229,18 @@ class PreFilterBank:
         if block_start is not None:
             b = np.asarray(block_start, bool).copy()
             b[0] = True
-            idx = np.flatnonzero(b)
+            idx = b.nonzero()[0]
             if idx.size < t.size:
                 early, prompt, late = (np.add.reduceat(np.asarray(a), idx)
                                        for a in (early, prompt, late))
                 t = np.add.reduceat(t, idx)
         r_tau, r_phi = discriminator_variances(cn0_hz, t, self.spacing)
-        xi = self.x[i].copy()
-        Pi = self.P[i].copy()
-        Ci = self.C[i].copy()
-        nis = prefilter_epochs(xi, Pi, np.ascontiguousarray(early, np.complex128),
+        # the channel's rows of x, P, C are contiguous views: updated in place
+        nis = prefilter_epochs(self.x[i], self.P[i], np.ascontiguousarray(early, np.complex128),
                                np.ascontiguousarray(prompt, np.complex128),
                                np.ascontiguousarray(late, np.complex128), t, self.spacing,
                                self.beta, r_tau, r_phi, self.q_tau, self.q_phi, self.s_f,
-                               Ci, 0.0, self.q_phi_model, self.s_f_model)
-        self.x[i] = xi
-        self.P[i] = Pi
-        self.C[i] = Ci
+                               self.C[i], 0.0, self.q_phi_model, self.s_f_model)
         self.nis[i] = nis / (2.0 * t.size)
         self.nis_p[i] = float(gammaincc(t.size, 0.5 * nis))  # chi-square sf, 2 per block
 

@@ -71,6 +71,7 @@ __all__ = [
     "PostCorrelationNoise",
     "carrier_lock_metric",
     "cn0_known_noise",
+    "cn0_of_sums",
     "cn0_m2m4",
     "m2m4_powers",
     "noise_code_phase",
@@ -123,8 +124,16 @@ def cn0_known_noise(prompts: np.ndarray, noise_power, t_coh_s) -> float:
         nb = np.broadcast_to(nb, p.shape)
     if tb.shape != p.shape:
         tb = np.broadcast_to(tb, p.shape)
-    pd = float((p.real * p.real + p.imag * p.imag - nb).sum())
-    den = float((nb * tb).sum())
+    return cn0_of_sums(p, nb, tb)
+
+
+def cn0_of_sums(prompts: np.ndarray, noise_power: np.ndarray, t_coh_s: np.ndarray) -> float:
+    """:func:`cn0_known_noise` of prompt sums with per-sum noise powers and lengths, given
+    as arrays of the prompts' shape (no checks): ``10 log10(sum(|P_b|^2 - N_b) /
+    sum(N_b T_b))`` [dB-Hz], NaN when either sum is not positive."""
+    p = prompts
+    pd = float((p.real * p.real + p.imag * p.imag - noise_power).sum())
+    den = float((noise_power * t_coh_s).sum())
     if not (pd > 0.0 and den > 0.0):
         return math.nan
     return 10.0 * math.log10(pd / den)
@@ -339,7 +348,7 @@ class PostCorrelationNoise:
         were added (a channel adds every block and asks every lock evaluation)."""
         if self._dirty:
             held = self._v[:self.count]
-            self._s = float(np.sum(held))
+            self._s = float(held.sum())
             self._s2 = float(np.dot(held, held))
             self._dirty = False
         return self._s, self._s2
