@@ -104,3 +104,17 @@ def test_saastamoinen_height_and_mapping():
     # vectorized over all arguments
     out = saastamoinen_delay(np.full(4, LAT), np.array([0.0, 100.0, 1000.0, 5000.0]), np.pi / 4)
     assert out.shape == (4,) and np.all(np.diff(out) < 0)
+
+
+def test_saastamoinen_of_one_receiver_equals_the_broadcast_inputs():
+    """One receiver and several elevations (the range model's call) take the receiver's
+    terms on one-element arrays: each delay equals the one of fully broadcast inputs, bit
+    for bit (numpy's power of a 0-d value would not), and a 0-d elevation stays 0-d."""
+    rng = np.random.default_rng(4)
+    for _ in range(2000):
+        lat, h = rng.uniform(-1.5, 1.5), rng.uniform(-100.0, 12000.0)
+        el = rng.uniform(-0.2, 1.6, size=int(rng.integers(1, 16)))
+        got = saastamoinen_delay(lat, h, el)
+        want = saastamoinen_delay(np.full(el.size, lat), np.full(el.size, h), el)
+        assert got.shape == el.shape and np.array_equal(got, want)
+    assert saastamoinen_delay(0.5, 100.0, 0.7).shape == ()

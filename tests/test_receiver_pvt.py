@@ -533,3 +533,12 @@ def test_initial_guess_forms(world):
         pvt.solve(syn.obs_exact, world.eph, world.iono, x0=[1.0, 2.0])
     with pytest.raises(ValueError, match="weighting"):
         pvt.PvtConfig(weighting="snr")
+
+
+def test_range_norms_are_numpys_norm_bit_for_bit():
+    """``pvt._norms`` (the range model's row norms without ``np.linalg.norm``'s argument
+    handling) gives its values exactly, so the Sagnac iteration's ranges are unchanged."""
+    rng = np.random.default_rng(9)
+    for n in (1, 3, 7, 15):
+        d = rng.normal(size=(n, 3)) * 10 ** rng.uniform(0, 8, size=(n, 1))
+        assert np.array_equal(pvt._norms(d), np.linalg.norm(d, axis=-1))

@@ -131,8 +131,15 @@ def saastamoinen_delay(lat, h, el, humidity: float = 0.5) -> np.ndarray:
     ndarray
         Slant delay [m] (hydrostatic + wet), same shape as the broadcast inputs.
     """
-    # broadcast first: numpy's power of an array and of one value may differ in the last bit
-    lat, h, el = np.broadcast_arrays(*(np.asarray(a, float) for a in (lat, h, el)))
+    lat, h, el = (np.asarray(a, float) for a in (lat, h, el))
+    if lat.ndim == 0 and h.ndim == 0 and el.ndim > 0:
+        # one receiver, several satellites (the range model's every call): its terms on
+        # one-element arrays, as each element of the broadcast arrays gets them
+        lat, h = lat.reshape(1), h.reshape(1)
+    else:
+        # broadcast first: numpy's power of an array and of a 0-d value (scalar maths) may
+        # differ in the last bit
+        lat, h, el = np.broadcast_arrays(lat, h, el)
     hc = np.clip(h, 0.0, 11000.0)
     P = 1013.25 * (1.0 - 2.2557e-5 * hc) ** 5.2568          # hPa
     T = 15.0 - 6.5e-3 * hc + 273.15                          # K

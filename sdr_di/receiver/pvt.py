@@ -391,6 +391,12 @@ def _drot_z(vec: np.ndarray, theta: np.ndarray) -> np.ndarray:
                      np.zeros_like(c)], axis=-1)
 
 
+def _norms(d: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(d, axis=-1)`` of real rows, bit for bit (its own reduction),
+    without its argument handling (the deep loop predicts ranges every interval)."""
+    return np.sqrt(np.add.reduce(d * d, axis=-1))
+
+
 def sagnac_rotation(r_sat: np.ndarray, r_rx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rotated satellite positions, geometric ranges and rotation angles (travel time iterated).
 
@@ -398,14 +404,14 @@ def sagnac_rotation(r_sat: np.ndarray, r_rx: np.ndarray) -> tuple[np.ndarray, np
     positions in the ECEF frame of the reception instant (n, 3), the ranges (n,) [m] and the
     Earth-rotation angles (n,) [rad]. Also used forwards by the vector loop's NCO model.
     """
-    rho = np.linalg.norm(r_sat - r_rx, axis=-1)
+    rho = _norms(r_sat - r_rx)
     for _ in range(3):
         theta = OMEGA_E * rho / C_LIGHT
         r_rot = _rot_z(r_sat, theta)
-        rho = np.linalg.norm(r_rot - r_rx, axis=-1)
+        rho = _norms(r_rot - r_rx)
     theta = OMEGA_E * rho / C_LIGHT
     r_rot = _rot_z(r_sat, theta)
-    return r_rot, np.linalg.norm(r_rot - r_rx, axis=-1), theta
+    return r_rot, _norms(r_rot - r_rx), theta
 
 
 def atmosphere_delays(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
@@ -426,7 +432,9 @@ def atmosphere_delays(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
         ion = iono_delay_b3i_m(iono, llh[0], llh[1], el_pos, az, t_sow)
     else:
         ion = np.zeros_like(el)
-    return el, az, np.broadcast_to(tropo, el.shape), np.broadcast_to(ion, el.shape)
+    # (both have el's shape already for one receiver: the broadcast view only when not)
+    return el, az, *(a if a.shape == el.shape else np.broadcast_to(a, el.shape)
+                     for a in (tropo, ion))
 
 
 def _atmosphere_rate(r_rx: np.ndarray, v_rx: np.ndarray, r_sat_rot: np.ndarray,
