@@ -664,3 +664,21 @@ def test_bit_power_is_the_same_with_integer_counts_and_equals_cn0_known_noise():
                 want = (cn0_known_noise(b.p[-k:], 2.5 * b.n[-k:], b.n[-k:] / 25e6) if k
                         else math.nan)
                 assert got == want or (math.isnan(got) and math.isnan(want))
+
+
+def test_discriminator_variances_of_a_few_blocks_equal_the_array_form():
+    """An interval's one or two blocks take Python floats (the same IEEE operations):
+    their variances equal those of the numpy form, bit for bit, NaN and 1 Hz floor included."""
+    from sdr_di.deep.prefilter import _FEW_BLOCKS, discriminator_variances
+
+    rng = np.random.default_rng(8)
+    pad = np.full(_FEW_BLOCKS + 1, 0.01)            # enough blocks for the array form
+    for _ in range(3000):
+        cn0 = 10 ** rng.uniform(-1.0, 7.0) if rng.random() > 0.05 else float(
+            rng.choice([math.nan, math.inf, 0.0, -5.0]))
+        t = rng.uniform(1e-4, 0.03, size=int(rng.integers(1, _FEW_BLOCKS + 1)))
+        d = rng.uniform(0.05, 1.0)
+        few = discriminator_variances(cn0, t, d)
+        arr = discriminator_variances(cn0, np.r_[t, pad], d)
+        for a, b in zip(few, arr):
+            assert np.array_equal(a, b[:t.size], equal_nan=True)

@@ -110,10 +110,22 @@ def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I
     return s_f, 0.0
 
 
+#: Blocks up to which :func:`discriminator_variances` works on Python floats.
+_FEW_BLOCKS = 4
+
+
 def discriminator_variances(cn0_hz: float, t_epoch: np.ndarray, spacing: float
                             ) -> tuple[np.ndarray, np.ndarray]:
     """``(r_tau [chips^2], r_phi [rad^2])`` per epoch (module notes) at ``cn0_hz`` (linear)."""
-    snr = np.maximum(float(cn0_hz), 1.0) * np.asarray(t_epoch, float)
+    t = np.asarray(t_epoch, float)
+    c = max(float(cn0_hz), 1.0)                  # (NaN stays NaN, as np.maximum's)
+    if t.ndim == 1 and t.size <= _FEW_BLOCKS and not (t == 0.0).any():
+        # the loop's blocks (one or two per interval): the same IEEE operations on Python
+        # floats, without a dozen numpy calls on one-element arrays (bit for bit, tested)
+        snr = [c * v for v in t.tolist()]
+        return (np.array([spacing / (2.0 * s) * (1.0 + 1.0 / s) for s in snr]),
+                np.array([1.0 / (2.0 * s) * (1.0 + 1.0 / (2.0 * s)) for s in snr]))
+    snr = c * t
     r_tau = spacing / (2.0 * snr) * (1.0 + 1.0 / snr)
     r_phi = 1.0 / (2.0 * snr) * (1.0 + 1.0 / (2.0 * snr))
     return r_tau, r_phi

@@ -65,10 +65,12 @@ def kepler_E(M: np.ndarray, e, tol: float = 1e-15, max_iter: int = 30) -> np.nda
         return E
     # rows (records of a stack) converge separately: a row stops where it would alone
     active = np.ones(M.shape[0], bool)
+    rows = active.reshape((-1,) + (1,) * (M.ndim - 1))     # (a view: follows `active`)
+    inner = tuple(range(1, M.ndim))
     for _ in range(max_iter):
         dE = (E - e * np.sin(E) - M) / (1.0 - e * np.cos(E))
-        E = np.where(active.reshape((-1,) + (1,) * (M.ndim - 1)), E - dE, E)
-        active &= ~(np.abs(dE) < tol).all(axis=tuple(range(1, M.ndim)))
+        E = np.where(rows, E - dE, E)
+        active &= ~(np.abs(dE) < tol).all(axis=inner)
         if not active.any():
             break
     return E
