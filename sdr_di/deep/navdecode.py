@@ -128,7 +128,10 @@ class ChannelNavDecoder:
         if len(prompts) == 0:
             return
         bitno = (self.ms0 + np.asarray(epochs, np.int64)) // self.bit_ms
-        edges = np.flatnonzero(np.concatenate(([True], bitno[1:] != bitno[:-1])))
+        first = np.empty(bitno.size, bool)        # the first epoch of each bit
+        first[0] = True
+        np.not_equal(bitno[1:], bitno[:-1], out=first[1:])
+        edges = first.nonzero()[0]
         sums = np.add.reduceat(np.asarray(prompts, np.complex128), edges)
         for k, s in zip(bitno[edges].tolist(), sums.tolist()):
             if self._acc_bit is not None and k == self._acc_bit:
