@@ -486,3 +486,16 @@ def test_receiver_without_logs(tmp_path):
     assert rx.channels[sc.satellites.prns[0]].state == ChannelState.TRACK
     with pytest.raises(ValueError):
         rx.run(IfSource.from_sidecar(meta), epoch_interval_s=0.0)
+
+
+def test_lock_detector_means_are_numpys_mean_bit_for_bit():
+    """The lock detectors' means (``lock._mean``: the same reduction over the count, without
+    np.mean's Python layers) equal np.mean's values exactly, on windows of any length."""
+    from sdr_di.receiver.lock import _mean
+
+    rng = np.random.default_rng(12)
+    for n in (1, 2, 7, 8, 9, 100, 200, 1000, 1001):
+        for _ in range(50):
+            a = rng.normal(size=n) * 10 ** rng.uniform(-5, 8)
+            assert _mean(a) == float(np.mean(a))
+    assert math.isnan(_mean(np.zeros(0)))

@@ -81,14 +81,22 @@ __all__ = [
 ]
 
 
+def _mean(a: np.ndarray) -> float:
+    """``float(np.mean(a))`` of a float array, bit for bit (its reduction over all elements,
+    divided by their count), without np.mean's Python layers: the lock detectors take
+    several means of every channel's prompt window at each evaluation. NaN when empty."""
+    n = a.size
+    return float(np.add.reduce(a, axis=None)) / n if n else math.nan
+
+
 def m2m4_powers(prompts: np.ndarray) -> tuple[float, float]:
     """Signal and noise power ``(P_d, P_n)`` of complex prompts by the moments method.
 
     Returns ``(nan, M2)`` when the moments are inconsistent with a positive signal power.
     """
     p2 = (prompts.real * prompts.real + prompts.imag * prompts.imag)
-    m2 = float(np.mean(p2))
-    m4 = float(np.mean(p2 * p2))
+    m2 = _mean(p2)
+    m4 = _mean(p2 * p2)
     d = 2.0 * m2 * m2 - m4
     if not (d > 0.0 and m2 > 0.0):
         return math.nan, m2
@@ -100,7 +108,7 @@ def prompt_signal_power(prompts: np.ndarray, noise_power: float) -> float:
     """``M2 - P_n``: signal power of complex prompts whose noise power is known (may be
     negative for noise alone)."""
     p = np.asarray(prompts)
-    return float(np.mean(p.real * p.real + p.imag * p.imag)) - float(noise_power)
+    return _mean(p.real * p.real + p.imag * p.imag) - float(noise_power)
 
 
 def cn0_known_noise(prompts: np.ndarray, noise_power, t_coh_s) -> float:
@@ -180,13 +188,13 @@ def carrier_lock_metric(prompts: np.ndarray, signal_power: float | None = None) 
         return 0.0
     i2 = p.real * p.real
     q2 = p.imag * p.imag
-    nbd = float(np.mean(i2 - q2))
+    nbd = _mean(i2 - q2)
     if signal_power is None:
         signal_power, _ = m2m4_powers(p)
     if signal_power is not None and signal_power > 0.0:
         den = signal_power
     else:
-        den = float(np.mean(i2 + q2))
+        den = _mean(i2 + q2)
     if not den > 0.0:
         return 0.0
     return max(-1.0, min(1.0, nbd / den))
