@@ -244,6 +244,9 @@ class IfSource:
         self.uncached = True
         self._pool = None
         self._ahead: tuple | None = None
+        #: ``(first sample, stored values)`` of the last read, for the next read-ahead to
+        #: copy its first samples from (:meth:`_after_read`); dropped once used.
+        self._held: tuple | None = None
         # the end of the last read, and the overlaps the caller's last 8 reads asked for
         # again (samples): the read-ahead starts twice the largest before the end
         self._prev_end: int | None = None
@@ -460,10 +463,13 @@ class IfSource:
         thread reads the next ``n + b`` samples from ``b`` before this call's end, the
         range the receivers' sequential chunk reads ask for next: they re-read an overlap of
         up to two coherent blocks, and ``b`` is twice the largest overlap of the last 8 calls
-        (``n / 2`` at most, and before any overlap was seen): on the 40 s 25 MHz default
-        file the receivers ask for 1.12 times the file (chunks of 100 or 200 ms that
-        overlap by 10 ms) and the file is read 1.35 times (scalar and deep alike, measured
-        2026-12-04), rather than 1.5 times with ``b = n / 2``. A later call inside that
+        (``n / 2`` at most, and before any overlap was seen). The samples of that range the
+        last read already holds (its last ``b``, and the samples its read-ahead read past
+        the range asked for) are copied from its values before they are returned, and only
+        the rest is read from the file: on the 40 s 25 MHz default file the receivers ask
+        for 1.12 times the file (chunks of 100 or 200 ms that overlap by 10 ms); the file
+        was read 1.35 times with every read-ahead read whole (scalar and deep alike,
+        measured 2026-12-04) and 1.5 times with ``b = n / 2``. A later call inside that
         range is served from it, so the file read overlaps the caller's work (the read
         releases the GIL, as do the correlator kernels); any other call reads
         synchronously and drops it. The read-ahead goes a piece at a time, while no split
@@ -482,19 +488,30 @@ class IfSource:
         out = self._take_ahead(start_sample, n, n_comp)
         if out is None:
             out = self._read_stored_now(start_sample, n, n_comp)
+            self._held = (start_sample, out)
         self._after_read(start_sample, n, n_comp)
         return out, n_comp
 
     def _after_read(self, start_sample: int, n: int, n_comp: int) -> None:
-        """Schedule the read-ahead after a read of ``[start_sample, start_sample + n)``."""
+        """Schedule the read-ahead after a read of ``[start_sample, start_sample + n)``; the
+        values held from it (:attr:`_held`) that the read-ahead's range starts with are
+        copied in rather than read again (:meth:`read_stored` notes)."""
         end = start_sample + n
+        held, self._held = self._held, None
         if self._prev_end is not None and start_sample <= self._prev_end:
             self._overlaps.append(self._prev_end - start_sample)
         self._prev_end = end
         if self.read_ahead and n > 0 and end < self._n:
             back = min(n // 2, 2 * max(self._overlaps)) if self._overlaps else n // 2
             a0 = end - back
-            self._schedule_ahead(a0, min(n + back, self._n - a0), n_comp)
+            m = min(n + back, self._n - a0)
+            head = None
+            if held is not None:
+                h0, vals = held
+                h1 = min(h0 + vals.size // n_comp, a0 + m)
+                if h0 <= a0 < h1:
+                    head = vals[(a0 - h0) * n_comp:(h1 - h0) * n_comp]
+            self._schedule_ahead(a0, m, n_comp, head)
 
     def read_stored_power(self, start_sample: int, n: int) -> tuple[np.ndarray, int, float]:
         """:meth:`read_stored` and the mean power per sample of the values it returns
@@ -618,14 +635,20 @@ class IfSource:
             raise SampleFormatError(f"IF file {self.path}: short read at sample {start_sample}")
         return out
 
-    def _schedule_ahead(self, start_sample: int, n: int, n_comp: int) -> None:
+    def _schedule_ahead(self, start_sample: int, n: int, n_comp: int,
+                        head: np.ndarray | None = None) -> None:
         """Start reading ``[start_sample, start_sample + n)`` in the background
-        (:class:`_ReadAhead`)."""
+        (:class:`_ReadAhead`); ``head``, the stored values of its first samples, already
+        read, is copied in (here, before the caller can change them) instead."""
         if self._pool is None:
             from concurrent.futures import ThreadPoolExecutor
 
             self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="if-read-ahead")
         job = _ReadAhead(self, start_sample, n, n_comp)
+        if head is not None and 0 < head.size <= job.values.size \
+                and head.dtype == job.values.dtype and head.size % n_comp == 0:
+            job.values[:head.size] = head
+            job.copied = head.size // n_comp
         if job.sums is not None:
             _compile_here()
         self._pool.submit(job.run)
@@ -646,6 +669,7 @@ class IfSource:
             buf, sums = job.result()
         except Exception:  # noqa: BLE001 - read again in the caller's thread, which raises
             return None
+        self._held = (a0, buf)           # (the next read-ahead's head: _after_read)
         i = (start_sample - a0) * n_comp
         if with_power:
             return buf[i:i + n * n_comp], sums, i
@@ -655,6 +679,7 @@ class IfSource:
         st = dict(self.__dict__)
         st["_pool"] = None
         st["_ahead"] = None
+        st["_held"] = None
         return st
 
     def chunks(self, n_per_chunk: int, start: int = 0,
@@ -741,6 +766,7 @@ class _ReadAhead:
             if self.values.dtype == np.int8 else None
         step = _PIECE_BLOCKS * _POWER_BLOCK // n_comp          # samples per piece
         self.pieces = [(a, min(a + step, n)) for a in range(0, n, step)]
+        self.copied = 0                  # leading samples copied in, not to read
         self._next = 0                   # first piece not taken
         self._busy = 0                   # pieces being read
         self._stop = False
@@ -764,8 +790,10 @@ class _ReadAhead:
         try:
             a, b = self.pieces[i]
             v0, v1 = a * self.n_comp, b * self.n_comp
-            self.src._read_stored_into(self.values[v0:v1], self.start + a, b - a,
-                                       self.n_comp)
+            r0 = max(a, self.copied)
+            if r0 < b:
+                self.src._read_stored_into(self.values[r0 * self.n_comp:v1], self.start + r0,
+                                           b - r0, self.n_comp)
             if self.sums is not None:    # v0 is a multiple of the block
                 block_sum_squares(self.values[v0:v1], _POWER_BLOCK,
                                   self.sums[v0 // _POWER_BLOCK:-(-v1 // _POWER_BLOCK)])
