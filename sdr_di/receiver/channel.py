@@ -384,7 +384,7 @@ class Channel:
         self.epoch += 1
 
     # -- per-epoch processing ---------------------------------------------------------------
-    def process_block(self, outs) -> None:
+    def process_block(self, outs, noise: np.ndarray | None = None) -> None:
         """Consume the E/P/L correlations of every epoch of :attr:`block` and plan the next.
 
         Parameters
@@ -392,12 +392,19 @@ class Channel:
         outs : sequence
             One ``(E, P, L)`` (complex) per row of :attr:`block`, or one per epoch (no
             noise-correlator values).
+        noise : numpy.ndarray, optional
+            With one triple per row: the noise rows' values, :func:`~sdr_di.receiver.lock.
+            noise_values` of their sums and sample counts (the scalar bank makes them for
+            several channels at once), instead of making them here from ``outs``.
         """
         m = self.n_block_epochs
         if len(outs) == 2 * m:
-            nz = outs[1::2]
-            self.noise.add([o[0] for o in nz], [o[1] for o in nz], [o[2] for o in nz],
-                           [r[1] for r in self.block[1::2]])
+            if noise is not None:
+                self.noise.add_values(noise)
+            else:
+                nz = outs[1::2]
+                self.noise.add([o[0] for o in nz], [o[1] for o in nz], [o[2] for o in nz],
+                               [r[1] for r in self.block[1::2]])
             outs = outs[0::2]
         self._frozen = False
         for i in range(m):

@@ -104,6 +104,7 @@ from .correlator import (
     padded_replicas,
 )
 from .ifreader import IfSource
+from .lock import noise_values
 from .threads import KernelThreads
 from .tracking import ChannelObservation, ChannelState, TrackingConfig, TrackingLog
 
@@ -143,13 +144,16 @@ class _Bank:
             self.rot_dphi[s] = d
 
     def correlate(self, x: np.ndarray, n_comp: int, buf0: int, slots: tuple[int, ...],
-                  chans: list, ready: Callable[[int, list], None]) -> None:
+                  chans: list, ready: Callable[[int, list, np.ndarray | None], None]) -> None:
         """Correlate every row of the channels' blocks on the stored samples ``x``
         (:meth:`~sdr_di.receiver.ifreader.IfSource.read_stored`, first sample ``buf0``);
-        ``ready(j, outs)`` gets channel ``j``'s list of ``(E, P, L)`` complex triples as
-        soon as its rows are final, the channels in order: those of the kernel call's
+        ``ready(j, outs, noise)`` gets channel ``j``'s list of ``(E, P, L)`` complex triples
+        as soon as its rows are final, the channels in order: those of the kernel call's
         leading part while its worker correlates the rest (:meth:`~sdr_di.receiver.threads.
-        KernelThreads.run_rows`), then the others."""
+        KernelThreads.run_rows`), then the others. ``noise``: the values of its noise rows
+        (every other row: :meth:`~sdr_di.receiver.channel.Channel.process_block`), made for
+        the channels of a part in one numpy pass (:func:`~sdr_di.receiver.lock.
+        noise_values`); None when a channel's block is not in pairs."""
         params: list[tuple] = []
         reps = []
         for c in chans:
@@ -172,6 +176,7 @@ class _Bank:
 
         ends = np.cumsum(reps).tolist()
         taken = [0]                       # channels given to `ready`
+        paired = all(r % 2 == 0 for r in reps)     # (epoch row, noise row) pairs
 
         def take(rows_done: int) -> None:
             j0 = j1 = taken[0]
@@ -179,12 +184,18 @@ class _Bank:
                 j1 += 1
             if j1 == j0:
                 return
-            a0 = ends[j0 - 1] if j0 else 0
+            a0, a1 = (ends[j0 - 1] if j0 else 0), ends[j1 - 1]
             # (re, im) pairs are contiguous: a complex128 view gives Python complex E, P, L
-            o = out[a0:ends[j1 - 1]].view(np.complex128).reshape(-1, 3).tolist()
+            seg = out[a0:a1].view(np.complex128).reshape(-1, 3)
+            o = seg.tolist()
+            noise = None
+            if paired:       # (every noise row holds at least one sample: Channel._plan)
+                nz = seg[1::2]
+                noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], nsamp[a0 + 1:a1:2])
             for j in range(j0, j1):
                 a = (ends[j - 1] if j else 0) - a0
-                ready(j, o[a:a + reps[j]])
+                ready(j, o[a:a + reps[j]],
+                      None if noise is None else noise[a // 2:(a + reps[j]) // 2])
             taken[0] = j1
 
         self.threads.run_rows(rows_ab, nsamp, take)
@@ -584,11 +595,11 @@ class ScalarReceiver:
             slots = tuple(slot_of[id(c)] for c in batch)
             t_ch = [0.0]
 
-            def ready(j: int, outs: list, batch=batch, t_ch=t_ch) -> None:
+            def ready(j: int, outs: list, noise, batch=batch, t_ch=t_ch) -> None:
                 # a channel's block needs only its own rows: the channels of the kernel's
                 # leading part are processed while its worker correlates the others
                 tc = time.perf_counter()
-                batch[j].process_block(outs)
+                batch[j].process_block(outs, noise)
                 t_ch[0] += time.perf_counter() - tc
 
             bank.correlate(x, n_comp, buf0, slots, batch, ready)
