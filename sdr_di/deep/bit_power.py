@@ -112,8 +112,9 @@ class BitPower:
         n = np.asarray(n_samples)
         if p.size == 0:
             return
-        # sample counts are whole numbers: their sums are exact in int64 as in float64
-        n = n.astype(float) if n.dtype.kind not in "iu" else n
+        if n.dtype.kind not in "iu":
+            # (sample counts are whole numbers: their sums are exact in int64 as in float64)
+            n = np.asarray(n, float)
         idx = np.asarray(bit_start, bool).nonzero()[0]
         if idx.size == 0:
             self._acc_p += complex(p.sum())
