@@ -455,7 +455,7 @@ def _scalar_companions(args: argparse.Namespace, source):
     """Scalar mode's assistance navigation data (``--ephemeris``, else the sidecar's
     ``ephemeris_file``; None with ``--no-assist``) and reference file (``--truth``, else the
     sidecar's ``truth_file``), as the integrated modes find them."""
-    from .integration.run_integrated import companion_files
+    from .io.sidecar import companion_files
     from .orbits.rinex_nav import load_nav
 
     comp = companion_files(source, skip=("imu",) + (("truth",) if args.truth else ()))
@@ -533,7 +533,7 @@ def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
     _probe_filter(cfg.filter, cfg.filter_options, 1.0 / cfg.filter_rate_hz)
     if args.filter_rate is None:
         return
-    from .integration.run_integrated import companion_files
+    from .io.sidecar import companion_files
     from .io.imu_files import read_imu
 
     imu_path = args.imu or companion_files(source, skip=("truth",))["imu"]

@@ -50,6 +50,7 @@ from ..errors import ImuDataError
 from ..integration.assumptions import deep_beliefs, sidecar_truth
 from ..integration.consistency import SD_COLUMNS
 from ..io.atomic import atomic_open, ensure_output_dir
+from ..io.sidecar import companion_files
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
 from ..receiver.run_scalar import search_assistance
@@ -79,31 +80,6 @@ class DeepRunSummary:
     iono_from_s: float | None = None
     #: ``metrics`` over the rows from ``iono_from_s`` on (None when it is None)
     metrics_after_iono: dict | None = None
-
-
-def companion_files(source: IfSource, skip: tuple[str, ...] = ()) -> dict:
-    """``{"imu", "truth", "ephemeris"}`` paths named by the IF file's sidecar (None if absent).
-
-    The sidecar is the one the source was opened from (else ``X.json`` beside ``X.bin``); the
-    IMU and truth files are checked against the sizes and digests it records
-    (:func:`~sdr_di.io.sidecar.check_member`: a mixed set raises ``FileSetError``), except
-    those named in ``skip`` (replaced by the caller's own files).
-    """
-    from ..io.sidecar import check_member, member_path, read_sidecar
-
-    out = {"imu": None, "truth": None, "ephemeris": None}
-    sidecar = getattr(source, "sidecar_path", None)
-    meta = source.meta if sidecar is not None else None
-    if meta is None:
-        sidecar = source.path.with_suffix(".json")
-        if not sidecar.exists():
-            return out
-        meta = read_sidecar(sidecar)
-    for key in ("imu", "truth"):
-        if key not in skip:
-            out[key] = check_member(sidecar, meta, f"{key}_file")
-    out["ephemeris"] = member_path(sidecar, meta, "ephemeris_file")
-    return out
 
 
 def iono_in_force(res: IntegrationResult) -> np.ndarray:

@@ -212,6 +212,31 @@ _CHECKS: tuple[tuple[str, bool, Any, str], ...] = (
 _NULLABLE = frozenset({"imu_file", "truth_file", "ephemeris_file", "files"})
 
 
+def companion_files(source, skip: tuple[str, ...] = ()) -> dict:
+    """``{"imu", "truth", "ephemeris"}`` paths named by an IF file's sidecar (None if absent).
+
+    ``source``: the :class:`~sdr_di.receiver.ifreader.IfSource` of the IF file. The sidecar is
+    the one it was opened from (else ``X.json`` beside ``X.bin``); the IMU and truth files are
+    checked against the sizes and digests it records (:func:`check_member`: a mixed set
+    raises ``FileSetError``), except those named in ``skip`` (replaced by the caller's own
+    files). (Here rather than with the integrated run, which re-exports it: the scalar run
+    needs it too, without importing the integration package.)
+    """
+    out = {"imu": None, "truth": None, "ephemeris": None}
+    sidecar = getattr(source, "sidecar_path", None)
+    meta = source.meta if sidecar is not None else None
+    if meta is None:
+        sidecar = source.path.with_suffix(".json")
+        if not sidecar.exists():
+            return out
+        meta = read_sidecar(sidecar)
+    for key in ("imu", "truth"):
+        if key not in skip:
+            out[key] = check_member(sidecar, meta, f"{key}_file")
+    out["ephemeris"] = member_path(sidecar, meta, "ephemeris_file")
+    return out
+
+
 def read_sidecar(path: str | Path) -> dict[str, Any]:
     """Read and check a sidecar.
 
