@@ -386,7 +386,7 @@ def test_read_ahead_copies_what_it_reuses_before_the_caller_owns_it(tmp_path, fm
     while s + n <= 60_000:
         got, _ = src.read_stored(s, n)
         np.testing.assert_array_equal(got, ref.read_stored(s, n)[0])
-        got[:] = 1                               # the caller's array, its to change
+        got[:] = 1                               # (the caller's own array to change)
         s += n - ov
     assert src._ahead is not None and src._ahead[2].copied > 0
 
