@@ -196,8 +196,7 @@ def test_noise_sums_made_when_asked_equal_sums_after_every_add():
 def test_noise_values_are_the_values_add_keeps():
     """The deep loop's and the scalar bank's path (:func:`noise_values` of several channels'
     epochs at once, then ``add_values``) keeps the values ``add`` keeps, bit for bit: a
-    channel's short blocks (plain Python), long ones (numpy) and sums of no sample left
-    out."""
+    channel's short blocks, long ones and sums of no sample left out."""
     rng = np.random.default_rng(12)
     by_add, by_values = PostCorrelationNoise(n_values=200), PostCorrelationNoise(n_values=200)
     for m in (5, 20, 33, 80, 300):

@@ -320,16 +320,12 @@ class PostCorrelationNoise:
             early, prompt, late, n_samples = (early,), (prompt,), (late,), (n_samples,)
         elif _is_scalar(n_samples):
             n_samples = [n_samples] * len(prompt)
-        if len(prompt) <= 32:     # a channel's block: plain Python is cheaper than numpy
-            vals = [(e.real * e.real + e.imag * e.imag + p.real * p.real + p.imag * p.imag
-                     + l.real * l.real + l.imag * l.imag) / (3.0 * n)
-                    for e, p, l, n in zip(early, prompt, late, n_samples) if n > 0]
-        else:
-            n = np.asarray(n_samples, float)
-            ok = n > 0
-            vals = noise_values(*(np.asarray(a, np.complex128)[ok]
-                                  for a in (early, prompt, late)), n[ok])
-        self.add_values(vals)
+        # (the receivers' channels pass noise_values of several channels at once to
+        # add_values; this form is for sums given one channel's block at a time)
+        n = np.asarray(n_samples, float)
+        ok = n > 0
+        self.add_values(noise_values(*(np.asarray(a, np.complex128)[ok]
+                                       for a in (early, prompt, late)), n[ok]))
 
     def add_values(self, vals) -> None:
         """Add noise powers per sample (:func:`noise_values` of sums of at least one
