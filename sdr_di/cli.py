@@ -14,6 +14,10 @@ from typing import NoReturn
 
 from .errors import SdrDiError
 
+#: ``integration.config.DEEP_MEASUREMENTS`` without importing the integration package at
+#: start-up (a scalar run does not need it); tests/test_deep_measurements.py keeps them equal
+_DEEP_MEASUREMENTS = ("prefilter", "reset", "discriminator")
+
 
 class UsageError(SdrDiError):
     """Command-line options that do not fit together (one-line message, exit 2)."""
@@ -338,6 +342,15 @@ def _add_run(sub) -> None:
                    help="deep: filter intervals between an update and the NCO commands that "
                    "first use it, beyond the next (default 0; 1: the next interval is "
                    "correlated while the filter updates, on a second core: docs/deep.md)")
+    g.add_argument("--deep-measurements", choices=_DEEP_MEASUREMENTS, default=None,
+                   help="deep: what each channel hands the integration filter: 'prefilter' "
+                   "(default, paper 004's cascaded pre-filters), 'reset' (pre-filters "
+                   "restarted from an uninformative prior every interval) or "
+                   "'discriminator' (the interval's discriminator outputs; docs/deep.md)")
+    g.add_argument("--fusion-rate", type=float, default=None, metavar="HZ",
+                   help="deep, --deep-measurements reset: rate of the filter's updates with "
+                   "the pre-filters' outputs, each followed by their information reset; the "
+                   "filter rate divided by a whole number (default 5; docs/deep.md)")
     g.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
                    help="what the integration filter believes: IMU spec, oscillator, R, P0, "
                    "initial errors (docs/assumptions.md)")
@@ -366,6 +379,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise UsageError("--gnss-rate: only with --mode loose or tight")
     if args.nco_latency is not None and args.mode != "deep":
         raise UsageError("--nco-latency: only with --mode deep")
+    for opt in ("deep_measurements", "fusion_rate"):
+        if getattr(args, opt) is not None and args.mode != "deep":
+            raise UsageError(f"--{opt.replace('_', '-')}: only with --mode deep")
     if args.approx_pos is not None and (args.mode != "scalar" or args.ephemeris is None):
         raise UsageError("--approx-pos: only in scalar mode, with --ephemeris")
     _check_run_options(args)
@@ -575,6 +591,10 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
         kw["iono_wait_s"] = args.iono_wait
     if args.nco_latency is not None:
         kw["nco_latency"] = args.nco_latency
+    if args.deep_measurements is not None:
+        kw["deep_measurements"] = args.deep_measurements
+    if args.fusion_rate is not None:
+        kw["fusion_rate_hz"] = args.fusion_rate
     try:
         cfg = IntegrationConfig(**kw)
     except ValueError as exc:

@@ -91,7 +91,8 @@ from ..constants import C_LIGHT, CHIP_RATE_B3I, F_B3I
 from ..ins.imu import ImuErrorModel
 from ._numba_prefilter import prefilter_epochs
 
-__all__ = ["PreFilterBank", "discriminator_variances", "model_process_noise"]
+__all__ = ["PreFilterBank", "ResetPreFilterBank", "coherent_blocks", "discriminator_variances",
+           "model_process_noise"]
 
 
 def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I
@@ -112,6 +113,25 @@ def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I
 
 #: Blocks up to which :func:`discriminator_variances` works on Python floats.
 _FEW_BLOCKS = 4
+
+
+def coherent_blocks(early, prompt, late, t_epoch: np.ndarray, block_start=None):
+    """Correlator sums and durations of the coherent blocks of one channel's epochs.
+
+    ``block_start`` (bool per epoch, or None: every epoch its own block) marks the epochs
+    that start a block; the first epoch always does. Returns ``(early, prompt, late, t)``
+    summed over each block (the inputs themselves when every epoch starts one).
+    """
+    t = t_epoch
+    if block_start is not None:
+        b = np.asarray(block_start, bool).copy()
+        b[0] = True
+        idx = b.nonzero()[0]
+        if idx.size < t.size:
+            early, prompt, late = (np.add.reduceat(np.asarray(a), idx)
+                                   for a in (early, prompt, late))
+            t = np.add.reduceat(t, idx)
+    return early, prompt, late, t
 
 
 def discriminator_variances(cn0_hz: float, t_epoch: np.ndarray, spacing: float
@@ -238,14 +258,7 @@ class PreFilterBank:
         t = np.ascontiguousarray(t_epoch, dtype=np.float64)
         if t.size == 0:
             return
-        if block_start is not None:
-            b = np.asarray(block_start, bool).copy()
-            b[0] = True
-            idx = b.nonzero()[0]
-            if idx.size < t.size:
-                early, prompt, late = (np.add.reduceat(np.asarray(a), idx)
-                                       for a in (early, prompt, late))
-                t = np.add.reduceat(t, idx)
+        early, prompt, late, t = coherent_blocks(early, prompt, late, t, block_start)
         r_tau, r_phi = discriminator_variances(cn0_hz, t, self.spacing)
         # the channel's rows of x, P, C are contiguous views: updated in place
         nis = prefilter_epochs(self.x[i], self.P[i], np.ascontiguousarray(early, np.complex128),
@@ -253,11 +266,108 @@ class PreFilterBank:
                                np.ascontiguousarray(late, np.complex128), t, self.spacing,
                                self.beta, r_tau, r_phi, self.q_tau, self.q_phi, self.s_f,
                                self.C[i], 0.0, self.q_phi_model, self.s_f_model)
-        self.nis[i] = nis / (2.0 * t.size)
-        self.nis_p[i] = float(gammaincc(t.size, 0.5 * nis))  # chi-square sf, 2 per block
+        self._set_nis(i, nis, t.size)
+
+    def _set_nis(self, i: int, nis: float, blocks: int) -> None:
+        """NIS per measurement and its chi-square tail probability (2 per block)."""
+        self.nis[i] = nis / (2.0 * blocks)
+        self.nis_p[i] = float(gammaincc(blocks, 0.5 * nis))  # chi-square sf, 2 per block
+
+    def set_frequency(self, i: int, df_hz: float) -> None:
+        """Channel ``i``'s frequency error estimate [Hz] (the loop's first interval: the
+        scalar loop's Doppler minus the INS prediction)."""
+        self.x[i, 2] = df_hz
 
     def outputs(self, i: int) -> tuple[float, float, float, float]:
         """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])`` of channel ``i``: the
         estimates and their error variances under the noise model (``C``, module notes)."""
         return (float(self.x[i, 0]), float(self.x[i, 2]), float(self.C[i, 0, 0]),
                 float(self.C[i, 2, 2]))
+
+
+class ResetPreFilterBank(PreFilterBank):
+    """Pre-filters with an information reset after every fusion (``deep_measurements =
+    "reset"``; docs/deep.md, *Measurement architectures*; Carlson 1990's federated filter
+    with its local filters' information zeroed after each fusion).
+
+    The same 3-state filter and measurement model as :class:`PreFilterBank`, but after each
+    fusion (below) the filter restarts from an uninformative prior on all three states (code,
+    phase and frequency): :meth:`decorrelate` and :meth:`reset` set ``P = C =
+    diag(sigma_tau_reset^2, sigma_phi_reset^2, sigma_f_reset^2)``. The state is kept only as
+    the point about which the discriminators are linearized (and the phase innovation is
+    reduced modulo pi); its weight is ``r / sigma_reset^2`` (below 1 % of the frequency
+    information at 25 dB-Hz with the defaults). So each output holds only the information of
+    the blocks since the last fusion, and the errors of consecutive outputs are independent:
+    the integration filter, which absorbed the previous output, does not count it again. The phase is reset too: a
+    carried phase would make consecutive frequency outputs share the phase noise of the
+    block between them (a lag-1 correlation of about -0.5).
+
+    The reset comes after every fusion, that is every update of the integration filter with
+    these outputs: every ``fusion_intervals`` filter intervals
+    (``IntegrationConfig.fusion_rate_hz``, default 5 Hz for this architecture: Carlson's
+    local filters run faster than the master's fusion). Between fusions the bank keeps
+    filtering the intervals' blocks, so a 200 ms window's frequency comes from 200 ms of
+    carrier phase. With a fusion every interval, the frequency comes from the phases of at
+    least two blocks of it (the vector loop then cuts blocks of at most half an interval,
+    :func:`~sdr_di.deep.architectures.block_ms`). The design noise is the noise model's
+    (``s_f = s_f_model``, ``q_tau = q_phi = 0``; the model's phase noise, zero by default,
+    enters ``C`` only), so ``P`` and ``C`` agree: the filter is the weighted least-squares
+    fit of the interval's blocks under the model.
+
+    Parameters
+    ----------
+    n, spacing, carrier_hz
+        As :class:`PreFilterBank`.
+    sigma_tau_reset, sigma_phi_reset, sigma_f_reset : float
+        Prior standard deviations of every interval: code [chips] (default 1), phase [rad]
+        (default 100) and frequency [Hz] (default 100).
+    s_f_model, q_phi_model : float or None
+        The noise model (:class:`PreFilterBank`).
+    """
+
+    def __init__(self, n: int, spacing: float = 0.5, carrier_hz: float = F_B3I, *,
+                 sigma_tau_reset: float = 1.0, sigma_phi_reset: float = 100.0,
+                 sigma_f_reset: float = 100.0, s_f_model: float | None = None,
+                 q_phi_model: float | None = None):
+        self.sigma_reset = (float(sigma_tau_reset), float(sigma_phi_reset),
+                            float(sigma_f_reset))
+        self.unfitted = np.full(int(n), 3, np.int64)   # states not yet fitted since a reset
+        super().__init__(n, spacing, carrier_hz, s_f_model=s_f_model, q_phi_model=q_phi_model,
+                         sigma_tau0=self.sigma_reset[0], sigma_f0=self.sigma_reset[2],
+                         q_tau=0.0)
+        self.s_f = self.s_f_model
+        self.q_phi = 0.0
+
+    def reset(self, i: int, dtau: float = 0.0, dphi: float = 0.0, df: float = 0.0,
+              sigma_tau: float | None = None, sigma_phi: float = 1.0,
+              sigma_f: float | None = None) -> None:
+        """Set channel ``i``'s state (the linearization point); the covariance is always
+        the uninformative prior (the sigmas given are not used: no prior information is
+        handed on)."""
+        self.x[i] = (dtau, dphi, df)
+        self._uninformed(i)
+
+    def decorrelate(self, i: int, frequency: bool | None = None) -> None:
+        """Information reset: the uninformative prior on every state, the state kept as
+        the linearization point."""
+        self._uninformed(i)
+
+    def _uninformed(self, i: int) -> None:
+        st, sp, sf = self.sigma_reset
+        self.P[i] = np.diag([st * st, sp * sp, sf * sf])
+        self.C[i] = self.P[i]
+        self.unfitted[i] = 3
+
+    def _set_nis(self, i: int, nis: float, blocks: int) -> None:
+        """NIS per degree of freedom: ``2 m`` for ``m`` blocks less the three states
+        fitted from the uninformative prior (on the first blocks after a reset); no test
+        without a degree of freedom."""
+        fitted = min(int(self.unfitted[i]), 2 * blocks)
+        self.unfitted[i] -= fitted
+        dof = 2 * blocks - fitted
+        if dof <= 0:
+            self.nis[i] = math.nan
+            self.nis_p[i] = 1.0
+            return
+        self.nis[i] = nis / dof
+        self.nis_p[i] = float(gammaincc(0.5 * dof, 0.5 * nis))
