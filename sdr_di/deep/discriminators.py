@@ -126,7 +126,11 @@ class DiscriminatorBank:
               sigma_f: float | None = None) -> None:
         """Nothing is carried between intervals: no prior to set."""
 
-    def decorrelate(self, i: int, frequency: bool | None = None) -> None:
+    #: :meth:`decorrelate` takes no prior (nothing is carried).
+    takes_prior = False
+
+    def decorrelate(self, i: int, frequency: bool | None = None,
+                    prior: tuple[float, float] | None = None) -> None:
         """Nothing is carried between intervals: nothing to forget."""
 
     def set_frequency(self, i: int, df_hz: float) -> None:

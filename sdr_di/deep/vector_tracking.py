@@ -58,6 +58,7 @@ _FAST_MS = 60        # bit sums of the fast test (interval left out) [ms]
 _LOSS_MS = 120       # bit sums of the loss test [ms]
 _CN0_MIN_MS = 40     # bit sums before the loop's own C/N0 replaces the scalar loop's [ms]
 _SIGMA_F_MIN = 0.5   # floor of a restarted pre-filter's frequency sigma [Hz]
+_SIGMA_TAU_MIN = 0.01  # floor of a reset pre-filter's code prior sigma [chips] (0.3 m)
 
 
 @dataclasses.dataclass
@@ -509,6 +510,12 @@ class VectorTracking:
         n_ch, pre, cfg = self.n_channels, self.pre, self.cfg
         Hr = self.meas_all.matrix[n_ch:]
         sig_f = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hr, loop.kf.P, Hr), 0.0)) / LAMBDA_B3I
+        sig_tau = None
+        if pre.takes_prior and self.fusing:
+            # information reset: the filter's range and rate sigmas as the window's prior
+            Hc = self.meas_all.matrix[:n_ch]
+            sig_tau = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hc, loop.kf.P, Hc),
+                                         0.0)) * CHIP_RATE_B3I / C_LIGHT
         for c in self.chans:
             i = c.idx
             if c.fast_fail >= 2 or pre.nis_p[i] < cfg.nis_p_min:
@@ -516,7 +523,9 @@ class VectorTracking:
                 # filter's rate uncertainty as the frequency prior
                 pre.reset(i, sigma_phi=1.0, sigma_f=max(float(sig_f[i]), _SIGMA_F_MIN))
             elif self.fusing:
-                pre.decorrelate(i)
+                pre.decorrelate(i) if sig_tau is None else pre.decorrelate(
+                    i, prior=(max(float(sig_tau[i]), _SIGMA_TAU_MIN),
+                              max(float(sig_f[i]), _SIGMA_F_MIN)))
 
     def geometry_of(self, iv: Interval) -> None:
         """Lines of sight of launched interval ``iv`` for :meth:`restart_prefilters`."""

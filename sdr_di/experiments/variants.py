@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import ExperimentError
 from . import plotting
-from ._deep import Inputs, record_run, run_deep_variant, segment_metrics
+from ._deep import DEEP_ONLY, Inputs, record_run, run_deep_variant, segment_metrics
 from .filter_figures import (
     QUANTITIES,
     STATS,
@@ -135,9 +135,9 @@ def loop_config(params: dict, **fixed: Any) -> dict:
     ``filter_rate_hz``, ``output_rate_hz``, ``gnss_rate_hz`` (loose/tight fix or observable
     rate), ``handover_wait_s`` (the hand-over rule's wait after the first fix, before 4
     channels with time and ephemeris suffice), ``deep_cn0_min_dbhz`` (the loop's channel
-    gate, as ``cn0_min_dbhz``) and ``nco_latency`` (deep variants only:
-    :func:`~._deep.run_deep_variant`) are taken when present and not ``None``; ``fixed``
-    wins over them.
+    gate, as ``cn0_min_dbhz``), ``nco_latency``, ``deep_measurements`` and
+    ``fusion_rate_hz`` (deep variants only: :func:`~._deep.run_deep_variant`) are taken
+    when present and not ``None``; ``fixed`` wins over them.
     """
     cfg: dict = {}
     for key in ("filter_rate_hz", "output_rate_hz", "gnss_rate_hz", "handover_wait_s"):
@@ -147,18 +147,35 @@ def loop_config(params: dict, **fixed: Any) -> dict:
         cfg["cn0_min_dbhz"] = float(params["deep_cn0_min_dbhz"])
     if params.get("nco_latency") is not None:
         cfg["nco_latency"] = int(params["nco_latency"])
+    if params.get("deep_measurements") is not None:
+        cfg["deep_measurements"] = str(params["deep_measurements"])
+    if params.get("fusion_rate_hz") is not None:
+        cfg["fusion_rate_hz"] = float(params["fusion_rate_hz"])
     cfg.update(fixed)
     return cfg
 
 
-def check_nco_latency(exp: str, params: dict) -> None:
-    """Reject an ``nco_latency`` other than ``None`` (the receiver's default), 0 or 1."""
-    from ..integration.config import is_nco_latency
+def check_deep_options(exp: str, params: dict) -> None:
+    """Reject deep-mode settings the receiver would refuse: an ``nco_latency`` other than
+    ``None`` (the receiver's default), 0 or 1; a ``deep_measurements`` that is not an
+    architecture (:data:`~sdr_di.integration.config.DEEP_MEASUREMENTS`); a
+    ``fusion_rate_hz`` that does not fit them (:class:`~sdr_di.integration.config.
+    IntegrationConfig`)."""
+    from ..integration.config import DEEP_MEASUREMENTS, IntegrationConfig, is_nco_latency
 
     v = params.get("nco_latency")
     if v is not None and not is_nco_latency(v):
         raise ExperimentError(f"{exp}: nco_latency={v!r}: expected 0 or 1 (filter intervals "
                               "between an update and the NCO commands it first steers)")
+    a = params.get("deep_measurements")
+    if a is not None and a not in DEEP_MEASUREMENTS:
+        raise ExperimentError(f"{exp}: deep_measurements={a!r}: expected one of "
+                              f"{', '.join(DEEP_MEASUREMENTS)}")
+    try:
+        IntegrationConfig(**{k: params[k] for k in DEEP_ONLY + ("filter_rate_hz",)
+                             if params.get(k) is not None})
+    except (ValueError, TypeError) as exc:
+        raise ExperimentError(f"{exp}: {exc}") from None
 
 
 def nan_figures(label: str, infix: str = "") -> dict:
