@@ -22,6 +22,7 @@ from typing import Any
 
 from ..constants import parse_prn
 from ..errors import ScenarioError, SdrDiError
+from ..ins.grades import IMU_GRADES
 from ..oscillator import OscillatorSpec, oscillator_from_table
 from ..timebase import datetime_to_bdt, utc_to_bdt
 
@@ -38,13 +39,22 @@ SEGMENT_KEYS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "hold": (("duration_s",), ()),
 }
 
-#: IMU grade presets: (accel scale ppm, gyro scale ppm, accel bias mg, gyro bias deg/h,
-#: accel random walk m/s/sqrt(h), gyro random walk deg/sqrt(h)).
-IMU_GRADES: dict[str, tuple[float, float, float, float, float, float]] = {
-    "mems": (100.0, 100.0, 4.0, 8.0, 0.05, 0.04),  # paper 004 Table 4
-    "tactical": (50.0, 50.0, 1.0, 1.0, 0.03, 0.05),
-    "navigation": (10.0, 10.0, 0.025, 0.01, 0.002, 0.002),
-    "perfect": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+#: ``[imu]`` keys of the scenario -> the :class:`~sdr_di.ins.imu.ImuErrorModel` field its
+#: grade default comes from (grades: :data:`~sdr_di.ins.grades.IMU_GRADES`).
+IMU_KEYS: dict[str, str] = {
+    "accel_scale_factor_ppm": "accel_scale_factor_ppm",
+    "gyro_scale_factor_ppm": "gyro_scale_factor_ppm",
+    "accel_bias_mg": "accel_bias_mg",
+    "gyro_bias_deg_h": "gyro_bias_deg_h",
+    "accel_random_walk_mps_sqrth": "accel_random_walk",
+    "gyro_random_walk_deg_sqrth": "gyro_random_walk",
+    "accel_bias_instability_mg": "accel_bias_instability_mg",
+    "gyro_bias_instability_deg_h": "gyro_bias_instability_deg_h",
+    "accel_bias_tau_s": "accel_bias_tau_s",
+    "gyro_bias_tau_s": "gyro_bias_tau_s",
+    "accel_misalignment_mrad": "accel_misalignment_mrad",
+    "gyro_misalignment_mrad": "gyro_misalignment_mrad",
+    "gyro_g_sensitivity_deg_h_per_g": "gyro_g_sensitivity_deg_h_per_g",
 }
 
 #: Shortest scenario duration [s]: ten B3I code periods, and two IMU intervals at 200 Hz so
@@ -58,7 +68,8 @@ SAMPLE_FORMATS = ("iq_int8", "real_int8", "iq_int16", "real_int16", "iq_int4")
 
 @dataclasses.dataclass(frozen=True)
 class ImuSpec:
-    """IMU grade and error parameters (user units; see :mod:`sdr_di.sim.imu`)."""
+    """IMU grade and error parameters (user units; 1-sigma; :mod:`sdr_di.ins.imu`, grades
+    :mod:`sdr_di.ins.grades`)."""
 
     grade: str
     rate_hz: float
@@ -68,6 +79,31 @@ class ImuSpec:
     gyro_bias_deg_h: float
     accel_random_walk_mps_sqrth: float
     gyro_random_walk_deg_sqrth: float
+    accel_bias_instability_mg: float = 0.0
+    gyro_bias_instability_deg_h: float = 0.0
+    accel_bias_tau_s: float = 3600.0
+    gyro_bias_tau_s: float = 3600.0
+    accel_misalignment_mrad: float = 0.0
+    gyro_misalignment_mrad: float = 0.0
+    gyro_g_sensitivity_deg_h_per_g: float = 0.0
+
+    #: The fields of paper 004's six terms (and grade, rate): all a legacy spec records.
+    LEGACY = ("grade", "rate_hz", "accel_scale_factor_ppm", "gyro_scale_factor_ppm",
+              "accel_bias_mg", "gyro_bias_deg_h", "accel_random_walk_mps_sqrth",
+              "gyro_random_walk_deg_sqrth")
+
+    @property
+    def is_extended(self) -> bool:
+        """Whether any term beyond paper 004's six is set (in-run bias, misalignment,
+        g-sensitivity)."""
+        return any(getattr(self, f.name) != 0 for f in dataclasses.fields(self)
+                   if f.name not in self.LEGACY and not f.name.endswith("_tau_s"))
+
+    def as_dict(self) -> dict[str, Any]:
+        """The spec for the sidecar and summaries: every field of an extended spec, the
+        legacy fields alone otherwise (so a legacy scenario's sidecar is unchanged)."""
+        d = dataclasses.asdict(self)
+        return d if self.is_extended else {k: d[k] for k in self.LEGACY}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -426,16 +462,9 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     im = _Reader(raw.get("imu", {}), f"{where}: [imu]")
     grade = im.str_("grade", "mems", tuple(IMU_GRADES))
     g = IMU_GRADES[grade]
-    imu = ImuSpec(
-        grade=grade,
-        rate_hz=im.num("rate_hz", 200.0, lo=1.0, hi=10000.0),
-        accel_scale_factor_ppm=im.num("accel_scale_factor_ppm", g[0], lo=0.0),
-        gyro_scale_factor_ppm=im.num("gyro_scale_factor_ppm", g[1], lo=0.0),
-        accel_bias_mg=im.num("accel_bias_mg", g[2], lo=0.0),
-        gyro_bias_deg_h=im.num("gyro_bias_deg_h", g[3], lo=0.0),
-        accel_random_walk_mps_sqrth=im.num("accel_random_walk_mps_sqrth", g[4], lo=0.0),
-        gyro_random_walk_deg_sqrth=im.num("gyro_random_walk_deg_sqrth", g[5], lo=0.0),
-    )
+    terms = {key: im.num(key, getattr(g, field), lo=0.0, lo_open=key.endswith("_tau_s"))
+             for key, field in IMU_KEYS.items()}
+    imu = ImuSpec(grade=grade, rate_hz=im.num("rate_hz", 200.0, lo=1.0, hi=10000.0), **terms)
     im.check_unknown()
     shortest = max(MIN_DURATION_S, 2.0 / imu.rate_hz)
     if duration < shortest:

@@ -166,7 +166,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "start": {"week": week, "sow": sow, "bdt": bdt.isoformat(), "utc": utc.isoformat()},
             "receiver_clock": {"bias_s": sc.clock.bias_s, "drift_s_s": sc.clock.drift_s_s},
             "oscillator": None if sc.oscillator is None else sc.oscillator.as_dict(),
-            "imu": dataclasses.asdict(sc.imu),
+            "imu": sc.imu.as_dict(),
             "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain,
                     **gen.jammers.agc.as_dict()},
             "interference": jams,
