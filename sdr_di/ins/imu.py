@@ -46,9 +46,11 @@ measurement model, vector form, body axes::
 
 Extended draws follow the legacy constants in the same generator: accel scale, gyro scale,
 accel bias, gyro bias (as above), then ``M_a`` and ``M_g`` (six each, row-major off-diagonal
-order), ``G_g`` (nine, row-major), then the white noises, then the Gauss-Markov drives
-(accel (n, 3), gyro (n, 3)). The unit's constants are drawn before anything whose count
-depends on the record length, so the same seed gives the same unit whatever the duration.
+order), ``G_g`` (nine, row-major), then one row of twelve unit normals per sample (accel
+noise, gyro noise, accel and gyro Gauss-Markov drives, three each). The unit's constants are
+drawn before anything whose count depends on the record length, and the per-sample draws
+row by row, so the same seed gives the same unit, and the same noise and in-run bias over
+the common span, whatever the duration.
 A model without extended terms draws exactly as before (the default scenario's files are
 unchanged byte for byte).
 """
@@ -378,10 +380,10 @@ class ImuErrorModel:
             raise TypeError("ImuErrorModel.apply needs a numpy.random.Generator")
         u = self.draw_unit(rng)
         s_a, s_g, b_a, b_g = u.accel_scale, u.gyro_scale, u.accel_bias, u.gyro_bias
-        n_a = rng.standard_normal((n, 3)) * (self.accel_random_walk_si / math.sqrt(dt))
-        n_g = rng.standard_normal((n, 3)) * (self.gyro_random_walk_si / math.sqrt(dt))
         if not self.is_extended:
-            # the legacy formula, operation for operation (byte-identical records)
+            # the legacy draws and formula, operation for operation (byte-identical records)
+            n_a = rng.standard_normal((n, 3)) * (self.accel_random_walk_si / math.sqrt(dt))
+            n_g = rng.standard_normal((n, 3)) * (self.gyro_random_walk_si / math.sqrt(dt))
             return ImuData(
                 t=np.array(truth.t, float),
                 f_b=(1.0 + s_a) * f + b_a + n_a,
@@ -389,9 +391,13 @@ class ImuErrorModel:
                 rate_hz=float(truth.rate_hz),
                 accel_bias=b_a, gyro_bias=b_g, accel_scale=s_a, gyro_scale=s_g,
             )
-        u.d_a = self.gauss_markov(rng.standard_normal((n, 3)), self.accel_bias_instability_si,
+        # one row of twelve per sample: a longer record extends a shorter one's noise
+        z = rng.standard_normal((n, 12))
+        n_a = z[:, 0:3] * (self.accel_random_walk_si / math.sqrt(dt))
+        n_g = z[:, 3:6] * (self.gyro_random_walk_si / math.sqrt(dt))
+        u.d_a = self.gauss_markov(z[:, 6:9], self.accel_bias_instability_si,
                                   self.accel_bias_tau_s, dt)
-        u.d_g = self.gauss_markov(rng.standard_normal((n, 3)), self.gyro_bias_instability_si,
+        u.d_g = self.gauss_markov(z[:, 9:12], self.gyro_bias_instability_si,
                                   self.gyro_bias_tau_s, dt)
         K_a = np.diag(s_a) + u.M_a
         K_g = np.diag(s_g) + u.M_g

@@ -146,6 +146,31 @@ class SignalSpec:
 
 
 @dataclasses.dataclass(frozen=True)
+class AtmosphereSpec:
+    """Truth atmosphere (``[atmosphere]``; model and defaults: docs/scenario.md and
+    :mod:`sdr_di.sim.atmosphere`). ``truth = "model"``: the delays are the receiver's models
+    (broadcast Klobuchar, Saastamoinen standard atmosphere); ``"residuals"``: the truth
+    differs from them by the drawn amounts below (1-sigma values)."""
+
+    truth: str = "model"
+    #: 1-sigma of the per-satellite-pass scale of the Klobuchar delay, truth = (1 + k) K [-]
+    iono_scale_sigma: float = 0.5
+    #: stationary 1-sigma [-] and correlation time [s] of the slow variation of that scale
+    iono_variation_sigma: float = 0.1
+    iono_variation_tau_s: float = 1800.0
+    #: 1-sigma of the zenith wet delay's offset from the standard atmosphere's [m]
+    zwd_sigma_m: float = 0.05
+    #: stationary 1-sigma [m] and correlation time [s] of its slow variation
+    zwd_variation_sigma_m: float = 0.01
+    zwd_variation_tau_s: float = 3600.0
+
+    @property
+    def residuals(self) -> bool:
+        """Whether the truth differs from the receiver's models."""
+        return self.truth == "residuals"
+
+
+@dataclasses.dataclass(frozen=True)
 class ReceiverClock:
     """Receiver clock: bias [s] at t = 0 and constant drift [s/s]."""
 
@@ -186,6 +211,8 @@ class Scenario:
     interference: tuple = ()
     multipath: tuple = ()
     agc: Any = None
+    #: Truth atmosphere (``[atmosphere]``); None: the table is absent (truth = model).
+    atmosphere: AtmosphereSpec | None = None
 
     @property
     def hash(self) -> str:
@@ -423,7 +450,8 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     if not isinstance(raw, dict):
         raise ScenarioError(f"{where}: expected TOML tables at the top level")
     known = {"scenario", "time", "start", "motion", "imu", "satellites", "signal", "outage",
-             "receiver_clock", "oscillator", "assume", "interference", "multipath", "agc"}
+             "receiver_clock", "oscillator", "assume", "interference", "multipath", "agc",
+             "atmosphere"}
     extra = sorted(set(raw) - known)
     if extra:
         raise ScenarioError(f"{where}: unknown table(s) {', '.join(map(repr, extra))}")
@@ -561,6 +589,7 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     check_bands(jammers, fs, f_if, is_complex, where)
     multipath = parse_multipath(raw.get("multipath", []), where)
     agc = parse_agc(raw.get("agc", {}), where)
+    atmosphere = _parse_atmosphere(raw["atmosphere"], where) if "atmosphere" in raw else None
     assume = raw.get("assume")
     if assume is not None and not isinstance(assume, dict):
         raise ScenarioError(f"{where}: [assume] must be a table")
@@ -575,4 +604,18 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
         motion=motion, imu=imu, satellites=satellites, signal=signal,
         outages=tuple(outages), clock=clock, raw=raw_canon, oscillator=oscillator,
         assume=assume, interference=jammers, multipath=multipath, agc=agc,
+        atmosphere=atmosphere,
     )
+
+
+def _parse_atmosphere(table: Any, where: str) -> AtmosphereSpec:
+    """``[atmosphere]`` (:class:`AtmosphereSpec`; every key optional)."""
+    r = _Reader(table, f"{where}: [atmosphere]")
+    d = AtmosphereSpec()
+    kw: dict[str, Any] = {"truth": r.str_("truth", d.truth, ("model", "residuals"))}
+    for f in dataclasses.fields(AtmosphereSpec):
+        if f.name != "truth":
+            kw[f.name] = r.num(f.name, getattr(d, f.name), lo=0.0,
+                               lo_open=f.name.endswith("_tau_s"))
+    r.check_unknown()
+    return AtmosphereSpec(**kw)

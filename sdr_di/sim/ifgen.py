@@ -212,6 +212,9 @@ class IfGenerator:
         #: Truth oscillator path (:class:`~sdr_di.sim.oscillator.ClockTruth`, set by the
         #: builder when the scenario has ``[oscillator]``); None: the ``[receiver_clock]`` line.
         self.clock_truth = None
+        #: Truth atmosphere residuals (:class:`~sdr_di.sim.atmosphere.AtmosphereTruth`, set
+        #: by the builder for ``[atmosphere] truth = "residuals"``); None: truth = model.
+        self.atmosphere = None
 
     # -- geometry on the node grid ------------------------------------------------------
     def node_times(self, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -247,7 +250,7 @@ class IfGenerator:
             if row.k not in delays:
                 delays[row.k] = satellite_delays(sat.eph, self.path, t, self.sc.sow, b,
                                                  self.iono, sig.troposphere == "saastamoinen",
-                                                 rx=rx)
+                                                 rx=rx, atmosphere=self.atmosphere)
             d = delays[row.k]
             x = _week_seconds_between(self.sc.week, self.sc.sow, sat.nav.week, sat.nav.t0)
             d_code, d_carr = d.d_code, d.d_carr
