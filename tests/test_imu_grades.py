@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from sdr_di.errors import AssumptionsError
 from sdr_di.ins.grades import GRADE_PROVENANCE, GRADE_SOURCES, IMU_GRADES
 from sdr_di.ins.imu import G_STANDARD, ImuData, ImuErrorModel
 from sdr_di.integration.assumptions import parse_assumptions
-from sdr_di.scenario.schema import ImuSpec, load_scenario
+from sdr_di.scenario.schema import ImuSpec, load_scenario, parse_scenario
 
 REPO = Path(__file__).resolve().parents[1]
 GRADES = ("navigation", "tactical", "industrial", "consumer")
@@ -128,10 +129,6 @@ def test_scenario_grade_fills_terms_and_explicit_values_override():
     assert sc.imu.grade == "mems" and not sc.imu.is_extended
     assert list(sc.imu.as_dict()) == list(ImuSpec.LEGACY)
     assert not ImuErrorModel.from_spec(sc.imu).is_extended
-    assert "grade" in raw_default
-    from sdr_di.scenario.schema import parse_scenario
-    import tomllib
-
     raw = tomllib.loads(raw_default)
     raw["satellites"]["ephemeris"] = str(REPO / "ephemeris" / Path(
         raw["satellites"]["ephemeris"]).name)

@@ -166,7 +166,7 @@ class ImuUnit:
         return out
 
 
-#: Units of the extended terms: SI factor of each user unit.
+#: One milliradian [rad] (the misalignment keys are in mrad).
 _MRAD = 1e-3
 
 
