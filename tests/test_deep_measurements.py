@@ -189,3 +189,14 @@ def test_architecture_is_a_study_factor():
     raw["factorial"]["deep_measurements"] = ["prefilter", "centralised"]
     with pytest.raises(StudyError, match="deep_measurements"):
         parse_study(raw)
+    # or a filter entry's suffix, so that architectures pair on the same files and start-up
+    from sdr_di.experiments.variants import variant_list
+
+    vs = variant_list("compare", "ekf,ekf@reset,ff-aukf@discriminator,ekf@tight")
+    assert [(v.label, v.coupling, v.architecture) for v in vs] == [
+        ("ekf", "deep", None), ("ekf@reset", "deep", "reset"),
+        ("ff-aukf@discriminator", "deep", "discriminator"), ("ekf@tight", "tight", None)]
+    del raw["factorial"]
+    raw["study"]["filters"] = ["ekf", "ekf@reset", "ekf@centralised"]
+    with pytest.raises(StudyError, match="centralised"):
+        parse_study(raw)

@@ -75,9 +75,17 @@ Interaction with the vector loop (:mod:`sdr_di.integration.receiver`):
   default-scenario file (2.5 MHz, ``ekf``, 13.8 s of vector loop): velocity RMSE
   0.0092 m/s with the carrier states kept, 0.036 m/s with the frequency reset too
   (attitude 0.036 vs 0.043 deg, position 0.45 m both); keeping the code covariance as well
-  made the filter overconfident (velocity 0.061 m/s, attitude 0.17 deg). The feedback shift
-  keeps the carried state the residual error, so the integration filter does not see an old
-  error twice.
+  made the filter overconfident (velocity 0.061 m/s, attitude 0.17 deg).
+
+What the cascade costs. The feedback shift moves the carried state and the truth together,
+so the carried state's *estimation error* stays in it, and :meth:`PreFilterBank.decorrelate`
+resets a variance, not the state: every output re-uses the pre-filter's prior, which the
+integration filter already absorbed from the previous output. The integration filter counts
+old information again, and consecutive outputs have correlated errors (rate lag-1
+autocorrelation +0.13 at 40 dB-Hz, +0.44 at 30; sums of 25 consecutive normalized rate errors
+0.27 and 0.51 per term where white errors give 1: ``scripts/check_prefilter.py``), which no
+white ``R`` describes. :class:`ResetPreFilterBank` (``deep_measurements = "reset"``) hands
+over only a window's information; docs/deep.md, *Measurement architectures*.
 """
 
 from __future__ import annotations

@@ -14,7 +14,8 @@ A variant's label prefixes its figures (``"<label>.pos_m_rmse"``) and names its 
 (``errors_<label>.csv``): the filter entry as given (``ff-aukf``,
 ``ff-aukf:q_states=nominal``), followed by ``@loose`` or ``@tight`` for those couplings.
 Deep, the system's own coupling, has no suffix, so the figures of the deep-only experiments
-keep their names. ``loose`` here is the receiver's own WLS fixes fed to the filter
+keep their names; a deep variant with its own measurement architecture has it as the suffix
+(``ekf@reset``, ``ekf@discriminator``). ``loose`` here is the receiver's own WLS fixes fed to the filter
 (``sdr-di run --mode loose``), never ``sdr-di lc`` (simulated position/velocity, the
 ``noise-mismatch`` experiment).
 """
@@ -30,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ExperimentError
+from ..integration.config import DEEP_MEASUREMENTS
 from . import plotting
 from ._deep import DEEP_ONLY, Inputs, record_run, run_deep_variant, segment_metrics
 from .filter_figures import (
@@ -67,7 +69,8 @@ class Variant:
     options : dict
         Filter options (:func:`~sdr_di.filters.make_filter` keyword arguments).
     mode : str
-        ``"loose"``, ``"tight"`` or ``"deep"``.
+        ``"loose"``, ``"tight"`` or ``"deep"``, or a deep measurement architecture
+        (``"prefilter"``, ``"reset"``, ``"discriminator"``: deep mode with it).
     """
 
     spec: str
@@ -79,6 +82,16 @@ class Variant:
     def label(self) -> str:
         """Figure prefix and file-name stem (module notes)."""
         return variant_label(self.spec, self.mode)
+
+    @property
+    def coupling(self) -> str:
+        """The coupling mode (``IntegrationConfig.mode``)."""
+        return "deep" if self.mode in DEEP_MEASUREMENTS else self.mode
+
+    @property
+    def architecture(self) -> str | None:
+        """The deep measurement architecture the entry names (None: the cell's)."""
+        return self.mode if self.mode in DEEP_MEASUREMENTS else None
 
 
 def mode_list(exp: str, text: str, allowed: Sequence[str] = MODES) -> list[str]:
@@ -92,10 +105,13 @@ def mode_list(exp: str, text: str, allowed: Sequence[str] = MODES) -> list[str]:
 
 
 def split_entry(exp: str, entry: str, mode: str = "deep") -> tuple[str, str]:
-    """``"ekf@tight"`` -> ``("ekf", "tight")``; an entry without ``@`` takes ``mode``."""
+    """``"ekf@tight"`` -> ``("ekf", "tight")``; an entry without ``@`` takes ``mode``. After
+    the ``@`` may also stand a deep measurement architecture (``"ekf@reset"``: deep mode with
+    ``deep_measurements = "reset"``, :attr:`Variant.architecture`), so that a study pairs
+    architectures on the same files as it pairs couplings."""
     spec, at, m = canonical_entry(entry).partition("@")
     if at:
-        mode_list(exp, m)
+        mode_list(exp, m, MODES + DEEP_MEASUREMENTS)
         return spec, m
     return spec, mode
 
@@ -250,8 +266,9 @@ def run_variants(inputs: Inputs, variants: Sequence[Variant], cfg: dict, fig: di
     """
     series: dict = {}
     for v in variants:
-        dr = run_deep_variant(inputs, v.filter, mode=v.mode, filter_options=dict(v.options),
-                              **cfg)
+        arch = {} if v.architecture is None else {"deep_measurements": v.architecture}
+        dr = run_deep_variant(inputs, v.filter, mode=v.coupling,
+                              filter_options=dict(v.options), **{**cfg, **arch})
         res = record_run(fig, v.label, dr)
         if res is None:
             fig.update(nan_figures(v.label))
