@@ -16,7 +16,7 @@ import numpy as np
 
 from ..io.atomic import atomic_open
 
-__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "time_series"]
+__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "save_png", "time_series"]
 
 PLOTS_SKIPPED = "plots skipped: matplotlib is not installed (pip install matplotlib)"
 
@@ -31,12 +31,14 @@ def matplotlib_missing() -> str | None:
     return None
 
 
-def _save(fig, path: Path) -> Path:
+def save_png(fig, path: Path, dpi: int = 100) -> Path:
+    """Draw a :class:`matplotlib.figure.Figure` with the Agg canvas (no display) and write it
+    as PNG at ``dpi``, atomically."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
+    fig.savefig(buf, format="png", dpi=dpi)
     with atomic_open(path, "wb") as fh:
         fh.write(buf.getvalue())
     return path
@@ -73,7 +75,7 @@ def time_series(path: Path, t_by_label: dict[str, np.ndarray],
     axes[0].legend(fontsize="x-small", ncol=5, loc="upper right")
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def bar_chart(path: Path, labels: Sequence[str],
@@ -92,4 +94,4 @@ def bar_chart(path: Path, labels: Sequence[str],
     axes[-1].set_xticks(x, labels, rotation=30, ha="right")
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
+    return save_png(fig, path)

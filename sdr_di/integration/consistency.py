@@ -163,7 +163,7 @@ def _entry(x: np.ndarray, dof: int) -> dict:
     fin = x[np.isfinite(x)]
     n_eff = effective_count(fin)
     return {"value": float(fin.mean()) if fin.size else None, "expected": 1.0,
-            "n": int(fin.size), "n_eff": n_eff,
+            "n": int(fin.size), "n_eff": n_eff, "dof": int(dof),
             "band": [None if not math.isfinite(v) else v for v in chi2_band(n_eff, dof)]
             if fin.size else [None, None]}
 
@@ -193,7 +193,8 @@ def consistency_summary(mode: str, t_nis, nis_blocks, nis_dof, t_rows, nees,
     dict
         ``{"band_rule": BAND_RULE, "nis_<block>": entry, "nees_pos" / "nees_vel" /
         "nees_att": entry}``; an entry is ``{"value" (mean), "expected": 1, "n", "n_eff",
-        "band": [low, high]}``, ``value`` None without samples.
+        "dof" (degrees of freedom of one sample), "band": [low, high]}``, ``value`` None
+        without samples.
     """
     out: dict = {"band_rule": BAND_RULE}
     nb = np.asarray(nis_blocks, float).reshape(-1, 2)

@@ -103,7 +103,7 @@ def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> 
     axes[0].legend(fontsize="small", ncol=4)
     fig.suptitle("paired RMSE ratio to the baseline per cell: geometric mean over seeds,\n"
                  "corrected interval; below 1 = better than the baseline", fontsize="medium")
-    return plotting._save(fig, path)
+    return plotting.save_png(fig, path)
 
 
 def render_study_report(folder: str | Path) -> Path:
