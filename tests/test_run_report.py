@@ -127,3 +127,54 @@ def test_report_of_a_folder_that_is_not_a_run_is_one_line_exit_2(tmp_path, capsy
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("sdr-di: error: report ") and "JSON object" \
         in err[0]
+
+
+def test_plain_log_axis_labels_read_as_decimals():
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from sdr_di.experiments.plotting import plain_log_axis
+
+    fig = Figure()
+    ax = fig.subplots()
+    ax.plot([0, 1], [0.3, 3.0])
+    ax.set_yscale("log")
+    plain_log_axis(ax)
+    FigureCanvasAgg(fig).draw()
+    labels = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
+    assert labels and all(lab.replace(".", "", 1).isdigit() for lab in labels), labels
+    assert {"0.5", "1", "2"} <= set(labels)
+
+
+def test_study_summary_shows_nees_and_nis_beside_the_rmse(tmp_path):
+    """A hand-made study folder: NEES beside each RMSE (the ensemble's with band and
+    verdict when cells.csv has them), the NIS per block after the comparison columns."""
+    import csv
+
+    from sdr_di.studies.study_report import render_study_report
+
+    (tmp_path / "study.json").write_text(json.dumps(
+        {"name": "s", "baseline": "ekf", "filters": ["ekf", "ukf"], "runs": 4,
+         "cells": [{"name": "c"}], "status": "done", "interval": "log_ratio"}))
+    base = {"cell": "c", "n_ok": "4", "n_runs": "4", "nis_code": "1.02", "nis_rate": "0.97",
+            "nis_vel": "", "nis_pos": ""}
+    rows = []
+    for f, nees in (("ekf", 3.0), ("ukf", 1.05)):
+        r = {**base, "filter": f}
+        for q in ("pos", "vel", "att"):
+            r.update({f"{q}_rmse_mean": "0.5", f"{q}_best": "0", f"{q}_ratio": "0.9",
+                      f"{q}_ratio_ci_low": "0.8", f"{q}_ratio_ci_high": "1.0",
+                      f"{q}_wins": "3", f"{q}_sign_p_holm": "0.3", f"nees_{q}": str(nees)})
+        rows.append(r)
+    rows[0].update({"anees_pos": "3.0", "anees_pos_lo": "0.8", "anees_pos_hi": "1.25"})
+    with open(tmp_path / "cells.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    page = render_study_report(tmp_path).read_text()
+    summary = page[page.index("Summary per cell"):page.index("Plots")]
+    for q in ("pos", "vel", "att"):
+        assert f"<th>{q} RMSE</th><th>{q} NEES</th>" in summary
+    assert "<th>NIS code</th><th>NIS rate</th>" in summary and "NIS vel" not in summary
+    assert "3 [0.8, 1.25] <span class='v-reversed'>overconfident</span>" in summary
+    assert "<td>1.05</td>" in summary

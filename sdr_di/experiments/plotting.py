@@ -16,7 +16,8 @@ import numpy as np
 
 from ..io.atomic import atomic_open
 
-__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "save_png", "time_series"]
+__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "plain_log_axis", "save_png",
+           "time_series"]
 
 PLOTS_SKIPPED = "plots skipped: matplotlib is not installed (pip install matplotlib)"
 
@@ -42,6 +43,17 @@ def save_png(fig, path: Path, dpi: int = 100) -> Path:
     with atomic_open(path, "wb") as fh:
         fh.write(buf.getvalue())
     return path
+
+
+def plain_log_axis(ax, axis: str = "y") -> None:
+    """Ticks of a log axis at 1, 2 and 5 per decade labelled as plain decimals (0.5, 1, 2),
+    never in the ``10^x`` forms a reader has to decode ("9.95x10^-1")."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    a = ax.yaxis if axis == "y" else ax.xaxis
+    a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    a.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    a.set_minor_formatter(NullFormatter())
 
 
 def time_series(path: Path, t_by_label: dict[str, np.ndarray],

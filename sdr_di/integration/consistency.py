@@ -43,7 +43,7 @@ from .metrics import time_window
 
 __all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "block_nis",
            "chi2_band", "consistency_summary", "effective_count", "enu_blocks", "flat",
-           "formal_sd", "nees_per_dof"]
+           "formal_sd", "nees_per_dof", "verdict"]
 
 #: NIS block names of each mode, in the order of ``z`` (two equal halves).
 NIS_BLOCKS = {"deep": ("code", "rate"), "tight": ("range", "rate"), "loose": ("vel", "pos"),
@@ -156,6 +156,20 @@ def chi2_band(n_eff: float, dof: int, level: float = 0.95) -> list[float]:
     # chdtri(k, p): the chi-square quantile of upper tail p (scipy.special, so that the run
     # modules do not import scipy.stats at start-up: test_coupling)
     return [float(chdtri(k, 1.0 - a) / k), float(chdtri(k, a) / k)]
+
+
+def verdict(value: float | None, band) -> str:
+    """``consistent``, ``pessimistic`` (below the band: the covariance is larger than the
+    errors) or ``overconfident`` (above it: smaller) of a mean NIS/NEES per degree of
+    freedom against its ``[low, high]`` band; ``no samples`` for a missing value."""
+    if value is None or not math.isfinite(float(value)):
+        return "no samples"
+    lo, hi = (math.nan if b is None else float(b) for b in band)
+    if value < lo:
+        return "pessimistic"
+    if value > hi:
+        return "overconfident"
+    return "consistent"
 
 
 def _entry(x: np.ndarray, dof: int) -> dict:

@@ -2,8 +2,8 @@
 
 A run's summary JSON carries, per statistic, the mean per degree of freedom over the run
 (``value``, expected 1), the sample count ``n``, the effective count ``n_eff`` and the 95 %
-``band`` (:mod:`~sdr_di.integration.consistency`). The verdict compares the mean with the
-band::
+``band`` (:mod:`~sdr_di.integration.consistency`). The verdict
+(:func:`~sdr_di.integration.consistency.verdict`) compares the mean with the band::
 
     value < low    pessimistic    the filter's covariance is larger than its errors
     value > high   overconfident  the covariance is smaller than its errors
@@ -20,7 +20,7 @@ from __future__ import annotations
 import html
 import math
 
-from ..integration.consistency import chi2_band
+from ..integration.consistency import chi2_band, verdict
 
 __all__ = ["VERDICTS", "consistency_rows", "consistency_table_html", "verdict"]
 
@@ -34,19 +34,6 @@ _LABELS = {"nis_code": "NIS, code (pseudorange) block", "nis_range": "NIS, pseud
            "nis_rate": "NIS, pseudorange-rate block", "nis_vel": "NIS, velocity block",
            "nis_pos": "NIS, position block", "nees_pos": "NEES, position",
            "nees_vel": "NEES, velocity", "nees_att": "NEES, attitude"}
-
-
-def verdict(value: float | None, band) -> str:
-    """``consistent``, ``pessimistic`` or ``overconfident`` of a mean NIS/NEES per degree
-    of freedom against its ``[low, high]`` band; ``no samples`` for a missing value."""
-    if value is None or not math.isfinite(float(value)):
-        return "no samples"
-    lo, hi = (math.nan if b is None else float(b) for b in band)
-    if value < lo:
-        return "pessimistic"
-    if value > hi:
-        return "overconfident"
-    return "consistent"
 
 
 def _band(key: str, entry: dict) -> tuple[list[float], int, float]:

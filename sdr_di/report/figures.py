@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..constants import orbit_type
-from ..experiments.plotting import save_png
+from ..experiments.plotting import plain_log_axis, save_png
 
 __all__ = ["CN0_DROP_DB", "DPI", "Spans", "channel_figure", "error_figure",
            "fix_status_figure", "nis_figure", "runs_of", "sats_used_figure", "sky_figure",
@@ -206,7 +206,7 @@ def nis_figure(path: Path, t_s, nis_blocks: np.ndarray, block_names: Sequence[st
                     ax.axhline(v, color="k", ls=":", lw=0.7)
         ax.axhline(1.0, color="tab:green", lw=0.8)
         ax.set_yscale("log")
-        _plain_log_axis(ax)
+        plain_log_axis(ax)
         ax.set_ylabel(f"NIS {block_names[j]}\nper dof ({d_med})")
         ax.grid(True, alpha=0.3, which="both")
     axes[0].set_xlim(*spans.xlim(t))
@@ -215,16 +215,6 @@ def nis_figure(path: Path, t_s, nis_blocks: np.ndarray, block_names: Sequence[st
     fig.suptitle(f"{title}: NIS per measurement block against its chi-square band "
                  "(dotted: the run mean's band)", fontsize="medium")
     return save_png(fig, path, DPI)
-
-
-def _plain_log_axis(ax) -> None:
-    """Tick labels of a log axis as plain decimals (0.5, 1, 2), never ``10^x`` forms."""
-    from matplotlib.ticker import FuncFormatter, LogLocator
-
-    fmt = FuncFormatter(lambda v, _: f"{v:g}")
-    ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-    ax.yaxis.set_major_formatter(fmt)
-    ax.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
 
 
 def trajectory_figure(path: Path, east_north: np.ndarray, truth_en: np.ndarray | None, *,
