@@ -64,6 +64,13 @@ def test_scalar_run_uses_the_sidecar_ephemeris_and_reports_accuracy(short_file, 
     assert "no fix in" in page and "the run failed" in page
     assert "no fix: no fix errors" in page and "fix-pos-error" not in page
     assert 'id="default_scalar-channels"' in page and 'id="default_scalar-navdata"' in page
+    # stopped part-way: the solution file still under its .part name, no run record
+    cold = tmp_path / "cold"
+    (cold / "default_pvt.csv").rename(cold / "default_pvt.csv.part")
+    (cold / "default_scalar_summary.json").unlink()
+    assert main(["report", str(cold)]) == 0
+    page = (cold / "report.html").read_text()
+    assert "default_pvt.csv.part: still under its temporary name" in page
 
 
 def test_scalar_progress_bar_says_what_it_does_and_ends_at_100(short_file, tmp_path, capsys):
