@@ -151,8 +151,8 @@ def error_figure(path: Path, t_s, err, sd, *, quantity: str, unit: str, spans: S
     axes[0].set_xlim(*spans.xlim(t))
     axes[-1].set_xlabel(spans.xlabel)
     axes[0].legend(fontsize="x-small", ncol=6, loc="upper left")
-    fig.suptitle(f"{title}: {quantity} per axis [{unit}] and the filter's +-3 sigma",
-                 fontsize="medium")
+    envelope = " and the filter's +-3 sigma" if np.isfinite(sd).any() else ""
+    fig.suptitle(f"{title}: {quantity} per axis [{unit}]{envelope}", fontsize="medium")
     return save_png(fig, path, DPI)
 
 
