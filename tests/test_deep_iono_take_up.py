@@ -68,7 +68,7 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
     assert "after the ionosphere take-up" in cap.out
     # the run's figures, and `sdr-di report RUN_DIR` on an integrated run
     names = ("pos-error", "vel-error", "att-error", "nis", "trajectory", "channels",
-             "sats-used")
+             "innovations", "sats-used")
     assert sorted(p.name for p in out.glob("*.png")) == sorted(
         f"default_deep_{n}.png" for n in names)
     assert main(["report", str(out)]) == 0

@@ -126,6 +126,7 @@ def _check(argv: list[str], out: str, place: Path) -> None:
                 for name in ("pos-error", "vel-error", "att-error", "nis", "trajectory",
                              "channels", "sats-used", "consistency"):
                     assert f'id="tour_{mode}-{name}"' in page, (mode, name)
+            assert 'id="tour_deep-innovations"' in page     # per channel: deep only
             for name in ("fix-pos-error", "fix-vel-error", "channels", "sky", "fix-status",
                          "trajectory", "navdata"):
                 assert f'id="tour_scalar-{name}"' in page, name

@@ -287,6 +287,9 @@ class IntegrationResult:
         a reference)
     updates : dict, per filter update ``t`` [s], ``nis`` (k, 2) per block, ``dof`` (k,)
         (:attr:`~sdr_di.integration.loop.IntegrationLoop.updates`)
+    innov : (n, 2 n_ch) normalized innovation ``y_i / sqrt(S_ii)`` of each channel's code
+        then rate measurement at the row's last update (deep; NaN where not mapped:
+        :func:`~sdr_di.integration.loop.channel_innovations`)
     """
 
     t: np.ndarray
@@ -316,6 +319,7 @@ class IntegrationResult:
     sd: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 9)))
     nees: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
     updates: dict = dataclasses.field(default_factory=dict)
+    innov: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
@@ -681,7 +685,7 @@ class IntegratedReceiver:
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
             nav_change=col["nav"], navigation=navigation, mode=self.config.mode,
             filter_used=getattr(self, "filter_used", None),
-            sd=col["sd"], nees=col["nees"], updates=col["updates"])
+            sd=col["sd"], nees=col["nees"], updates=col["updates"], innov=col["innov"])
 
     # ------------------------------------------------------------------------------------
     def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, hand, recorder,

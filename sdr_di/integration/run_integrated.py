@@ -30,7 +30,9 @@ names and renamed when complete:
                            believed: :func:`~sdr_di.integration.assumptions.deep_beliefs`)
 ``STEM_MODE_channels.csv`` one row per output epoch: ``t_s`` and, per channel ``Cxx``,
                            ``cn0_Cxx`` [dB-Hz] and ``used_Cxx`` (1: in the measurement
-                           vector / fix at the row, 0: not)
+                           vector / fix at the row, 0: not); deep also ``innov_code_Cxx``,
+                           ``innov_rate_Cxx``: the normalized innovation ``y / sqrt(S)``
+                           of the channel's measurements at the row's last update
 ``STEM_MODE_nis.csv``      one row per filter update: ``t_s``, the NIS per degree of
                            freedom of each measurement block (``nis_<block>``,
                            :data:`~sdr_di.integration.consistency.NIS_BLOCKS`) and
@@ -142,13 +144,18 @@ def write_channel_series(path: Path, res: IntegrationResult) -> Path:
     cn0 = res.cn0_dbhz if res.cn0_dbhz.shape == (n, n_ch) else np.full((n, n_ch), np.nan)
     used = res.used if res.used.shape == (n, n_ch) else np.zeros((n, n_ch), bool)
     names = [f"C{int(p):02d}" for p in res.prns]
+    cols = ["t_s", *(f"cn0_{c}" for c in names), *(f"used_{c}" for c in names)]
+    data = [res.t, cn0, used.astype(float)]
+    innov = np.asarray(res.innov, float)
+    if innov.shape == (n, 2 * n_ch) and np.isfinite(innov).any():
+        cols += [f"innov_{b}_{c}" for b in NIS_BLOCKS[res.mode] for c in names]
+        data.append(innov)
     with atomic_open(path, "w") as fh:
-        fh.write(f"# sdr-di {res.mode} channels: C/N0 [dB-Hz] and used (1 in the "
-                 "measurement vector) per channel and output row\n")
-        fh.write(",".join(["t_s", *(f"cn0_{c}" for c in names),
-                           *(f"used_{c}" for c in names)]) + "\n")
-        np.savetxt(fh, np.column_stack([res.t, cn0, used.astype(float)]).reshape(n, -1),
-                   delimiter=",", fmt="%.10g")
+        fh.write(f"# sdr-di {res.mode} channels: C/N0 [dB-Hz], used (1 in the measurement "
+                 "vector) and, in deep mode, the normalized innovation y/sqrt(S) of the code "
+                 "and rate measurement at the row's last update, per channel and output row\n")
+        fh.write(",".join(cols) + "\n")
+        np.savetxt(fh, np.column_stack(data).reshape(n, -1), delimiter=",", fmt="%.10g")
     return path
 
 

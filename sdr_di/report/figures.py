@@ -27,8 +27,8 @@ from ..constants import orbit_type
 from ..experiments.plotting import plain_log_axis, save_png
 
 __all__ = ["CN0_DROP_DB", "DPI", "Spans", "channel_figure", "error_figure",
-           "fix_status_figure", "nis_figure", "runs_of", "sats_used_figure", "sky_figure",
-           "trajectory_figure"]
+           "fix_status_figure", "innovation_figure", "nis_figure", "runs_of",
+           "sats_used_figure", "sky_figure", "trajectory_figure"]
 
 #: Resolution of the report's PNGs [dots per inch]: 9-inch figures 810 pixels wide, about
 #: 50-90 kB each (a 60 s run's page stays near 1 MB).
@@ -299,6 +299,38 @@ def channel_figure(path: Path, cn0: dict, lock: dict, *, spans: Spans, title: st
         "; red ticks: new phase arc (LLI)" if slips else "")
     ax1.set_title(key, fontsize="x-small", loc="left")
     fig.suptitle(f"{title}: C/N0 and lock per channel", fontsize="medium")
+    return save_png(fig, path, DPI)
+
+
+def innovation_figure(path: Path, innov: dict, *, spans: Spans, title: str) -> Path:
+    """Normalized innovation ``y / sqrt(S)`` of each channel, one panel per measurement
+    block (deep: code, rate), with the +-3 lines a consistent filter stays within.
+
+    Parameters
+    ----------
+    innov : dict
+        ``{block: {prn: (t [s], y / sqrt(S) [-])}}``.
+    """
+    blocks = list(innov)
+    fig, axes = _figure(len(blocks))
+    t_all = []
+    for ax, b in zip(axes, blocks):
+        spans.shade(ax)
+        for prn, (t, v) in sorted(innov[b].items()):
+            t = np.asarray(t, float)
+            ax.plot(t, np.asarray(v, float), lw=0.8, marker=_MARK[orbit_type(prn)], ms=2,
+                    markevery=0.1, label=f"C{prn:02d}")
+            t_all.append(t)
+        for s in (-3.0, 3.0):
+            ax.axhline(s, color="tab:red", lw=0.8, ls="--")
+        ax.axhline(0.0, color="0.5", lw=0.5)
+        ax.set_ylabel(f"{b} innovation\n/ sqrt(S) [-]")
+        ax.grid(True, alpha=0.3)
+    axes[0].set_xlim(*spans.xlim(np.concatenate(t_all) if t_all else np.zeros(1)))
+    axes[-1].set_xlabel(spans.xlabel)
+    axes[0].legend(fontsize="x-small", ncol=9, loc="upper left")
+    fig.suptitle(f"{title}: normalized innovation per channel (dashed: +-3)",
+                 fontsize="medium")
     return save_png(fig, path, DPI)
 
 

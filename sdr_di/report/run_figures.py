@@ -12,7 +12,8 @@ Figures (``NAME``; ``PLOTSTEM`` = ``STEM_MODE``, ``STEM_scalar`` for a scalar ru
 integrated     ``pos-error``, ``vel-error``, ``att-error`` (per ENU axis with the filter's
 (deep, loose,  +-3 sigma; with a reference), ``nis`` (per block against its band),
 tight, lc)     ``trajectory`` (east-north, with the truth), ``channels`` (C/N0 and use
-               per channel), ``sats-used``; table ``consistency``. ``lc`` has no position
+               per channel), ``innovations`` (deep: per channel, normalized),
+               ``sats-used``; table ``consistency``. ``lc`` has no position
                rows and no channels (its NIS is per row, all blocks together).
 scalar         ``fix-pos-error``, ``fix-vel-error`` (per ENU axis against the reference
                file the IF file's sidecar names), ``channels`` (C/N0 and lock from the
@@ -106,18 +107,22 @@ def draw_run(folder: str | Path, run: RunFiles, redraw: bool = False) -> RunSect
 # --- integrated modes and lc ------------------------------------------------------------
 
 def _channel_series(path: Path | None):
-    """``({prn: (t, cn0)}, {prn: (t, used)})`` of ``STEM_MODE_channels.csv``."""
+    """``({prn: (t, cn0)}, {prn: (t, used)}, {block: {prn: (t, innovation)}})`` of
+    ``STEM_MODE_channels.csv``."""
     if path is None:
-        return {}, {}
+        return {}, {}, {}
     c = read_csv_columns(path)
     t = c.get("t_s", np.zeros(0))
-    cn0, used = {}, {}
+    cn0, used, innov = {}, {}, {}
     for k, v in c.items():
         if k.startswith("cn0_C"):
             cn0[int(k[5:])] = (t, v)
         elif k.startswith("used_C"):
             used[int(k[6:])] = (t, v > 0.5)
-    return cn0, used
+        elif k.startswith("innov_"):
+            block, ch = k[6:].rsplit("_C", 1)
+            innov.setdefault(block, {})[int(ch)] = (t, v)
+    return cn0, used, innov
 
 
 def _integrated(folder: Path, run: RunFiles, redraw: bool) -> RunSection:
@@ -141,7 +146,7 @@ def _integrated(folder: Path, run: RunFiles, redraw: bool) -> RunSection:
     if rows["t_s"].size == 0:
         sec.failures.append(f"{run.stem}.csv has no rows: the run wrote no solution")
     handover = s.get("handover_s") if mode != "lc" else None
-    cn0, used = _channel_series(run.files.get("channels"))
+    cn0, used, innov = _channel_series(run.files.get("channels"))
     t = rows["t_s"]
     spans = F.Spans.of(t, rows.get("n_used"), cn0, handover)
     newest = _newest(run.files.values())
@@ -181,8 +186,18 @@ def _integrated(folder: Path, run: RunFiles, redraw: bool) -> RunSection:
                          "(the filter's use of the channel)",
              lambda p: F.channel_figure(p, cn0, used, spans=spans, title=title,
                                         lock_label="in the measurement vector"))
-        sec.notes.append("per-channel innovations are not written by the run; the NIS per "
-                         "measurement block stands for them")
+        if innov:
+            draw("innovations", "normalized innovation y/sqrt(S) of each channel's "
+                                "measurements at the last filter update of each row (within "
+                                "+-3 for a consistent filter)",
+                 lambda p: F.innovation_figure(p, innov, spans=spans, title=title))
+        elif mode == "deep":
+            sec.notes.append(f"no innovation columns in {run.stem}_channels.csv (a run "
+                             "written before they existed): no per-channel innovations")
+        else:
+            sec.notes.append(f"per-channel innovations are written in deep mode only ({mode}"
+                             " forms its measurement vector otherwise); the NIS per block "
+                             "stands for them")
     elif mode != "lc":
         sec.notes.append(f"no {run.stem}_channels.csv (a run written before it existed): "
                          "no C/N0 per channel")
