@@ -30,8 +30,8 @@ __all__ = ["CN0_DROP_DB", "DPI", "Spans", "channel_figure", "error_figure",
            "fix_status_figure", "innovation_figure", "nis_figure", "runs_of",
            "sats_used_figure", "sky_figure", "trajectory_figure"]
 
-#: Resolution of the report's PNGs [dots per inch]: 9-inch figures 810 pixels wide, about
-#: 50-90 kB each (a 60 s run's page stays near 1 MB).
+#: Resolution of the report's PNGs [dots per inch]: 9-inch figures 810 pixels wide, 15-200 kB
+#: each (a 60 s run's page is about 0.7 MB).
 DPI = 90
 #: A channel's C/N0 this far below its own median is shaded as a drop [dB].
 CN0_DROP_DB = 6.0
@@ -345,7 +345,11 @@ def sats_used_figure(path: Path, t_s, n_used, *, spans: Spans, title: str,
     ax.set_xlim(*spans.xlim(np.asarray(t_s, float)))
     ax.set_xlabel(spans.xlabel)
     ax.grid(True, alpha=0.3)
-    ax.yaxis.get_major_locator().set_params(integer=True)
+    from matplotlib.ticker import MaxNLocator
+
+    n = np.asarray(n_used, float)
+    ax.set_ylim(0, (np.nanmax(n) if np.isfinite(n).any() else 1) + 1)
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.legend(fontsize="x-small", loc="lower right")
     fig.suptitle(f"{title}: {label}", fontsize="medium")
     return save_png(fig, path, DPI)
@@ -366,6 +370,7 @@ def fix_status_figure(path: Path, t_s, status: Sequence[str], n_sats, pdop, *, s
     axes[0].set_ylim(-0.5, len(kinds) - 0.5)
     axes[1].step(t, np.asarray(n_sats, float), where="post", color="k")
     axes[1].set_ylabel("satellites\nin the fix")
+    axes[1].set_ylim(0, float(np.nanmax(np.r_[np.asarray(n_sats, float), 1.0])) + 1)
     axes[2].plot(t, np.asarray(pdop, float), color="k")
     axes[2].set_ylabel("PDOP")
     for ax in axes:

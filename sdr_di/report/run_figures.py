@@ -335,7 +335,18 @@ def _scalar(folder: Path, run: RunFiles, redraw: bool) -> RunSection:
         sec.failures.append(f"no fix in {n_rows} epochs: the run failed (what it wrote is "
                             "shown; 'sdr-di run' prints the likely causes)")
     timed = np.isfinite(sol["rx_sow"]) & (sol["rx_week"] > 0)
-    t_rows = rel(sol["rx_week"][timed], sol["rx_sow"][timed]) if t0 else np.zeros(0)
+    rate = rec.get("rate_hz")
+    if t0 and timed.any() and (~timed).any() and rate:
+        # epochs before the receiver time was set: one every 1 / rate before the first
+        # timed one (the run's epoch grid, STEM_scalar_summary.json)
+        t_all = np.full(n_rows, np.nan)
+        t_all[timed] = rel(sol["rx_week"][timed], sol["rx_sow"][timed])
+        i0 = int(np.argmax(timed))
+        t_all[:i0] = t_all[i0] - (i0 - np.arange(i0)) / float(rate)
+        timed = np.isfinite(t_all)
+        t_rows = t_all[timed]
+    else:
+        t_rows = rel(sol["rx_week"][timed], sol["rx_sow"][timed]) if t0 else np.zeros(0)
     if t0 and (~timed).any():
         sec.notes.append(f"{int((~timed).sum())} epochs before the receiver time was set are "
                          "left out of the time figures")

@@ -6,7 +6,7 @@ what ran (mode, filter, hand-over, channels), what failed (a file left under its
 name, no fix, the run's warnings), the error table and the consistency table, the figures
 (:mod:`~sdr_di.report.run_figures`, drawn from the folder's files when missing), and one
 line for each part left out with the reason. Figures are embedded as base64 PNG: the page
-reads offline and can be mailed alone (about 1 MB for a 60 s run).
+reads offline and can be mailed alone (about 0.7 MB per 60 s run).
 """
 
 from __future__ import annotations
