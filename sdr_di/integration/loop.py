@@ -162,6 +162,17 @@ def channel_innovations(m: Measurements, y: np.ndarray, S: np.ndarray) -> np.nda
     return out
 
 
+def _per_channels(innov: np.ndarray | None, n_ch: int) -> np.ndarray:
+    """:func:`channel_innovations` of an update (None: no update since the last row) for a
+    row of ``n_ch`` channels: a source that acquires channels later (loose, tight) may have
+    had fewer at the update, or more while its loop ran behind the receiver."""
+    out = np.full(2 * n_ch, math.nan)
+    if innov is not None:
+        k = min(innov.size // 2, n_ch)
+        out[:k], out[n_ch:n_ch + k] = innov[:k], innov[innov.size // 2:innov.size // 2 + k]
+    return out
+
+
 class MeasurementSource(Protocol):
     """A coupling mode's part of the loop (deep: :class:`~sdr_di.deep.vector_tracking.
     VectorTracking`).
@@ -444,8 +455,7 @@ class IntegrationLoop:
                 rows[k].append(v)
             rows["nis"].append(self._nis[0] / self._nis[1] if self._nis[1] else math.nan)
             self._nis = [0.0, 0]
-            rows["innov"].append(self._innov if self._innov is not None
-                                 else np.full(2 * m.used.size, math.nan))
+            rows["innov"].append(_per_channels(self._innov, m.used.size))
             self._innov = None
             P = self.kf.P                  # of the corrected solution (x fed back)
             rows["sd"].append(formal_sd(P, ins.llh))
