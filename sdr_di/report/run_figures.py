@@ -25,6 +25,7 @@ scalar         ``fix-pos-error``, ``fix-vel-error`` (per ENU axis against the re
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import html
 import math
@@ -366,8 +367,12 @@ def _scalar(folder: Path, run: RunFiles, redraw: bool) -> RunSection:
         from ..io.imu_files import read_truth
         from ..receiver.accuracy import solution_errors
 
-        truth = read_truth(truth_path)[0]
-        te, dr_e, dv_n = solution_errors(pvt_path, truth_path)
+        try:
+            truth = read_truth(truth_path)[0]
+            te, dr_e, dv_n = solution_errors(pvt_path, truth_path)
+        except SdrDiError as exc:
+            truth, te = None, np.zeros(0)
+            sec.notes.append(f"reference file not used: {exc}")
         if te.size:
             # ECEF -> ENU at the first fix (a run spans a few km: the rotation differs by
             # less than 1e-3 rad over it)
@@ -469,7 +474,11 @@ def _navdata(sec: RunSection, run: RunFiles) -> None:
         return
     from ..studies.tables import read_csv_table
 
-    head, rows = read_csv_table(path)
+    try:
+        head, rows = read_csv_table(path)
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        sec.notes.append(f"{path.name} not readable ({exc}): no navigation data table")
+        return
     from .sky import load_navigation
 
     nav = load_navigation([run.files.get("rinex_nav")])

@@ -258,7 +258,11 @@ def _field(line: str, k: int) -> tuple[float, str]:
     """Value (NaN if blank) and LLI character of observation ``k`` of a satellite line."""
     s = line[3 + 16 * k: 3 + 16 * k + 16]
     v = s[:14].strip()
-    return (float(v) if v else math.nan), (s[14:15] if len(s) > 14 else " ")
+    try:
+        x = float(v) if v else math.nan
+    except ValueError:                    # a damaged line: the value is not there
+        x = math.nan
+    return x, (s[14:15] if len(s) > 14 else " ")
 
 
 def read_obs_rinex(path: str | Path) -> ObsSeries | None:
