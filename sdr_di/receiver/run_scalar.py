@@ -165,7 +165,7 @@ class RunSummary:
     first_fix_s: float = math.nan
     #: per output epoch: ``t_s`` [s since the file start], ``n_sats`` (satellites in the fix,
     #: 0 without one), ``cn0_dbhz`` ``{prn: (t_s list, C/N0 list [dB-Hz])}`` of the
-    #: channels observed (for the run's plots)
+    #: channels observed (in memory, for a caller of the API; the report reads the files)
     series: dict = dataclasses.field(default_factory=dict)
 
 
