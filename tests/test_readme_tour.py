@@ -126,7 +126,9 @@ def _check(argv: list[str], out: str, place: Path) -> None:
                 for name in ("pos-error", "vel-error", "att-error", "nis", "trajectory",
                              "channels", "sats-used", "consistency"):
                     assert f'id="tour_{mode}-{name}"' in page, (mode, name)
-            assert 'id="tour_deep-innovations"' in page     # per channel: deep only
+            for mode in ("deep", "tight"):                  # per channel: not loose (a fix)
+                assert f'id="tour_{mode}-innovations"' in page, mode
+            assert 'id="tour_loose-innovations"' not in page
             for name in ("fix-pos-error", "fix-vel-error", "channels", "sky", "fix-status",
                          "trajectory", "navdata"):
                 assert f'id="tour_scalar-{name}"' in page, name

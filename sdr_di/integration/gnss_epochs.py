@@ -433,6 +433,10 @@ class ScalarEpochSource:
         self.n_channels = len(self.prns)
         self._used, self._cn0 = self._used[idx], self._cn0[idx]
 
+    def columns_of(self, prns) -> np.ndarray:
+        """Channel column of each of ``prns``, in their order (-1: not a column)."""
+        return np.array([self.col.get(int(p), -1) for p in prns], int)
+
     def used_mask(self, prns) -> np.ndarray:
         """Channel mask of ``prns``."""
         used = np.zeros(self.n_channels, bool)

@@ -131,6 +131,9 @@ class Measurements:
         on the intervals between epochs).
     channels : (n,) int array or None
         PRNs in ``z``'s order (tight; None where not needed).
+    columns : (n,) int array or None
+        Channel column (index into ``used``) of each channel in ``z``'s order (tight);
+        None: ``z`` holds the used channels in column order (deep).
     """
 
     z: np.ndarray | None
@@ -138,6 +141,7 @@ class Measurements:
     geometry: tuple
     used: np.ndarray
     channels: np.ndarray | None = None
+    columns: np.ndarray | None = None
 
     @property
     def n_used(self) -> int:
@@ -148,15 +152,16 @@ class Measurements:
 def channel_innovations(m: Measurements, y: np.ndarray, S: np.ndarray) -> np.ndarray:
     """Normalized innovation ``y_i / sqrt(S_ii)`` of each channel's two measurements,
     ``(2 n_ch,)``: the code (pseudorange) rows, then the rate rows, in channel order; NaN for
-    a channel not in ``z``. Mapped where ``z`` holds the used channels in channel order (deep:
-    ``m.channels`` None); NaN everywhere for loose (``z`` is a fix) and tight (``z`` in the
-    observations' order)."""
+    a channel not in ``z``. ``z``'s channels are those of ``m.columns`` (tight), else the used
+    ones in column order (deep); loose's ``z`` is a fix, not channels: NaN everywhere."""
     n_ch = m.used.size
     out = np.full(2 * n_ch, math.nan)
     n = y.size // 2
-    if m.channels is not None or y.size != 2 * n or n != m.n_used:
+    if y.size != 2 * n or n != m.n_used or (m.channels is not None and m.columns is None):
         return out
-    cols = np.flatnonzero(m.used)
+    cols = np.flatnonzero(m.used) if m.columns is None else np.asarray(m.columns, int)
+    if cols.size != n or (cols < 0).any():
+        return out
     w = y / np.sqrt(np.diagonal(S))
     out[cols], out[n_ch + cols] = w[:n], w[n:]
     return out

@@ -288,7 +288,7 @@ class IntegrationResult:
     updates : dict, per filter update ``t`` [s], ``nis`` (k, 2) per block, ``dof`` (k,)
         (:attr:`~sdr_di.integration.loop.IntegrationLoop.updates`)
     innov : (n, 2 n_ch) normalized innovation ``y_i / sqrt(S_ii)`` of each channel's code
-        then rate measurement at the row's last update (deep; NaN where not mapped:
+        then rate measurement at the row's last update (deep, tight; NaN where not mapped:
         :func:`~sdr_di.integration.loop.channel_innovations`)
     """
 

@@ -30,9 +30,10 @@ names and renamed when complete:
                            believed: :func:`~sdr_di.integration.assumptions.deep_beliefs`)
 ``STEM_MODE_channels.csv`` one row per output epoch: ``t_s`` and, per channel ``Cxx``,
                            ``cn0_Cxx`` [dB-Hz] and ``used_Cxx`` (1: in the measurement
-                           vector / fix at the row, 0: not); deep also ``innov_code_Cxx``,
-                           ``innov_rate_Cxx``: the normalized innovation ``y / sqrt(S)``
-                           of the channel's measurements at the row's last update
+                           vector / fix at the row, 0: not); deep and tight also
+                           ``innov_<block>_Cxx`` (blocks of NIS_BLOCKS): the normalized
+                           innovation ``y_i / sqrt(S_ii)`` of the channel's measurements
+                           at the row's last update
 ``STEM_MODE_nis.csv``      one row per filter update: ``t_s``, the NIS per degree of
                            freedom of each measurement block (``nis_<block>``,
                            :data:`~sdr_di.integration.consistency.NIS_BLOCKS`) and
@@ -152,8 +153,8 @@ def write_channel_series(path: Path, res: IntegrationResult) -> Path:
         data.append(innov)
     with atomic_open(path, "w") as fh:
         fh.write(f"# sdr-di {res.mode} channels: C/N0 [dB-Hz], used (1 in the measurement "
-                 "vector) and, in deep mode, the normalized innovation y/sqrt(S) of the code "
-                 "and rate measurement at the row's last update, per channel and output row\n")
+                 "vector) and, deep and tight, the normalized innovation y_i/sqrt(S_ii) of each "
+                 "measurement at the row's last update, per channel and output row\n")
         fh.write(",".join(cols) + "\n")
         np.savetxt(fh, np.column_stack(data).reshape(n, -1), delimiter=",", fmt="%.10g")
     return path

@@ -12,7 +12,7 @@ Figures (``NAME``; ``PLOTSTEM`` = ``STEM_MODE``, ``STEM_scalar`` for a scalar ru
 integrated     ``pos-error``, ``vel-error``, ``att-error`` (per ENU axis with the filter's
 (deep, loose,  +-3 sigma; with a reference), ``nis`` (per block against its band),
 tight, lc)     ``trajectory`` (east-north, with the truth), ``channels`` (C/N0 and use
-               per channel), ``innovations`` (deep: per channel, normalized),
+               per channel), ``innovations`` (deep, tight: per channel, normalized),
                ``sats-used``; table ``consistency``. ``lc`` has no position
                rows and no channels (its NIS is per row, all blocks together).
 scalar         ``fix-pos-error``, ``fix-vel-error`` (per ENU axis against the reference
@@ -29,6 +29,7 @@ import csv
 import dataclasses
 import html
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -188,17 +189,17 @@ def _integrated(folder: Path, run: RunFiles, redraw: bool) -> RunSection:
              lambda p: F.channel_figure(p, cn0, used, spans=spans, title=title,
                                         lock_label="in the measurement vector"))
         if innov:
-            draw("innovations", "normalized innovation y/sqrt(S) of each channel's "
+            draw("innovations", "normalized innovation y/sqrt(S_ii) of each channel's "
                                 "measurements at the last filter update of each row (within "
-                                "+-3 for a consistent filter)",
+                                "+-3 for a consistent filter; S_ii holds the error common to "
+                                "all channels, the clock, which the NIS whitens out)",
                  lambda p: F.innovation_figure(p, innov, spans=spans, title=title))
-        elif mode == "deep":
+        elif mode in ("deep", "tight"):
             sec.notes.append(f"no innovation columns in {run.stem}_channels.csv (a run "
                              "written before they existed): no per-channel innovations")
         else:
-            sec.notes.append(f"per-channel innovations are written in deep mode only ({mode}"
-                             " forms its measurement vector otherwise); the NIS per block "
-                             "stands for them")
+            sec.notes.append("loose's measurement is a position/velocity fix, not channels: "
+                             "no per-channel innovations (the NIS per block stands for them)")
     elif mode != "lc":
         sec.notes.append(f"no {run.stem}_channels.csv (a run written before it existed): "
                          "no C/N0 per channel")
@@ -433,7 +434,17 @@ def _sky(sec: RunSection, run: RunFiles, sol: dict, fix: np.ndarray, eph_path, t
          title: str) -> None:
     from .sky import load_navigation, sky_tracks
 
-    nav = load_navigation([run.files.get("rinex_nav"), eph_path])
+    tracked = []
+    if "channels" in run.files:
+        try:
+            tracked = [int(v) for v in read_csv_columns(run.files["channels"])["prn"]]
+        except (SdrDiError, KeyError, ValueError):
+            tracked = []
+    # the assistance file first; the records the run decoded only for satellites it lacks
+    # (reading them also imports georinex for its header check: about 1 s)
+    nav = load_navigation([eph_path])
+    if nav is None or not set(tracked) <= set(nav.prns):
+        nav = load_navigation([eph_path, run.files.get("rinex_nav")])
     if nav is None:
         sec.notes.append("no navigation data (no record decoded and no assistance file "
                          "found): no sky plot")
@@ -450,12 +461,6 @@ def _sky(sec: RunSection, run: RunFiles, sol: dict, fix: np.ndarray, eph_path, t
     else:
         sec.notes.append("no fix and no time reference: no sky plot")
         return
-    tracked = []
-    if "channels" in run.files:
-        try:
-            tracked = [int(v) for v in read_csv_columns(run.files["channels"])["prn"]]
-        except (SdrDiError, KeyError, ValueError):
-            tracked = []
     tracks = sky_tracks(nav, week, sow, r, prns=sorted(set(nav.prns) | set(tracked)))
     tracks = {p: v for p, v in tracks.items() if np.nanmax(v[1]) > 0}
     if not tracks:
@@ -464,6 +469,23 @@ def _sky(sec: RunSection, run: RunFiles, sol: dict, fix: np.ndarray, eph_path, t
     draw("sky", "sky plot: azimuth and elevation of each satellite with a broadcast record "
                 "(GEO squares, IGSO triangles, MEO circles; hollow: not tracked)",
          lambda p: F.sky_figure(p, tracks, title=title, used=tracked))
+
+
+def _nav_records(path: Path | None) -> dict[int, int]:
+    """Records per PRN of the RINEX 3 navigation file a run wrote (its ``SV / EPOCH / SV
+    CLK`` lines, ``Cnn yyyy mm dd ...``), counted from the text."""
+    out: dict[int, int] = {}
+    if path is None:
+        return out
+    try:
+        lines = Path(path).read_text(encoding="ascii", errors="replace").splitlines()
+    except OSError:
+        return out
+    body = next((i for i, ln in enumerate(lines) if "END OF HEADER" in ln), len(lines))
+    for ln in lines[body + 1:]:
+        if re.match(r"C\d\d \d{4} \d\d \d\d", ln):
+            out[int(ln[1:3])] = out.get(int(ln[1:3]), 0) + 1
+    return out
 
 
 def _navdata(sec: RunSection, run: RunFiles) -> None:
@@ -479,10 +501,7 @@ def _navdata(sec: RunSection, run: RunFiles) -> None:
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         sec.notes.append(f"{path.name} not readable ({exc}): no navigation data table")
         return
-    from .sky import load_navigation
-
-    nav = load_navigation([run.files.get("rinex_nav")])
-    recs = {p: len(v) for p, v in nav.records.items()} if nav is not None else {}
+    recs = _nav_records(run.files.get("rinex_nav"))
     cols = ["prn", "orbit", "state", "cn0_dbhz", "ephemeris_decoded", "toe", "subframes",
             "records in the navigation file"]
     out = [f'<table id="{run.stem}_scalar-navdata"><tr>'
