@@ -129,21 +129,29 @@ def test_report_of_a_folder_that_is_not_a_run_is_one_line_exit_2(tmp_path, capsy
         in err[0]
 
 
-def test_plain_log_axis_labels_read_as_decimals():
+def test_ratio_axes_read_as_plain_decimals():
+    """The study's ratio axes: log over a wide span, linear near 1, never ``10^x`` labels."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from sdr_di.experiments.plotting import plain_log_axis
+    from sdr_di.experiments.plotting import ratio_axis
 
-    fig = Figure()
-    ax = fig.subplots()
-    ax.plot([0, 1], [0.3, 3.0])
-    ax.set_yscale("log")
-    plain_log_axis(ax)
-    FigureCanvasAgg(fig).draw()
-    labels = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
-    assert labels and all(lab.replace(".", "", 1).isdigit() for lab in labels), labels
-    assert {"0.5", "1", "2"} <= set(labels)
+    def labels(values):
+        fig = Figure()
+        ax = fig.subplots()
+        ax.plot(range(len(values)), values, "o")
+        ratio_axis(ax, values)
+        FigureCanvasAgg(fig).draw()
+        out = [t.get_text() for t in ax.get_yticklabels() + ax.get_yticklabels(minor=True)
+               if t.get_text()]
+        return ax.get_yscale(), out
+
+    scale, wide = labels([0.3, 1.0, 3.0])
+    assert scale == "log" and {"0.5", "1", "2"} <= set(wide), wide
+    scale, near = labels([0.95, 0.995, 1.04])          # a ratio near 1: many labels, linear
+    assert scale == "linear" and len(near) >= 4, near
+    for lab in wide + near:
+        assert lab.replace(".", "", 1).replace("-", "", 1).isdigit(), lab
 
 
 def test_study_summary_shows_nees_and_nis_beside_the_rmse(tmp_path):

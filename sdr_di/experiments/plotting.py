@@ -16,8 +16,8 @@ import numpy as np
 
 from ..io.atomic import atomic_open
 
-__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "plain_log_axis", "save_png",
-           "time_series"]
+__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "plain_log_axis", "ratio_axis",
+           "save_png", "time_series"]
 
 PLOTS_SKIPPED = "plots skipped: matplotlib is not installed (pip install matplotlib)"
 
@@ -54,6 +54,22 @@ def plain_log_axis(ax, axis: str = "y") -> None:
     a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
     a.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     a.set_minor_formatter(NullFormatter())
+
+
+def ratio_axis(ax, values, axis: str = "y") -> None:
+    """Scale of an axis of ratios (1 = equal): logarithmic with :func:`plain_log_axis` when
+    ``values`` span a factor of 3 or more, else linear (a log axis over 0.9-1.1 would have
+    one labelled tick); plain decimal labels either way."""
+    from matplotlib.ticker import FuncFormatter
+
+    v = np.asarray([x for x in np.ravel(values) if np.isfinite(x) and x > 0], float)
+    wide = v.size > 0 and v.max() / v.min() >= 3.0
+    if wide:
+        (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
+        plain_log_axis(ax, axis)
+    else:
+        a = ax.yaxis if axis == "y" else ax.xaxis
+        a.set_major_formatter(FuncFormatter(lambda x, _: f"{x:.3g}"))
 
 
 def time_series(path: Path, t_by_label: dict[str, np.ndarray],

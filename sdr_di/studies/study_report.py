@@ -7,7 +7,8 @@
    win count and Holm p (3 significant digits; the best mean per quantity in bold), and the
    NIS per measurement block.
 4. Plots: paired ratios per cell (the factor levels) with their corrected intervals, on a
-   log axis labelled in plain decimals; error
+   log axis when they span a factor of 3 or more, else linear, labelled in plain decimals;
+   error
    norms of a representative run (seed 0 of the first cell).
 5. Failed or diverged runs, then the raw tables (cells, comparisons, runs, the spec),
    collapsed.
@@ -101,6 +102,7 @@ def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> 
     axes = fig.subplots(len(qs), 1, sharex=True, squeeze=False)[:, 0]
     width = 0.8 / max(1, len(filters))
     for ax, q in zip(axes, qs):
+        shown: list[float] = [1.0]
         for k, f in enumerate(filters):
             xs, ys, lo, hi = [], [], [], []
             for j, cn in enumerate(names):
@@ -118,9 +120,9 @@ def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> 
                 lo.append(y - a if math.isfinite(a) else 0.0)
                 hi.append(b - y if math.isfinite(b) else 0.0)
             ax.errorbar(xs, ys, yerr=[lo, hi], fmt="o", capsize=3, label=f)
+            shown += [y - a for y, a in zip(ys, lo)] + [y + b for y, b in zip(ys, hi)]
         ax.axhline(1.0, color="0.4", lw=0.8, ls="--")
-        ax.set_yscale("log")
-        plotting.plain_log_axis(ax)
+        plotting.ratio_axis(ax, shown)
         ax.set_ylabel(f"{_QLABEL[q]} RMSE\nratio to {baseline}")
         ax.grid(True, alpha=0.3, which="both")
     axes[-1].set_xticks(range(len(names)), names, rotation=25, ha="right")
