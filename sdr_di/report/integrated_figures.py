@@ -61,7 +61,9 @@ def integrated_section(folder: Path, run: RunFiles, redraw: bool) -> RunSection:
     handover = s.get("handover_s") if mode != "lc" else None
     cn0, used, innov = _channel_series(run.files.get("channels"))
     t = rows["t_s"]
-    spans = F.Spans.of(t, rows.get("n_used"), cn0, handover)
+    spans = F.Spans.of(t, rows.get("n_used"), cn0, handover,
+                       xlabel="time since the scenario start [s]" if mode == "lc"
+                       else "time since the IF start [s]")
     newest = newest_mtime(run.files.values())
     draw = Drawer(folder, run.stem, newest, redraw, sec)
     title = f"{run.stem}"
