@@ -117,7 +117,8 @@ def _figure(n_rows: int, height: float = 2.1, width: float = 9.0, sharex: bool =
 
 
 def error_figure(path: Path, t_s, err, sd, *, quantity: str, unit: str, spans: Spans,
-                 title: str, axis_names: Sequence[str] = _AXES) -> Path:
+                 title: str, axis_names: Sequence[str] = _AXES,
+                 envelope: str = "filter") -> Path:
     """Error per axis against time with the filter's +-3 sigma envelope.
 
     Parameters
@@ -131,6 +132,8 @@ def error_figure(path: Path, t_s, err, sd, *, quantity: str, unit: str, spans: S
         ``unit`` (``sd`` all NaN: no envelope, said in the legend).
     quantity, unit : str
         Axis label text, e.g. ``"position error"``, ``"m"``.
+    envelope : str
+        Whose sigma ``sd`` is (``"filter"``, ``"PVT"``), for the legend and title.
     """
     t = np.asarray(t_s, float)
     err = np.asarray(err, float).reshape(-1, 3)
@@ -140,7 +143,7 @@ def error_figure(path: Path, t_s, err, sd, *, quantity: str, unit: str, spans: S
         spans.shade(ax)
         if np.isfinite(sd[:, j]).any():
             ax.fill_between(t, -3 * sd[:, j], 3 * sd[:, j], color="tab:blue", alpha=0.18,
-                            lw=0, label="filter +-3 sigma")
+                            lw=0, label=f"{envelope} +-3 sigma")
         ax.plot(t, err[:, j], color="k", lw=0.9, label="error")
         ax.axhline(0.0, color="0.5", lw=0.5)
         out = np.abs(err[:, j]) > 3 * sd[:, j]
@@ -151,8 +154,8 @@ def error_figure(path: Path, t_s, err, sd, *, quantity: str, unit: str, spans: S
     axes[0].set_xlim(*spans.xlim(t))
     axes[-1].set_xlabel(spans.xlabel)
     axes[0].legend(fontsize="x-small", ncol=6, loc="upper left")
-    envelope = " and the filter's +-3 sigma" if np.isfinite(sd).any() else ""
-    fig.suptitle(f"{title}: {quantity} per axis [{unit}]{envelope}", fontsize="medium")
+    whose = f" and the {envelope}'s +-3 sigma" if np.isfinite(sd).any() else ""
+    fig.suptitle(f"{title}: {quantity} per axis [{unit}]{whose}", fontsize="medium")
     return save_png(fig, path, DPI)
 
 

@@ -122,30 +122,38 @@ def scalar_section(folder: Path, run: RunFiles, redraw: bool) -> RunSection:
         from ..receiver.accuracy import solution_errors
 
         try:
-            truth = read_truth(truth_path)[0]
+            truth, t_week, t_sow = read_truth(truth_path)
             te, dr_e, dv_n = solution_errors(pvt_path, truth_path)
         except SdrDiError as exc:
             truth, te = None, np.zeros(0)
             sec.notes.append(f"reference file not used: {exc}")
         if te.size:
+            # the PVT's formal 1-sigma of the same fixes (the times solution_errors uses)
+            tf = (sol["week"][fix] - (t_week or 0)) * SECONDS_PER_WEEK + sol["sow"][fix] - (
+                t_sow or 0.0)
+            k = np.clip(np.searchsorted(tf, te), 0, max(tf.size - 1, 0))
+            sd = {q: np.column_stack([sol[f"{q}_sd_{a}{u}"][fix][k] for a in "enu"])
+                  for q, u in (("pos", "_m"), ("vel", ""))}
             # ECEF -> ENU at the first fix (a run spans a few km: the rotation differs by
             # less than 1e-3 rad over it)
             lat0, lon0 = math.radians(sol["lat_deg"][fix][0]), math.radians(
                 sol["lon_deg"][fix][0])
             dr_n = dr_e @ C_e_n(lat0, lon0).T
-            nan = np.full_like(dr_n, np.nan)
             sp = F.Spans.of(te, None, cn0, xlabel="time since the IF start [s]")
             draw("fix-pos-error", "position error of each fix per axis (ENU) against the "
-                                  "reference file",
-                 lambda p: F.error_figure(p, te, dr_n, nan, quantity="position error",
-                                          unit="m", spans=sp, title=title))
+                                  "reference file, with the PVT's formal +-3 sigma",
+                 lambda p: F.error_figure(p, te, dr_n, sd["pos"], quantity="position error",
+                                          unit="m", spans=sp, title=title,
+                                          envelope="PVT"))
             draw("fix-vel-error", "velocity error of each fix per axis (ENU) against the "
-                                  "reference file",
-                 lambda p: F.error_figure(p, te, dv_n, nan, quantity="velocity error",
-                                          unit="m/s", spans=sp, title=title))
-            sec.notes.append("the solution file carries DOPs, not the PVT's covariance: the "
-                             "fix errors are drawn without a sigma envelope (PDOP in the fix "
-                             "status figure)")
+                                  "reference file, with the PVT's formal +-3 sigma",
+                 lambda p: F.error_figure(p, te, dv_n, sd["vel"], quantity="velocity error",
+                                          unit="m/s", spans=sp, title=title,
+                                          envelope="PVT"))
+            if not np.isfinite(sd["pos"]).any():
+                sec.notes.append("the solution file has no sigma columns (written before "
+                                 "they existed): the fix errors are drawn without an "
+                                 "envelope")
     elif truth_path is not None:
         sec.notes.append("no fix: no fix errors against the reference file")
     else:
