@@ -80,8 +80,8 @@ class RunResult:
         Output folder.
     files : dict of str to Path
         Output files by label, as ``sdr-di run`` prints them (scalar: ``pvt``, ``nmea``,
-        ``channels``, ``rinex_obs``, ``rinex_nav``; integrated modes: ``solution``,
-        ``summary``).
+        ``channels``, ``summary``, ``rinex_obs``, ``rinex_nav``; integrated modes:
+        ``solution``, ``summary``, ``channels``, ``nis``).
     metrics : dict
         Scalar: ``n_epochs``, ``n_fixes``, ``processed_s``. Integrated modes: the error
         figures vs the reference after the hand-over (``att_deg_rmse``, ``att_deg_max``

@@ -355,8 +355,10 @@ def _add_run(sub) -> None:
                    help="what the integration filter believes: IMU spec, oscillator, R, P0, "
                    "initial errors (docs/assumptions.md)")
     p.add_argument("--plots", action="store_true",
-                   help="also write the run's plots (errors against the reference when there "
-                   "is one, C/N0, satellites used) as PNG; 'sdr-di report OUT' renders them")
+                   help="also write the run's figures as PNG beside its files (errors per axis "
+                   "with the filter's 3-sigma, NIS, trajectory, C/N0 and lock per channel, "
+                   "sky, ...); 'sdr-di report OUT' draws the same ones when missing and "
+                   "writes OUT/report.html")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
 
@@ -401,7 +403,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                          progress=not args.no_progress, assist=assist,
                          receiver=None if tracking is None
                          else ScalarReceiver(config=tracking, log=False), nav=nav,
-                         duration_s=args.duration)
+                         duration_s=args.duration, truth_path=truth_path)
     rt = res.processed_s / max(res.wall_s, 1e-9)
     print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
           f"{res.n_fixes}/{res.n_epochs} epochs with a fix"
@@ -412,7 +414,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"  C{row['prn']:02d} {row['state']:8s} C/N0 {row['cn0_dbhz']} dB-Hz  "
               f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
     if args.plots:
-        _scalar_plots(res, source, truth_path)
+        _scalar_plots(res)
     if truth_path is not None and res.n_fixes:
         from .receiver.accuracy import solution_vs_truth
 
@@ -444,19 +446,13 @@ def _no_fix_diagnosis(args: argparse.Namespace, source, res) -> str:
             f"({source.duration_s:.1f} s)")
 
 
-def _scalar_plots(res, source, truth_path) -> None:
-    """``run --plots`` in scalar mode (:mod:`sdr_di.studies.run_report`)."""
-    from .studies.run_report import write_run_plots
-    from .receiver.accuracy import solution_errors
+def _scalar_plots(res) -> None:
+    """``run --plots`` in scalar mode: the report's figures of this run
+    (:func:`sdr_di.report.write_run_plots`, drawn from the files the run wrote)."""
+    from .report import write_run_plots
 
-    errors = None
-    if truth_path is not None and res.n_fixes:
-        errors = solution_errors(res.files["pvt"], truth_path)
-    sr = res.series
-    out = write_run_plots(res.files["pvt"].parent, res.files["pvt"].stem.removesuffix("_pvt")
-                          + "_scalar", t_s=sr["t_s"], n_used=sr["n_sats"],
-                          cn0_by_prn=sr["cn0_dbhz"], errors=errors)
-    _print_plots(out)
+    pvt = res.files["pvt"]
+    _print_plots(write_run_plots(pvt.parent, pvt.name.removesuffix("_pvt.csv")))
 
 
 def _print_plots(out) -> None:
@@ -640,20 +636,11 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
                   f"epochs; the rows before it have iono = 0): velocity "
                   f"{mi['vel_mps_rmse']:.4f} m/s, position {mi['pos_m_rmse']:.3f} m "
                   f"(max {mi['pos_m_max']:.3f})")
-    if args.plots:
-        import numpy as np
+    if args.plots:      # the report's figures, drawn from the files the run wrote
+        from .report import write_run_plots
 
-        from .studies.run_report import write_run_plots
-
-        err = None
-        if np.isfinite(r.pos_err).any():
-            ok = np.isfinite(r.pos_err).all(axis=1)
-            err = (r.t[ok], r.pos_err[ok], r.vel_err[ok])
-        cn0 = {p: (r.t, r.cn0_dbhz[:, j]) for j, p in enumerate(r.prns)
-               if j < r.cn0_dbhz.shape[1]}
         _print_plots(write_run_plots(res.files["solution"].parent,
-                                     res.files["solution"].stem, t_s=r.t, n_used=r.n_used,
-                                     cn0_by_prn=cn0, errors=err))
+                                     res.files["solution"].stem))
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
     return 0

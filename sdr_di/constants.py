@@ -38,6 +38,9 @@ CARRIER_PER_CHIP_B3I = F_B3I / CHIP_RATE_B3I
 
 #: GEO PRNs (D2 navigation message, no NH code).
 GEO_PRNS = frozenset((1, 2, 3, 4, 5, 59, 60, 61, 62, 63))
+#: IGSO PRNs (inclined geosynchronous orbits, D1 message): BDS-2 C06-C10, C13, C16 and
+#: BDS-3 C38-C40 (the constellation status of the China Satellite Navigation Office).
+IGSO_PRNS = frozenset((6, 7, 8, 9, 10, 13, 16, 38, 39, 40))
 #: All B3I PRNs.
 ALL_PRNS = tuple(range(1, 64))
 
@@ -80,3 +83,9 @@ def parse_prn(value) -> int:
 def is_geo(prn: int) -> bool:
     """Return True for a GEO PRN (D2 message, GEO orbit computation)."""
     return int(prn) in GEO_PRNS
+
+
+def orbit_type(prn: int) -> str:
+    """``"GEO"``, ``"IGSO"`` or ``"MEO"`` of a PRN (:data:`GEO_PRNS`, :data:`IGSO_PRNS`)."""
+    p = int(prn)
+    return "GEO" if p in GEO_PRNS else "IGSO" if p in IGSO_PRNS else "MEO"

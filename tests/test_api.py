@@ -84,7 +84,7 @@ def test_loose_run_writes_the_cli_solution(tmp_path):
     after the hand-over (default scenario, 13.5 s at 2.5 MHz: hand-over at about 12.2 s)."""
     files = sdr_di.generate(tmp_path / "g", duration_s=13.5, sampling_rate_hz=2.5e6)
     res = sdr_di.run(files.if_file, mode="loose", filter="ekf", out=tmp_path / "api")
-    assert res.mode == "loose" and set(res.files) == {"solution", "summary"}
+    assert res.mode == "loose" and set(res.files) == {"solution", "summary", "channels", "nis"}
     assert 10.0 < res.metrics["handover_s"] < 13.0
     assert res.metrics["n"] >= 3 and np.isfinite(res.metrics["pos_m_rmse"])
     assert res.metrics["pos_m_rmse"] < 5.0

@@ -66,12 +66,18 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
     assert nav_change[k] & 2 and summ["iono_from_s"] == pytest.approx(t[k])
     assert summ["metrics_after_iono"]["n"] == t.size - k
     assert "after the ionosphere take-up" in cap.out
-    # the run's plots, and `sdr-di report RUN_DIR` on an integrated run
-    assert sorted(p.name for p in out.glob("*.png")) == [
-        "default_deep_cn0.png", "default_deep_errors.png", "default_deep_sats.png"]
+    # the run's figures, and `sdr-di report RUN_DIR` on an integrated run
+    names = ("pos-error", "vel-error", "att-error", "nis", "trajectory", "channels",
+             "innovations", "sats-used")
+    assert sorted(p.name for p in out.glob("*.png")) == sorted(
+        f"default_deep_{n}.png" for n in names)
     assert main(["report", str(out)]) == 0
     page = (out / "report.html").read_text()
-    assert "deep, filter ekf" in page and page.count("<img") == 3
+    assert "deep, filter ekf" in page and page.count("<img") == len(names)
+    for n in names:
+        assert f'id="default_deep-{n}"' in page, n
+    assert 'id="default_deep-consistency"' in page
+    assert page.count("<td class=") == 5              # nis_code, nis_rate, 3 NEES verdicts
 
 
 def test_integrated_progress_bar_reports_the_start_up_and_ends_at_100(late_file, capsys):

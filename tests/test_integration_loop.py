@@ -174,3 +174,24 @@ def test_background_loops_restore_the_switch_interval_after_the_last_one():
     with pytest.raises(RuntimeError, match="loop failed"):
         b.join()
     assert sys.getswitchinterval() == s0
+
+
+def test_channel_innovations_land_in_their_channel_columns():
+    """``y_i / sqrt(S_ii)`` per channel: deep's ``z`` holds the used channels in column
+    order, tight's in its own order with ``columns``; loose's fix maps to no channel."""
+    from sdr_di.integration.loop import Measurements, channel_innovations
+
+    y = np.array([1.0, -2.0, 0.5, 3.0])                 # 2 channels: codes, then rates
+    S = np.diag([4.0, 1.0, 0.25, 9.0])
+    used = np.array([False, True, False, True])
+    deep = channel_innovations(Measurements(y, S, (), used), y, S)
+    assert np.array_equal(deep, [np.nan, 0.5, np.nan, -2.0, np.nan, 1.0, np.nan, 1.0],
+                          equal_nan=True)
+    tight = channel_innovations(Measurements(y, S, (), used, channels=np.array([27, 8]),
+                                             columns=np.array([3, 1])), y, S)
+    assert np.array_equal(tight, [np.nan, -2.0, np.nan, 0.5, np.nan, 1.0, np.nan, 1.0],
+                          equal_nan=True)
+    fix = np.arange(6.0)
+    loose = channel_innovations(Measurements(fix, np.eye(6), (), np.ones(5, bool)), fix,
+                                np.eye(6))
+    assert np.isnan(loose).all()

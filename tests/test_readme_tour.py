@@ -65,6 +65,7 @@ def _small(cmd: str, place: Path) -> list[str]:
 def test_the_tour_is_the_four_modes_a_study_and_its_report():
     subs = [shlex.split(c)[1] for c in TOUR]
     assert subs[0] == "generate" and subs[-2:] == ["study", "report"]
+    assert "report signals/out/tour_run" in " ".join(TOUR)      # the runs' own page
     modes = {"scalar"}
     for c in TOUR:
         a = shlex.split(c)
@@ -119,4 +120,15 @@ def _check(argv: list[str], out: str, place: Path) -> None:
         for f in ("runs.csv", "cells.csv", "report.html"):
             assert (d / f).is_file(), f
     elif sub == "report":
-        assert (Path(argv[1]) / "report.html").is_file()
+        page = (Path(argv[1]) / "report.html").read_text()
+        if Path(argv[1]).name == "tour_run":    # the runs' report: each run's figures
+            for mode in ("deep", "loose", "tight"):
+                for name in ("pos-error", "vel-error", "att-error", "nis", "trajectory",
+                             "channels", "sats-used", "consistency"):
+                    assert f'id="tour_{mode}-{name}"' in page, (mode, name)
+            for mode in ("deep", "tight"):                  # per channel: not loose (a fix)
+                assert f'id="tour_{mode}-innovations"' in page, mode
+            assert 'id="tour_loose-innovations"' not in page
+            for name in ("fix-pos-error", "fix-vel-error", "channels", "sky", "fix-status",
+                         "trajectory", "navdata"):
+                assert f'id="tour_scalar-{name}"' in page, name

@@ -246,3 +246,31 @@ def test_close_is_the_only_way_to_the_final_name(tmp_path):
     assert w.close() == path and path.exists() and not (tmp_path / "a.csv.part").exists()
     assert w.close() == path                       # idempotent
     assert len(sf.read_solution_csv(path)["sow"]) == 1
+
+
+def test_csv_sigma_columns_are_the_covariance_in_enu_and_old_files_still_read(tmp_path):
+    """``pos_sd_*``/``vel_sd_*``: sqrt of the diagonal of ``C_e_n P C_e_n^T`` of the fix's
+    ``cov`` / ``cov_v`` (x, y, z block); NaN without a fix; a 24-column file reads with
+    NaN sigmas."""
+    A = np.array([[4.0, 1.0, 0.5], [1.0, 9.0, -2.0], [0.5, -2.0, 16.0]])
+    cov = np.zeros((4, 4))
+    cov[:3, :3] = A
+    sol = dataclasses.replace(make_solution(lat_deg=40.0, lon_deg=116.0), cov=cov,
+                              cov_v=cov * 1e-4)
+    bad = make_solution(sow=SOW + 0.2, status=PvtStatus.TOO_FEW_SATELLITES)
+    path = sf.write_solution_csv(tmp_path / "s.csv", [sol, bad])
+    d = sf.read_solution_csv(path)
+    C = C_e_n(math.radians(40.0), math.radians(116.0))
+    enu = np.sqrt(np.diagonal(C @ A @ C.T))
+    got = [d[c][0] for c in ("pos_sd_e_m", "pos_sd_n_m", "pos_sd_u_m")]
+    assert got == pytest.approx(enu, abs=1e-4)
+    got = [d[c][0] for c in ("vel_sd_e", "vel_sd_n", "vel_sd_u")]
+    assert got == pytest.approx(enu * 1e-2, abs=1e-5)
+    assert np.isnan([d[c][1] for c in sf.CSV_COLUMNS[-6:]]).all()
+    # a file of the 24 columns before the sigmas
+    lines = path.read_text().splitlines()
+    head = [ln for ln in lines if ln.startswith("#")]
+    rows = [",".join(ln.split(",")[:24]) for ln in lines[len(head):]]
+    (tmp_path / "old.csv").write_text("\n".join(head + rows) + "\n")
+    old = sf.read_solution_csv(tmp_path / "old.csv")
+    assert old["h_m"][0] == d["h_m"][0] and np.isnan(old["pos_sd_e_m"]).all()

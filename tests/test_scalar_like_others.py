@@ -42,19 +42,35 @@ def test_scalar_run_uses_the_sidecar_ephemeris_and_reports_accuracy(short_file, 
     assert first[:2] == ["", ""] and first[3:5] == ["", ""], lines[1]
     assert lines[-1].split(",")[0] not in ("", "0")
 
-    # --plots: errors (the truth file is there), C/N0, satellites; `report RUN_DIR` renders
+    # --plots: the report's figures (the truth file is there); `report RUN_DIR` embeds them
+    names = ("fix-pos-error", "fix-vel-error", "channels", "sky", "fix-status", "trajectory")
     pngs = sorted(p.name for p in out.glob("*.png"))
-    assert pngs == ["default_scalar_cn0.png", "default_scalar_errors.png",
-                    "default_scalar_sats.png"]
+    assert pngs == sorted(f"default_scalar_{n}.png" for n in names)
     assert main(["report", str(out)]) == 0
     page = (out / "report.html").read_text()
-    assert "<h1>Run: run</h1>" in page and page.count("<img") == 3
-    assert "C08" in page                         # the channel table
+    assert "<h1>Run: run</h1>" in page and page.count("<img") == len(names)
+    for n in names:
+        assert f'id="default_scalar-{n}"' in page, n
+    assert 'id="default_scalar-navdata"' in page and "C08" in page and "IGSO" in page
+    assert "no reference trajectory" not in page and "no fix" not in page
 
     # the same file without assistance: no ephemeris decoded in 8.5 s, so no fix
     res = run_scalar(open_source(short_file), tmp_path / "cold", duration_s=8.5,
                      progress=False)
     assert res.n_fixes == 0 and sum(fix) > 0
+    # its report: the failure stated, what it wrote shown, each part left out said
+    assert main(["report", str(tmp_path / "cold")]) == 0
+    page = (tmp_path / "cold" / "report.html").read_text()
+    assert "no fix in" in page and "the run failed" in page
+    assert "no fix: no fix errors" in page and "fix-pos-error" not in page
+    assert 'id="default_scalar-channels"' in page and 'id="default_scalar-navdata"' in page
+    # stopped part-way: the solution file still under its .part name, no run record
+    cold = tmp_path / "cold"
+    (cold / "default_pvt.csv").rename(cold / "default_pvt.csv.part")
+    (cold / "default_scalar_summary.json").unlink()
+    assert main(["report", str(cold)]) == 0
+    page = (cold / "report.html").read_text()
+    assert "default_pvt.csv.part: still under its temporary name" in page
 
 
 def test_scalar_progress_bar_says_what_it_does_and_ends_at_100(short_file, tmp_path, capsys):

@@ -383,7 +383,7 @@ def _write_csv(path: Path, s: dict, params: dict, eff) -> None:
 def _plot(path: Path, series: dict, params: dict, seed: int) -> None:
     from matplotlib.figure import Figure
 
-    from .plotting import _save
+    from .plotting import save_png as _save
 
     fig = Figure(figsize=(8, 4.5), layout="constrained")
     ax = fig.subplots()

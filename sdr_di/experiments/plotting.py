@@ -16,7 +16,8 @@ import numpy as np
 
 from ..io.atomic import atomic_open
 
-__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "time_series"]
+__all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "plain_log_axis", "ratio_axis",
+           "save_png", "time_series"]
 
 PLOTS_SKIPPED = "plots skipped: matplotlib is not installed (pip install matplotlib)"
 
@@ -31,15 +32,44 @@ def matplotlib_missing() -> str | None:
     return None
 
 
-def _save(fig, path: Path) -> Path:
+def save_png(fig, path: Path, dpi: int = 100) -> Path:
+    """Draw a :class:`matplotlib.figure.Figure` with the Agg canvas (no display) and write it
+    as PNG at ``dpi``, atomically."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
+    fig.savefig(buf, format="png", dpi=dpi)
     with atomic_open(path, "wb") as fh:
         fh.write(buf.getvalue())
     return path
+
+
+def plain_log_axis(ax, axis: str = "y") -> None:
+    """Ticks of a log axis at 1, 2 and 5 per decade labelled as plain decimals (0.5, 1, 2),
+    never in the ``10^x`` forms a reader has to decode ("9.95x10^-1")."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    a = ax.yaxis if axis == "y" else ax.xaxis
+    a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    a.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    a.set_minor_formatter(NullFormatter())
+
+
+def ratio_axis(ax, values, axis: str = "y") -> None:
+    """Scale of an axis of ratios (1 = equal): logarithmic with :func:`plain_log_axis` when
+    ``values`` span a factor of 3 or more, else linear (a log axis over 0.9-1.1 would have
+    one labelled tick); plain decimal labels either way."""
+    from matplotlib.ticker import FuncFormatter
+
+    v = np.asarray([x for x in np.ravel(values) if np.isfinite(x) and x > 0], float)
+    wide = v.size > 0 and v.max() / v.min() >= 3.0
+    if wide:
+        (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
+        plain_log_axis(ax, axis)
+    else:
+        a = ax.yaxis if axis == "y" else ax.xaxis
+        a.set_major_formatter(FuncFormatter(lambda x, _: f"{x:.3g}"))
 
 
 def time_series(path: Path, t_by_label: dict[str, np.ndarray],
@@ -73,7 +103,7 @@ def time_series(path: Path, t_by_label: dict[str, np.ndarray],
     axes[0].legend(fontsize="x-small", ncol=5, loc="upper right")
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
+    return save_png(fig, path)
 
 
 def bar_chart(path: Path, labels: Sequence[str],
@@ -92,4 +122,4 @@ def bar_chart(path: Path, labels: Sequence[str],
     axes[-1].set_xticks(x, labels, rotation=30, ha="right")
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
+    return save_png(fig, path)

@@ -334,7 +334,7 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
 def _plot_sweep(path: Path, rows: list[dict], modes: list[str], params: dict, seed: int) -> None:
     from matplotlib.figure import Figure
 
-    from .plotting import _save
+    from .plotting import save_png as _save
 
     fig = Figure(figsize=(8, 5.5), layout="constrained")
     ax1, ax2 = fig.subplots(2, 1, sharex=True)

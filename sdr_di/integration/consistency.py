@@ -46,6 +46,10 @@ __all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "block_n
            "enu_blocks", "flat",
            "formal_sd", "nees_per_dof"]
 
+
+           "chi2_band", "consistency_summary", "effective_count", "enu_blocks", "flat",
+           "formal_sd", "nees_per_dof", "verdict"]
+
 #: NIS block names of each mode, in the order of ``z`` (two equal halves).
 NIS_BLOCKS = {"deep": ("code", "rate"), "tight": ("range", "rate"), "loose": ("vel", "pos"),
               "lc": ("vel", "pos")}
@@ -204,12 +208,26 @@ def ensemble_band(n_runs: int, dim: int, level: float = 0.95, *,
     return [lo, hi] if per_dof else [lo * dim, hi * dim]
 
 
+def verdict(value: float | None, band) -> str:
+    """``consistent``, ``pessimistic`` (below the band: the covariance is larger than the
+    errors) or ``overconfident`` (above it: smaller) of a mean NIS/NEES per degree of
+    freedom against its ``[low, high]`` band; ``no samples`` for a missing value."""
+    if value is None or not math.isfinite(float(value)):
+        return "no samples"
+    lo, hi = (math.nan if b is None else float(b) for b in band)
+    if value < lo:
+        return "pessimistic"
+    if value > hi:
+        return "overconfident"
+    return "consistent"
+
+
 def _entry(x: np.ndarray, dof: int) -> dict:
     x = np.asarray(x, float)
     fin = x[np.isfinite(x)]
     n_eff = effective_count(fin)
     return {"value": float(fin.mean()) if fin.size else None, "expected": 1.0,
-            "n": int(fin.size), "n_eff": n_eff,
+            "n": int(fin.size), "n_eff": n_eff, "dof": int(dof),
             "band": [None if not math.isfinite(v) else v for v in chi2_band(n_eff, dof)]
             if fin.size else [None, None]}
 
@@ -239,7 +257,8 @@ def consistency_summary(mode: str, t_nis, nis_blocks, nis_dof, t_rows, nees,
     dict
         ``{"band_rule": BAND_RULE, "nis_<block>": entry, "nees_pos" / "nees_vel" /
         "nees_att": entry}``; an entry is ``{"value" (mean), "expected": 1, "n", "n_eff",
-        "band": [low, high]}``, ``value`` None without samples.
+        "dof" (degrees of freedom of one sample), "band": [low, high]}``, ``value`` None
+        without samples.
     """
     out: dict = {"band_rule": BAND_RULE}
     nb = np.asarray(nis_blocks, float).reshape(-1, 2)

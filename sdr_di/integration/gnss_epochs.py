@@ -419,16 +419,23 @@ class ScalarEpochSource:
 
     def keep_columns(self, prns, rows: dict) -> None:
         """Narrow the channel columns to ``prns`` (a subset of :attr:`prns`, any order), in
-        the source and in the loop's ``rows`` (``used``, ``cn0``): a loop run behind the
+        the source and in the loop's ``rows`` (``used``, ``cn0``, ``innov``): a loop run behind the
         scalar receiver starts with a column for every channel of the receiver, since which
         of them will be acquired later is known only at the end."""
         idx = [self.col[int(p)] for p in prns]
         for key in ("used", "cn0"):
             rows[key] = [np.asarray(r)[idx] for r in rows[key]]
+        half = self.n_channels                  # innov: code then rate, per channel
+        rows["innov"] = [np.r_[np.asarray(r)[:half][idx], np.asarray(r)[half:][idx]]
+                         for r in rows.get("innov", [])]
         self.prns = tuple(int(p) for p in prns)
         self.col = {p: i for i, p in enumerate(self.prns)}
         self.n_channels = len(self.prns)
         self._used, self._cn0 = self._used[idx], self._cn0[idx]
+
+    def columns_of(self, prns) -> np.ndarray:
+        """Channel column of each of ``prns``, in their order (-1: not a column)."""
+        return np.array([self.col.get(int(p), -1) for p in prns], int)
 
     def used_mask(self, prns) -> np.ndarray:
         """Channel mask of ``prns``."""

@@ -69,11 +69,11 @@ from .consistency import block_nis, enu_blocks, formal_sd, nees_per_dof
 from .metrics import nav_errors
 
 __all__ = ["BackgroundLoop", "IntegrationLoop", "Interval", "MeasurementSource",
-           "Measurements"]
+           "Measurements", "channel_innovations"]
 
 #: Columns of :attr:`IntegrationLoop.rows` (one entry per solution row).
 ROW_KEYS = ("t", "sow", "llh", "v", "att", "b", "d", "n", "ae", "ve", "pe", "used", "cn0",
-            "nis", "nav", "sd", "nees")
+            "nis", "nav", "sd", "nees", "innov")
 
 
 @dataclasses.dataclass
@@ -131,6 +131,9 @@ class Measurements:
         on the intervals between epochs).
     channels : (n,) int array or None
         PRNs in ``z``'s order (tight; None where not needed).
+    columns : (n,) int array or None
+        Channel column (index into ``used``) of each channel in ``z``'s order (tight);
+        None: ``z`` holds the used channels in column order (deep).
     """
 
     z: np.ndarray | None
@@ -138,11 +141,41 @@ class Measurements:
     geometry: tuple
     used: np.ndarray
     channels: np.ndarray | None = None
+    columns: np.ndarray | None = None
 
     @property
     def n_used(self) -> int:
         """Channels in the measurement vector."""
         return int(self.used.sum())
+
+
+def channel_innovations(m: Measurements, y: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """Normalized innovation ``y_i / sqrt(S_ii)`` of each channel's two measurements,
+    ``(2 n_ch,)``: the code (pseudorange) rows, then the rate rows, in channel order; NaN for
+    a channel not in ``z``. ``z``'s channels are those of ``m.columns`` (tight), else the used
+    ones in column order (deep); loose's ``z`` is a fix, not channels: NaN everywhere."""
+    n_ch = m.used.size
+    out = np.full(2 * n_ch, math.nan)
+    n = y.size // 2
+    if y.size != 2 * n or n != m.n_used or (m.channels is not None and m.columns is None):
+        return out
+    cols = np.flatnonzero(m.used) if m.columns is None else np.asarray(m.columns, int)
+    if cols.size != n or (cols < 0).any():
+        return out
+    w = y / np.sqrt(np.diagonal(S))
+    out[cols], out[n_ch + cols] = w[:n], w[n:]
+    return out
+
+
+def _per_channels(innov: np.ndarray | None, n_ch: int) -> np.ndarray:
+    """:func:`channel_innovations` of an update (None: no update since the last row) for a
+    row of ``n_ch`` channels: a source that acquires channels later (loose, tight) may have
+    had fewer at the update, or more while its loop ran behind the receiver."""
+    out = np.full(2 * n_ch, math.nan)
+    if innov is not None:
+        k = min(innov.size // 2, n_ch)
+        out[:k], out[n_ch:n_ch + k] = innov[:k], innov[innov.size // 2:innov.size // 2 + k]
+    return out
 
 
 class MeasurementSource(Protocol):
@@ -242,6 +275,7 @@ class IntegrationLoop:
         self.n_intervals = 0
         self.rows: dict = {k: [] for k in ROW_KEYS}
         self._nis = [0.0, 0]
+        self._innov: np.ndarray | None = None    # of the last update since the last row
         #: per update: time [s], NIS per degree of freedom of the two halves of ``z``
         #: (:func:`~sdr_di.integration.consistency.block_nis`) and the half's size
         self.updates: dict = {"t": [], "nis": [], "dof": []}
@@ -378,6 +412,7 @@ class IntegrationLoop:
             self.updates["t"].append(iv.k1 / self.fs)
             self.updates["nis"].append(block_nis(kf.y, kf.S, 2))
             self.updates["dof"].append(m.z.size // 2)
+            self._innov = channel_innovations(m, kf.y, kf.S)
         self.profile["filter"] += time.perf_counter() - ta
 
     def feed_back(self, iv: Interval, source: MeasurementSource,
@@ -425,6 +460,8 @@ class IntegrationLoop:
                 rows[k].append(v)
             rows["nis"].append(self._nis[0] / self._nis[1] if self._nis[1] else math.nan)
             self._nis = [0.0, 0]
+            rows["innov"].append(_per_channels(self._innov, m.used.size))
+            self._innov = None
             P = self.kf.P                  # of the corrected solution (x fed back)
             rows["sd"].append(formal_sd(P, ins.llh))
             if self.truth is not None:
@@ -448,7 +485,8 @@ class IntegrationLoop:
 
     def columns(self, n_ch: int) -> dict:
         """The rows as arrays: ``(n,)`` or ``(n, 3)`` floats, ``n`` and ``nav`` ints,
-        ``used`` ``(n, n_ch)`` bool, ``cn0`` ``(n, n_ch)``, ``sd`` ``(n, 9)``, ``nees``
+        ``used`` ``(n, n_ch)`` bool, ``cn0`` ``(n, n_ch)``, ``innov`` ``(n, 2 n_ch)``
+        (:func:`channel_innovations` of the row's last update), ``sd`` ``(n, 9)``, ``nees``
         ``(n, 3)``; ``updates``: :attr:`updates` as arrays (``nis`` ``(k, 2)``)."""
         rows = self.rows
 
@@ -462,6 +500,7 @@ class IntegrationLoop:
         out["nav"] = np.asarray(rows["nav"], int)
         out["used"] = np.asarray(rows["used"], bool).reshape(-1, n_ch)
         out["cn0"] = arr("cn0", n_ch)
+        out["innov"] = arr("innov", 2 * n_ch)
         out["sd"] = arr("sd", 9)
         out["nees"] = arr("nees", 3)
         up = self.updates

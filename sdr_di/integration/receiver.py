@@ -289,6 +289,9 @@ class IntegrationResult:
         (:attr:`~sdr_di.integration.loop.IntegrationLoop.updates`)
     deep_measurements : str or None, deep mode's measurement architecture
         (``IntegrationConfig.deep_measurements``); None in loose and tight
+    innov : (n, 2 n_ch) normalized innovation ``y_i / sqrt(S_ii)`` of each channel's code
+        then rate measurement at the row's last update (deep, tight; NaN where not mapped:
+        :func:`~sdr_di.integration.loop.channel_innovations`)
     """
 
     t: np.ndarray
@@ -319,6 +322,7 @@ class IntegrationResult:
     nees: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
     updates: dict = dataclasses.field(default_factory=dict)
     deep_measurements: str | None = None
+    innov: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 0)))
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
@@ -684,7 +688,7 @@ class IntegratedReceiver:
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
             nav_change=col["nav"], navigation=navigation, mode=self.config.mode,
             filter_used=getattr(self, "filter_used", None),
-            sd=col["sd"], nees=col["nees"], updates=col["updates"],
+            sd=col["sd"], nees=col["nees"], updates=col["updates"], innov=col["innov"],
             deep_measurements=(self.config.deep_measurements if self.config.mode == "deep"
                                else None))
 

@@ -28,6 +28,17 @@ names and renamed when complete:
                            ``truth`` (from the sidecar: scenario, receiver clock,
                            oscillator, IMU spec) and ``assumptions`` (what the filter
                            believed: :func:`~sdr_di.integration.assumptions.deep_beliefs`)
+``STEM_MODE_channels.csv`` one row per output epoch: ``t_s`` and, per channel ``Cxx``,
+                           ``cn0_Cxx`` [dB-Hz] and ``used_Cxx`` (1: in the measurement
+                           vector / fix at the row, 0: not); deep and tight also
+                           ``innov_<block>_Cxx`` (blocks of NIS_BLOCKS): the normalized
+                           innovation ``y_i / sqrt(S_ii)`` of the channel's measurements
+                           at the row's last update
+``STEM_MODE_nis.csv``      one row per filter update: ``t_s``, the NIS per degree of
+                           freedom of each measurement block (``nis_<block>``,
+                           :data:`~sdr_di.integration.consistency.NIS_BLOCKS`) and
+                           ``dof``, the block size (the per-update samples the summary's
+                           ``consistency`` averages; ``sdr-di report`` draws them)
 
 Warnings of the run (:class:`~sdr_di.receiver.navdata.NavDataWarning`: no ionosphere model
 at the hand-over) are printed as one ``sdr-di: warning: ...`` line each on stderr and kept
@@ -48,7 +59,7 @@ import numpy as np
 
 from ..errors import ImuDataError
 from ..integration.assumptions import deep_beliefs, sidecar_truth
-from ..integration.consistency import SD_COLUMNS
+from ..integration.consistency import NIS_BLOCKS, SD_COLUMNS
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..io.sidecar import companion_files
 from ..receiver.ifreader import IfSource
@@ -58,7 +69,8 @@ from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import TrackingConfig
 from .receiver import IntegrationConfig, IntegratedReceiver, IntegrationResult, check_imu_span
 
-__all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
+__all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_channel_series",
+           "write_deep_csv", "write_nis_series"]
 
 DEEP_COLUMNS = (
     "t_s", "bdt_week", "bdt_sow", "lat_deg", "lon_deg", "h_m", "v_e", "v_n", "v_u",
@@ -127,6 +139,45 @@ def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
                  f"{res.handover_s:.3f} s, channels {' '.join(f'C{p:02d}' for p in res.prns)}\n")
         fh.write(",".join(DEEP_COLUMNS) + "\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.12g")
+    return path
+
+
+def write_channel_series(path: Path, res: IntegrationResult) -> Path:
+    """Write ``STEM_MODE_channels.csv``: per output row, each channel's C/N0 [dB-Hz] and
+    whether it was in the measurement vector (atomic)."""
+    n, n_ch = res.t.size, len(res.prns)
+    cn0 = res.cn0_dbhz if res.cn0_dbhz.shape == (n, n_ch) else np.full((n, n_ch), np.nan)
+    used = res.used if res.used.shape == (n, n_ch) else np.zeros((n, n_ch), bool)
+    names = [f"C{int(p):02d}" for p in res.prns]
+    cols = ["t_s", *(f"cn0_{c}" for c in names), *(f"used_{c}" for c in names)]
+    data = [res.t, cn0, used.astype(float)]
+    innov = np.asarray(res.innov, float)
+    if innov.shape == (n, 2 * n_ch) and np.isfinite(innov).any():
+        cols += [f"innov_{b}_{c}" for b in NIS_BLOCKS[res.mode] for c in names]
+        data.append(innov)
+    with atomic_open(path, "w") as fh:
+        fh.write(f"# sdr-di {res.mode} channels: C/N0 [dB-Hz], used (1 in the measurement "
+                 "vector) and, deep and tight, the normalized innovation y_i/sqrt(S_ii) of each "
+                 "measurement at the row's last update, per channel and output row\n")
+        fh.write(",".join(cols) + "\n")
+        np.savetxt(fh, np.column_stack(data).reshape(n, -1), delimiter=",", fmt="%.10g")
+    return path
+
+
+def write_nis_series(path: Path, res: IntegrationResult) -> Path:
+    """Write ``STEM_MODE_nis.csv``: per filter update, the NIS per degree of freedom of each
+    measurement block and the block size (atomic)."""
+    up = res.updates or {}
+    t = np.asarray(up.get("t", np.zeros(0)), float)
+    nis = np.asarray(up.get("nis", np.zeros((0, 2))), float).reshape(-1, 2)
+    dof = np.asarray(up.get("dof", np.zeros(0)), float)
+    blocks = NIS_BLOCKS.get(res.mode, ("a", "b"))
+    with atomic_open(path, "w") as fh:
+        fh.write(f"# sdr-di {res.mode} NIS per degree of freedom of each measurement block "
+                 "at each filter update; dof = block size\n")
+        fh.write(",".join(["t_s", *(f"nis_{b}" for b in blocks), "dof"]) + "\n")
+        np.savetxt(fh, np.column_stack([t, nis, dof]).reshape(t.size, 4), delimiter=",",
+                   fmt="%.10g")
     return path
 
 
@@ -210,7 +261,9 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     out_dir = ensure_output_dir(out_dir)
     stem = stem or source.path.stem
     files = {"solution": out_dir / f"{stem}_{cfg.mode}.csv",
-             "summary": out_dir / f"{stem}_{cfg.mode}_summary.json"}
+             "summary": out_dir / f"{stem}_{cfg.mode}_summary.json",
+             "channels": out_dir / f"{stem}_{cfg.mode}_channels.csv",
+             "nis": out_dir / f"{stem}_{cfg.mode}_nis.csv"}
     bar = None
     t_wall = time.perf_counter()
     cb = None
@@ -256,6 +309,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     t_iono = iono_take_up_s(res)
     m_iono = None if t_iono is None else res.metrics(t0=t_iono)
     write_deep_csv(files["solution"], res)
+    write_channel_series(files["channels"], res)
+    write_nis_series(files["nis"], res)
     summary = {
         "mode": res.mode, "filter": res.filter_name, "handover_s": res.handover_s,
         "nco_latency": cfg.nco_latency if res.mode == "deep" else None,

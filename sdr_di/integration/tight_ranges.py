@@ -146,7 +146,8 @@ class TightRangeSource(ScalarEpochSource):
                                           self.tracking_config)
         z = np.r_[P - obs.pseudorange_m[idx], D - obs.pseudorange_rate_mps[idx]]
         return Measurements(z=z, R=np.diag(np.r_[var_p, var_d]), geometry=(iv.nav1.llh, U),
-                            used=self.used_mask(obs.prn[idx]), channels=obs.prn[idx])
+                            used=self.used_mask(obs.prn[idx]), channels=obs.prn[idx],
+                            columns=self.columns_of(obs.prn[idx]))
 
     def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
              m: Measurements) -> Measurements:
@@ -170,4 +171,5 @@ class TightRangeSource(ScalarEpochSource):
             return Measurements(z=None, R=None, geometry=(),
                                 used=np.zeros(self.n_channels, bool))
         return Measurements(z=m.z[rows], R=m.R[np.ix_(rows, rows)], geometry=(llh, U[keep]),
-                            used=self.used_mask(prns), channels=prns)
+                            used=self.used_mask(prns), channels=prns,
+                            columns=self.columns_of(prns))

@@ -37,6 +37,7 @@ import numpy as np
 
 from ..constants import SECONDS_PER_WEEK
 from ..errors import OutputError, SdrDiError
+from ..frames import C_e_n
 from ..timebase import bdt_minus_utc, bdt_to_datetime
 from .atomic import FinalizingWriter, atomic_open
 
@@ -64,14 +65,20 @@ CSV_COLUMNS = (
     "lat_deg", "lon_deg", "h_m", "x_m", "y_m", "z_m",
     "ve_mps", "vn_mps", "vu_mps", "clock_bias_m", "clock_drift_mps",
     "n_sats", "gdop", "pdop", "hdop", "vdop", "tdop", "status", "velocity_status",
+    "pos_sd_e_m", "pos_sd_n_m", "pos_sd_u_m", "vel_sd_e", "vel_sd_n", "vel_sd_u",
 )
+#: Columns a file written before the formal sigmas were added ends with (read with the
+#: sigma columns NaN).
+_CSV_COLUMNS_V1_0 = CSV_COLUMNS[:-6]
 _INT_COLS = ("week", "rx_week", "n_sats")
 _STR_COLS = ("utc", "status", "velocity_status")
 _FMT = {"sow": "%.9f", "rx_sow": "%.9f", "lat_deg": "%.10f", "lon_deg": "%.10f",
         "h_m": "%.4f", "x_m": "%.4f", "y_m": "%.4f", "z_m": "%.4f", "ve_mps": "%.5f",
         "vn_mps": "%.5f", "vu_mps": "%.5f", "clock_bias_m": "%.4f",
         "clock_drift_mps": "%.5f", "gdop": "%.3f", "pdop": "%.3f", "hdop": "%.3f",
-        "vdop": "%.3f", "tdop": "%.3f"}
+        "vdop": "%.3f", "tdop": "%.3f", **dict.fromkeys(
+            ("pos_sd_e_m", "pos_sd_n_m", "pos_sd_u_m"), "%.4f"),
+        **dict.fromkeys(("vel_sd_e", "vel_sd_n", "vel_sd_u"), "%.5f")}
 _KNOTS_PER_MPS = 3600.0 / 1852.0
 
 
@@ -140,7 +147,28 @@ def _csv_row(sol) -> str:
         vals[name] = _f(v, _FMT[name])
     for name in ("gdop", "pdop", "hdop", "vdop", "tdop"):
         vals[name] = _f(getattr(sol.dops, name), _FMT[name])
+    sd = _enu_sd(sol)
+    for j, name in enumerate(CSV_COLUMNS[-6:]):
+        vals[name] = _f(sd[j], _FMT[name])
     return ",".join(vals[c] for c in CSV_COLUMNS) + "\n"
+
+
+def _enu_sd(sol) -> np.ndarray:
+    """The fix's formal 1-sigma (6,): position E, N, U [m] from ``cov`` (x, y, z block) and
+    velocity E, N, U [m/s] from ``cov_v``, rotated from ECEF to ENU at the fix; NaN without
+    a valid fix (position) or velocity solution."""
+    out = np.full(6, math.nan)
+    llh = np.asarray(getattr(sol, "llh", np.full(3, math.nan)), float)
+    if not getattr(sol, "valid", str(sol.status) == "fix") or not np.isfinite(llh[:2]).all():
+        return out
+    C = C_e_n(llh[0], llh[1])
+    for k, cov in enumerate((getattr(sol, "cov", None), getattr(sol, "cov_v", None))):
+        P = np.asarray(cov if cov is not None else np.full((4, 4), math.nan), float)[:3, :3]
+        if np.isfinite(P).all():
+            out[3 * k:3 * k + 3] = np.sqrt(np.clip(np.diagonal(C @ P @ C.T), 0.0, None))
+    if str(sol.velocity_status) != "fix":
+        out[3:] = math.nan
+    return out
 
 
 _CSV_HEADER = (
@@ -152,6 +180,8 @@ _CSV_HEADER = (
     "# velocity: ve_mps, vn_mps, vu_mps East-North-Up [m/s]",
     "# clock: clock_bias_m = c * (receiver clock - BDT) [m]; clock_drift_mps its rate [m/s]",
     "# geometry: n_sats used; gdop, pdop, hdop, vdop, tdop (unweighted, ENU)",
+    ("# sigma: pos_sd_e_m, pos_sd_n_m, pos_sd_u_m [m], vel_sd_e, vel_sd_n, vel_sd_u [m/s]: the "
+     "fix's formal 1-sigma, East-North-Up, from the weighted least squares' covariance"),
     ("# status: fix | too_few_satellites | bad_geometry | no_convergence | large_residuals "
      "(| not_computed for velocity_status); nan = no value"),
 )
@@ -300,7 +330,8 @@ def read_solution_csv(path: str | Path) -> dict[str, np.ndarray]:
     -------
     dict
         Column name -> array: ``week``, ``rx_week``, ``n_sats`` int64; ``utc``, ``status``,
-        ``velocity_status`` str; everything else float64 (NaN where the file says ``nan``).
+        ``velocity_status`` str; everything else float64 (NaN where the file says ``nan``;
+        the sigma columns NaN in a file written before they existed).
 
     Raises
     ------
@@ -318,7 +349,8 @@ def read_solution_csv(path: str | Path) -> dict[str, np.ndarray]:
     i = 0
     while i < len(lines) and lines[i].startswith("#"):
         i += 1
-    if i >= len(lines) or tuple(lines[i].split(",")) != CSV_COLUMNS:
+    names = tuple(lines[i].split(",")) if i < len(lines) else ()
+    if names not in (CSV_COLUMNS, _CSV_COLUMNS_V1_0):
         raise SolutionFileError(f"{path}: line {i + 1}: expected the column line "
                                 f"{','.join(CSV_COLUMNS)}")
     cols: dict[str, list] = {c: [] for c in CSV_COLUMNS}
@@ -326,9 +358,10 @@ def read_solution_csv(path: str | Path) -> dict[str, np.ndarray]:
         if not line.strip():
             continue
         parts = line.split(",")
-        if len(parts) != len(CSV_COLUMNS):
+        if len(parts) != len(names):
             raise SolutionFileError(f"{path}: line {ln}: {len(parts)} fields, expected "
-                                    f"{len(CSV_COLUMNS)}")
+                                    f"{len(names)}")
+        parts += ["nan"] * (len(CSV_COLUMNS) - len(names))    # an older file: no sigmas
         for c, p in zip(CSV_COLUMNS, parts):
             try:
                 # an empty week / seconds of week: the time is not known yet (0 and NaN)

@@ -14,11 +14,15 @@ Outputs in ``out_dir`` (``STEM`` = IF file name without extension):
 ``STEM_channels.csv``  one row per channel: final state, C/N0, decoded ephemeris, time
 ``STEM_obs.rnx``   RINEX 3.05 observations (B3I ``C6I L6I D6I S6I``, BDT)
 ``STEM_nav.rnx``   RINEX 3.05 navigation file of the decoded records and Klobuchar set
+``STEM_scalar_summary.json``  the run's record: mode ``scalar``, its input files (IF,
+                   sidecar, reference trajectory, assistance navigation file: absolute
+                   paths), start time, epochs and fixes (read by ``sdr-di report``)
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import time
 from pathlib import Path
@@ -161,7 +165,7 @@ class RunSummary:
     first_fix_s: float = math.nan
     #: per output epoch: ``t_s`` [s since the file start], ``n_sats`` (satellites in the fix,
     #: 0 without one), ``cn0_dbhz`` ``{prn: (t_s list, C/N0 list [dB-Hz])}`` of the
-    #: channels observed (for the run's plots)
+    #: channels observed (in memory, for a caller of the API; the report reads the files)
     series: dict = dataclasses.field(default_factory=dict)
 
 
@@ -212,7 +216,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
                stem: str | None = None, progress: bool = True,
                receiver: ScalarReceiver | None = None,
                assist: bool | dict[int, float | None] = True, nav=None,
-               duration_s: float | None = None) -> RunSummary:
+               duration_s: float | None = None,
+               truth_path: str | Path | None = None) -> RunSummary:
     """Run the scalar receiver over ``source`` and write the solution files.
 
     Parameters
@@ -245,6 +250,10 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         decoded ephemeris. None: decoded data only.
     duration_s : float, optional
         Process only the first ``duration_s`` seconds of the file.
+    truth_path : path, optional
+        The reference trajectory the caller compares the fixes with (``--truth``, else the
+        sidecar's): recorded in ``STEM_scalar_summary.json`` so that ``sdr-di report`` finds
+        it wherever the outputs went. Not read here.
 
     Raises
     ------
@@ -267,7 +276,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     # after a blockage, lost channels are searched around, and timed from, the last fix
     rx.predictor = FixPredictor(engine, source.sampling_rate_hz, source.carrier_hz)
     files = {"pvt": out_dir / f"{stem}_pvt.csv", "nmea": out_dir / f"{stem}.nmea",
-             "channels": out_dir / f"{stem}_channels.csv"}
+             "channels": out_dir / f"{stem}_channels.csv",
+             "summary": out_dir / f"{stem}_scalar_summary.json"}
     files["rinex_obs"], files["rinex_nav"] = (out_dir / n for n in rinex_names(stem))
     csv_w = SolutionCsvWriter(files["pvt"])
     nmea_w = NmeaWriter(files["nmea"], rate_hz=None)
@@ -331,6 +341,8 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
         csv_w.close()
         nmea_w.close()
         rinex_w.close()
+        _write_record(files["summary"], source, nav, truth_path, counts, processed_s,
+                      rate_hz)
         if bar is not None:    # the last epoch is before the end of the file: the run is
             bar.update(bar.total - bar.n)    # done, so is the bar
     except BaseException:
@@ -345,6 +357,26 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     return RunSummary(files, counts["epochs"], counts["fixes"], processed_s, wall,
                       channels, dict(rx.profile), counts.get("first_fix_s", math.nan),
                       series)
+
+
+def _write_record(path: Path, source: IfSource, nav, truth_path, counts: dict,
+                  processed_s: float, rate_hz: float) -> None:
+    """``STEM_scalar_summary.json``: the run's inputs (absolute paths) and counts, for
+    ``sdr-di report`` (atomic)."""
+    def name(p):
+        return None if p is None else str(Path(p).resolve())
+
+    record = {"mode": "scalar", "if_file": name(source.path),
+              "sidecar": name(getattr(source, "sidecar_path", None)),
+              "truth_file": name(truth_path),
+              "ephemeris_file": name(getattr(nav, "path", None)),
+              "start": {"week": source.start_week, "sow": source.start_sow},
+              "rate_hz": rate_hz, "processed_s": processed_s, "epochs": counts["epochs"],
+              "fixes": counts["fixes"],
+              "first_fix_s": counts.get("first_fix_s")}
+    with atomic_open(path, "w") as fh:
+        json.dump(record, fh, indent=2)
+        fh.write("\n")
 
 
 def _search_summary(rx: ScalarReceiver) -> str:

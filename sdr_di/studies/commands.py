@@ -95,9 +95,12 @@ def add_parsers(subparsers) -> None:
         "report", help="render report.html for a campaign, robustness, study or run "
         "output folder",
         description="Write DIR/report.html: one self-contained page with every table "
-        "(inline) and plot (embedded PNG) of the folder.")
+        "(inline) and plot (embedded PNG) of the folder. On an sdr-di run or lc folder it "
+        "draws the run's figures from its files when they are missing (no rerun): errors "
+        "per axis with the filter's 3-sigma, NIS against its band, the consistency table, "
+        "trajectory, C/N0 and lock per channel, sky plot, fix status (docs/report.md).")
     p.add_argument("dir", type=Path, help="output folder of sdr-di campaign / robustness / "
-                   "study, or of one sdr-di run (its summary, channels and --plots)")
+                   "study, or of one sdr-di run or lc")
     p.set_defaults(func=cmd_report)
 
 
@@ -251,7 +254,7 @@ def _render(folder: Path) -> Path:
         from .study_report import render_study_report
 
         return render_study_report(folder)
-    from .run_report import is_run_folder, render_run_report
+    from ..report import is_run_folder, render_run_report   # the CLI glue: report is above
 
     if not any((Path(folder) / f).is_file() for f in ("campaign.json", "result.json")) \
             and is_run_folder(folder):

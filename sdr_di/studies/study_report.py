@@ -2,9 +2,13 @@
 
 1. The question and the design in two lines (cells, filters, baseline, seeds, correction).
 2. The verdict of every claim per cell, with the numbers behind it.
-3. Per cell, each filter's mean RMSE and its paired ratio to the baseline with the corrected
-   interval, win count and Holm p (3 significant digits; the best mean per quantity in bold).
-4. Plots: paired ratios per cell (the factor levels) with their corrected intervals; error
+3. Per cell, each filter's mean RMSE with its NEES beside it (ANEES with band and verdict
+   when cells.csv has them), its paired ratio to the baseline with the corrected interval,
+   win count and Holm p (3 significant digits; the best mean per quantity in bold), and the
+   NIS per measurement block.
+4. Plots: paired ratios per cell (the factor levels) with their corrected intervals, on a
+   log axis when they span a factor of 3 or more, else linear, labelled in plain decimals;
+   error
    norms of a representative run (seed 0 of the first cell).
 5. Failed or diverged runs, then the raw tables (cells, comparisons, runs, the spec),
    collapsed.
@@ -19,11 +23,12 @@ import json
 import math
 from pathlib import Path
 
-from ..io.atomic import atomic_open
 from ..experiments import plotting
+from ..integration.consistency import CONSISTENCY_KEYS, verdict
+from ..io.atomic import atomic_open
+from .campaign_report import CSS, img_html, sig, table_html
 from .execute import read_json
 from .paired import mean_ratio, ratio_of_log
-from .campaign_report import CSS, img_html, sig, table_html
 from .spec import QUANTITY_KEYS
 from .tables import read_csv_table
 
@@ -58,6 +63,26 @@ def _interval(lo, hi, n=None) -> str:
     return f"[{sig(lo)}, {sig(hi)}]" if math.isfinite(lo) and math.isfinite(hi) else ""
 
 
+#: NIS columns of cells.csv (every mode's blocks; a mode fills its own).
+_NIS_KEYS = tuple(k for k in CONSISTENCY_KEYS if k.startswith("nis_"))
+
+
+def _consistency_cell(row: dict, key: str) -> str:
+    """A cell's NEES or NIS per degree of freedom: ``anees_*``/``anis_*`` with its band
+    (``_lo``, ``_hi``) and verdict where cells.csv has them (ensemble statistics), else the
+    mean of the runs' own (``nees_*``, ``nis_*``)."""
+    a = "a" + key
+    if math.isfinite(_num(row.get(a))):
+        v, lo, hi = _num(row[a]), _num(row.get(f"{a}_lo")), _num(row.get(f"{a}_hi"))
+        if math.isfinite(lo) and math.isfinite(hi):
+            vd = verdict(v, (lo, hi))
+            cls = "v-holds" if vd == "consistent" else "v-reversed"
+            return f"{sig(v)} [{sig(lo)}, {sig(hi)}] <span class='{cls}'>{vd}</span>"
+        return sig(v)
+    v = _num(row.get(key))
+    return sig(v) if math.isfinite(v) else ""
+
+
 def _n_pairs(comps: list[dict], cell: str, filt: str, against: str, q: str):
     c = next((c for c in comps if c["cell"] == cell and c["filter"] == filt
               and c["against"] == against and c["quantity"] == q), None)
@@ -77,6 +102,7 @@ def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> 
     axes = fig.subplots(len(qs), 1, sharex=True, squeeze=False)[:, 0]
     width = 0.8 / max(1, len(filters))
     for ax, q in zip(axes, qs):
+        shown: list[float] = [1.0]
         for k, f in enumerate(filters):
             xs, ys, lo, hi = [], [], [], []
             for j, cn in enumerate(names):
@@ -94,8 +120,9 @@ def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> 
                 lo.append(y - a if math.isfinite(a) else 0.0)
                 hi.append(b - y if math.isfinite(b) else 0.0)
             ax.errorbar(xs, ys, yerr=[lo, hi], fmt="o", capsize=3, label=f)
+            shown += [y - a for y, a in zip(ys, lo)] + [y + b for y, b in zip(ys, hi)]
         ax.axhline(1.0, color="0.4", lw=0.8, ls="--")
-        ax.set_yscale("log")
+        plotting.ratio_axis(ax, shown)
         ax.set_ylabel(f"{_QLABEL[q]} RMSE\nratio to {baseline}")
         ax.grid(True, alpha=0.3, which="both")
     axes[-1].set_xticks(range(len(names)), names, rotation=25, ha="right")
@@ -103,7 +130,7 @@ def _ratio_plot(path: Path, cells: list[dict], baseline: str, qs: list[str]) -> 
     axes[0].legend(fontsize="small", ncol=4)
     fig.suptitle("paired RMSE ratio to the baseline per cell: geometric mean over seeds,\n"
                  "corrected interval; below 1 = better than the baseline", fontsize="medium")
-    return plotting._save(fig, path)
+    return plotting.save_png(fig, path)
 
 
 def render_study_report(folder: str | Path) -> Path:
@@ -176,8 +203,12 @@ def render_study_report(folder: str | Path) -> Path:
             parts.append("".join(out))
 
     parts.append("<h2>Summary per cell</h2><p>Mean RMSE over the seeds (position m, velocity "
-                 "m/s, attitude deg); for each other filter the paired ratio to the baseline "
-                 "with its corrected interval, wins/seeds and the Holm-adjusted sign-test p. "
+                 "m/s, attitude deg) and beside it the filter's NEES per degree of freedom "
+                 "(ANEES with its ensemble band and verdict where the study wrote them, else the "
+                 "mean over the seeds of each run's NEES; expected 1, below: pessimistic, "
+                 "above: overconfident); for each other filter the paired ratio to the baseline "
+                 "with its corrected interval, wins/seeds and the Holm-adjusted sign-test p; "
+                 "last, the NIS per measurement block the same way. "
                  "Bold: the best mean of the cell.</p>")
     for cn in dict.fromkeys(r["cell"] for r in cells):
         rows = [r for r in cells if r["cell"] == cn]
@@ -186,9 +217,12 @@ def render_study_report(folder: str | Path) -> Path:
         facs = {k: v for k, v in facs.items() if v != ""}
         parts.append(f"<h3>{html.escape(cn)}</h3>"
                      + (f"<p><code>{html.escape(json.dumps(facs))}</code></p>" if facs else ""))
+        nis_cols = [k for k in _NIS_KEYS if any(math.isfinite(_num(r.get(k))) for r in rows)]
         head = ["filter", "ok/n"]
         for q in qs:
-            head += [f"{q} RMSE", f"{q} ratio [interval]", f"{q} wins", f"{q} p (Holm)"]
+            head += [f"{q} RMSE", f"{q} NEES", f"{q} ratio [interval]", f"{q} wins",
+                     f"{q} p (Holm)"]
+        head += [f"NIS {k[4:]}" for k in nis_cols]
         out = ["<div class='scroll'><table><tr>"
                + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"]
         for r in rows:
@@ -197,6 +231,7 @@ def render_study_report(folder: str | Path) -> Path:
                 col = next(k for k in r if k.startswith(f"{q}_rmse_") and k != f"{q}_rmse_sd")
                 val = sig(_num(r[col]))
                 tds.append(f"<b>{val}</b>" if r.get(f"{q}_best") == "1" else val)
+                tds.append(_consistency_cell(r, f"nees_{q}"))
                 if r["filter"] == baseline:
                     tds += ["(baseline)", "", ""]
                 else:
@@ -204,6 +239,7 @@ def render_study_report(folder: str | Path) -> Path:
                                    _n_pairs(comps, cn, r["filter"], baseline, q))
                     tds += [f"{sig(_num(r[f'{q}_ratio']))} {iv}",
                             f"{r[f'{q}_wins']}/{r['n_runs']}", sig(_num(r[f"{q}_sign_p_holm"]))]
+            tds += [_consistency_cell(r, k) for k in nis_cols]
             out.append("<tr>" + "".join(f"<td>{t}</td>" for t in tds) + "</tr>")
         out.append("</table></div>")
         parts.append("".join(out))
