@@ -43,12 +43,7 @@ from .metrics import time_window
 
 __all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "block_nis",
            "chi2_band", "consistency_summary", "effective_count", "ensemble_band",
-           "enu_blocks", "flat",
-           "formal_sd", "nees_per_dof"]
-
-
-           "chi2_band", "consistency_summary", "effective_count", "enu_blocks", "flat",
-           "formal_sd", "nees_per_dof", "verdict"]
+           "enu_blocks", "flat", "formal_sd", "nees_per_dof", "verdict"]
 
 #: NIS block names of each mode, in the order of ``z`` (two equal halves).
 NIS_BLOCKS = {"deep": ("code", "rate"), "tight": ("range", "rate"), "loose": ("vel", "pos"),
