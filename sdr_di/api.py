@@ -26,6 +26,8 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from .io.paths import guarded
+
 if TYPE_CHECKING:
     from .studies.spec import StudySpec
     from .studies.study import StudyResult
@@ -116,6 +118,7 @@ _GENERATE_ARGUMENTS = {"duration_s": "duration_s", "seed": "seed",
                        "ephemeris": "ephemeris", "prns": "prns"}
 
 
+@guarded
 def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
              name: str | None = None, duration_s: float | None = None,
              seed: int | None = None, sampling_rate_hz: float | None = None,
@@ -198,6 +201,7 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
                           metadata=files["metadata"])
 
 
+@guarded
 def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None,
         prns: Sequence[str | int] | None = None, rate_hz: float = 5.0, cold: bool = False,
         pll_bw_hz: float | None = None,
@@ -408,6 +412,7 @@ def _run_integrated(source, out_dir: Path, prns, mode: str, rate_hz: float, cold
                      wall_s=res.wall_s, details=res)
 
 
+@guarded
 def study(spec: PathLike | Mapping[str, Any] | StudySpec, out: PathLike, *,
           runs: int | None = None, scheduler: str | None = None, workers: int | None = None,
           force: bool = False, report: bool = True,

@@ -752,7 +752,9 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     out = ensure_output_dir(out)  # created only now that every input is checked
     model = filter_imu or model  # the filter's IMU spec: assumed, else the truth's
     res = run_loose(truth, imu, model, st, seed=seed, duration_s=args.duration)
-    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", name)  # an import path's ':' out of file names
+    from .io.paths import file_safe
+
+    stem = file_safe(name)  # an import path's ':' out of file names
     csv = res.write_csv(out / f"{sc.name}_lc_{stem}.csv")
     summary = out / f"{sc.name}_lc_{stem}_summary.json"
     with atomic_open(summary, "w") as fh:
@@ -862,7 +864,15 @@ def main(argv: list[str] | None = None) -> int:
         parser = build_parser()
         argv = attach_negative_values(argv)
         args = parser.parse_args(argv)
-        return args.func(args)
+        from .io.paths import command_scope, path_error
+
+        with command_scope():  # no output may land on an input (sdr_di.io.paths)
+            try:
+                return args.func(args)
+            except OSError as exc:  # a path the system refused: a bad input, one line
+                raise path_error(exc) from None
+            except RecursionError:
+                raise UsageError("an input is nested too deeply to be read") from None
     except SdrDiError as exc:
         _clear_status()
         print(f"sdr-di: error: {_one_line(str(exc))}", file=sys.stderr)

@@ -49,7 +49,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -197,13 +196,10 @@ def load_lc_scenario(path: str | Path) -> tuple[Scenario, LcSettings]:
     ScenarioError
         Unreadable file, bad scenario or bad ``[lc]`` key.
     """
+    from ..io.paths import read_toml
+
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except OSError as exc:
-        raise ScenarioError(f"scenario {path}: cannot read ({exc.strerror or exc})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"scenario {path}: not valid TOML ({exc})") from None
+    raw = read_toml(path, "scenario", ScenarioError)
     lc = raw.pop("lc", {})
     sc = parse_scenario(raw, source=path, base_dir=path.parent)
     return sc, _parse_lc(lc, str(path))

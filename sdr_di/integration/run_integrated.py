@@ -58,6 +58,9 @@ from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import TrackingConfig
 from .receiver import IntegrationConfig, IntegratedReceiver, IntegrationResult, check_imu_span
 
+#: The filter whose runs keep the plain names ``STEM_MODE.csv`` (:func:`solution_names`).
+DEFAULT_FILTER = IntegrationConfig.filter
+
 __all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
 
 DEEP_COLUMNS = (
@@ -151,6 +154,18 @@ def _progress_stage(mode: str, n_channels: int, n_used: int | None) -> str:
     return f"ranges and rates of {n_used} satellites into the filter"
 
 
+def solution_names(out_dir: Path, stem: str, cfg: IntegrationConfig) -> dict[str, Path]:
+    """The solution CSV and summary of an integrated run: ``STEM_MODE.csv`` and
+    ``STEM_MODE_summary.json`` with the default filter, ``STEM_MODE_FILTER.csv`` and
+    ``STEM_MODE_FILTER_summary.json`` with any other, so that runs of two filters into one
+    folder never share a file (issue 49 item 13)."""
+    from ..io.paths import file_safe
+
+    tag = cfg.mode if cfg.filter == DEFAULT_FILTER else f"{cfg.mode}_{file_safe(cfg.filter)}"
+    return {"solution": out_dir / f"{stem}_{tag}.csv",
+            "summary": out_dir / f"{stem}_{tag}_summary.json"}
+
+
 def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig | None = None,
              imu_path: str | Path | None = None, truth_path: str | Path | None = None,
              nav_path: str | Path | None = None, assist: bool = True, prns=None,
@@ -203,10 +218,11 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     fs = source.sampling_rate_hz
     check_imu_span(source, imu, source.n_samples if duration_s is None else min(
         source.n_samples, round(duration_s * fs)))            # before any output or work
+    from ..io.paths import check_outputs
+
+    files = solution_names(Path(out_dir), stem or source.path.stem, cfg)
+    check_outputs(files.values())
     out_dir = ensure_output_dir(out_dir)
-    stem = stem or source.path.stem
-    files = {"solution": out_dir / f"{stem}_{cfg.mode}.csv",
-             "summary": out_dir / f"{stem}_{cfg.mode}_summary.json"}
     bar = None
     t_wall = time.perf_counter()
     cb = None

@@ -96,6 +96,7 @@ from ..constants import F_B3I, SECONDS_PER_WEEK
 from ..errors import SampleFormatError
 from ..io.sample_formats import SampleFormat, byte_layout, get_format
 from ..io.page_cache import aligned_empty, open_uncached, pread_uncached, release_read_behind
+from ..io.paths import note_input
 from ..io.sidecar import check_member, member_path, read_sidecar
 
 __all__ = ["FormatCheckError", "IfFileWarning", "IfSource", "check_format_statistics"]
@@ -263,6 +264,7 @@ class IfSource:
             raise SampleFormatError(f"IF file {self.path}: not a regular file")
         if not os.access(self.path, os.R_OK):
             raise SampleFormatError(f"IF file {self.path}: not readable")
+        note_input(self.path, what="IF file")
         bps = self.format.bytes_per_sample
         if size == 0:
             raise SampleFormatError(f"IF file {self.path}: empty file")
@@ -313,6 +315,7 @@ class IfSource:
         """
         path = Path(path)
         meta = read_sidecar(path)
+        note_input(path, what="sidecar")
         if_path = member_path(path, meta, "if_file")
         if not if_path.exists():
             raise SampleFormatError(f"sidecar {path}: IF file {if_path} not found")

@@ -16,7 +16,6 @@ import datetime as _dt
 import hashlib
 import json
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -237,15 +236,10 @@ def load_scenario(path: str | Path) -> Scenario:
     ScenarioError
         The file is missing, not TOML, or any key is missing, of the wrong type or impossible.
     """
+    from ..io.paths import read_toml
+
     path = Path(path)
-    try:
-        text = path.read_bytes()
-    except OSError as exc:
-        raise ScenarioError(f"scenario {path}: cannot read ({exc.strerror or exc})") from None
-    try:
-        raw = tomllib.loads(text.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"scenario {path}: not valid TOML ({exc})") from None
+    raw = read_toml(path, "scenario", ScenarioError)
     return parse_scenario(raw, source=path, base_dir=path.parent)
 
 

@@ -62,7 +62,6 @@ import dataclasses
 import hashlib
 import itertools
 import json
-import tomllib
 from pathlib import Path
 
 from ..errors import SdrDiError, StudyError
@@ -179,13 +178,10 @@ def load_study(path: str | Path) -> StudySpec:
     StudyError
         Missing file, not TOML, or anything :func:`parse_study` rejects.
     """
+    from ..io.paths import read_toml
+
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise StudyError(f"study {path}: cannot read ({exc.strerror or exc})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise StudyError(f"study {path}: not valid TOML ({exc})") from None
+    raw = read_toml(path, "study", StudyError)
     return parse_study(raw, source=path)
 
 
