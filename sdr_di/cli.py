@@ -691,7 +691,12 @@ def _cmd_lc(args: argparse.Namespace) -> int:
         run_loose,
     )
     from .integration.noise import NoiseWindow
-    from .io.atomic import atomic_open, check_output_dir, ensure_output_dir
+    from .io.atomic import (
+        atomic_open,
+        check_output_dir,
+        ensure_output_dir,
+        output_dir_removed_on_failure,
+    )
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
 
     sc, st = load_lc_scenario(args.scenario or DEFAULT_SCENARIO)
@@ -749,17 +754,19 @@ def _cmd_lc(args: argparse.Namespace) -> int:
             raise ScenarioError(f"{sc.source}: duration {sc.duration_s:g} s is shorter than one "
                                 f"GNSS interval ({shortest:g} s): no filter update, no result")
         truth, imu, model = make_inputs(sc, st)
-    out = ensure_output_dir(out)  # created only now that every input is checked
-    model = filter_imu or model  # the filter's IMU spec: assumed, else the truth's
-    res = run_loose(truth, imu, model, st, seed=seed, duration_s=args.duration)
-    from .io.paths import file_safe
+    from .io.paths import check_outputs, file_safe
 
     stem = file_safe(name)  # an import path's ':' out of file names
-    csv = res.write_csv(out / f"{sc.name}_lc_{stem}.csv")
-    summary = out / f"{sc.name}_lc_{stem}_summary.json"
-    with atomic_open(summary, "w") as fh:
-        json.dump(lc_summary(sc, st, model, assumed, res, seed=seed), fh, indent=2)
-        fh.write("\n")
+    csv, summary = out / f"{sc.name}_lc_{stem}.csv", out / f"{sc.name}_lc_{stem}_summary.json"
+    check_outputs([csv, summary])
+    model = filter_imu or model  # the filter's IMU spec: assumed, else the truth's
+    with output_dir_removed_on_failure(out):  # a failed run leaves no empty folder
+        ensure_output_dir(out)  # created only now that every input is checked
+        res = run_loose(truth, imu, model, st, seed=seed, duration_s=args.duration)
+        csv = res.write_csv(csv)
+        with atomic_open(summary, "w") as fh:
+            json.dump(lc_summary(sc, st, model, assumed, res, seed=seed), fh, indent=2)
+            fh.write("\n")
     head = (f"{'filter':14s} {'span_s':>11s} {'att_rmse_deg':>12s} {'att_max_deg':>11s} "
             f"{'vel_rmse':>9s} {'vel_max':>8s} {'pos_rmse_m':>10s} {'pos_max_m':>9s}")
     print(head)

@@ -55,6 +55,11 @@ class PathTooLongError(PathError, ValueError):
     """A path, or one of its names, is longer than the file system takes."""
 
 
+class OutOfSpaceError(OutputError):
+    """The outputs a command is about to write do not fit the free space (estimated before
+    any work)."""
+
+
 def shown(path: str | os.PathLike) -> str:
     """``path`` for a one-line message: at most :data:`SHOWN_PATH_CHARS` characters, the
     middle elided."""
@@ -215,3 +220,33 @@ def file_safe(name: str) -> str:
     import re
 
     return re.sub(r"[^A-Za-z0-9_.-]", "_", name)
+
+
+def check_free_space(out_dir: str | os.PathLike, n_bytes: float, what: str) -> None:
+    """Refuse to start writing about ``n_bytes`` (``what``: the estimate, in words) into
+    ``out_dir`` when its file system (that of the nearest existing folder) has less free.
+
+    Raises
+    ------
+    OutOfSpaceError
+    """
+    import shutil
+
+    probe = Path(out_dir)
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    try:
+        free = shutil.disk_usage(probe).free
+    except OSError:
+        return
+    if n_bytes > free:
+        raise OutOfSpaceError(f"{shown(out_dir)}: {what} needs about {_size(n_bytes)}, the "
+                              f"file system has {_size(free)} free")
+
+
+def _size(n: float) -> str:
+    for unit in ("bytes", "kB", "MB", "GB", "TB", "PB", "EB"):
+        if abs(n) < 1000 or unit == "EB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1000
+    return f"{n:g}"
