@@ -20,6 +20,12 @@ entry-point group ``sdr_di.filters``
 
 A plugin that cannot be imported, is not callable, or returns an object without the interface
 raises :class:`~sdr_di.errors.FilterError` (one line; the CLI exits 2 before any work).
+Naming a plugin imports its module, which runs the module's code.
+
+Once built, a plugin's methods are called through one guard (:func:`guard_plugin`): an
+exception it raises during the run (other than sdr-di's own errors, which keep their
+meaning) becomes a :class:`~sdr_di.errors.PluginError` naming the plugin, the call and the
+exception: one line and exit 1 from the CLI, a failed run of that filter alone in a study.
 """
 
 from __future__ import annotations
@@ -32,9 +38,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import FilterError
+from ..errors import FilterError, PluginError, SdrDiError
 
-__all__ = ["ENTRY_POINT_GROUP", "check_interface", "is_import_path", "plugin_names",
+__all__ = ["ENTRY_POINT_GROUP", "check_interface", "guard_plugin", "is_import_path",
+           "plugin_names",
            "register_filter", "resolve_plugin", "unregister_filter"]
 
 #: Entry-point group through which installed packages add filter names.
@@ -183,3 +190,46 @@ def check_interface(name: str, filt, n_states: int) -> None:
         got = np.shape(getattr(filt, a))
         if got != shape:
             raise FilterError(f"filter {name!r}: {a} has shape {got}, expected {shape}")
+
+
+#: The methods of a plugin the receiver calls during a run, each through :func:`guard_plugin`.
+GUARDED_METHODS = ("predict", "update")
+
+
+def guard_plugin(label: str, filt):
+    """Route the run-time calls of the plugin filter ``filt`` (:data:`GUARDED_METHODS`)
+    through one guard; returns ``filt``.
+
+    An exception of the plugin's code (not an :class:`~sdr_di.errors.SdrDiError`, not an
+    interrupt) is raised again as :class:`~sdr_di.errors.PluginError`: ``filter plugin
+    'mod:Cls': update() raised ZeroDivisionError: ... (call 31)``.
+    """
+    for method in GUARDED_METHODS:
+        bound = getattr(filt, method, None)
+        if bound is None:
+            continue
+        try:
+            setattr(filt, method, _Guarded(label, method, bound))
+        except AttributeError:  # __slots__ without a __dict__: left unguarded
+            pass
+    return filt
+
+
+class _Guarded:
+    """A plugin's bound method behind the guard (:func:`guard_plugin`); picklable."""
+
+    def __init__(self, label: str, method: str, bound) -> None:
+        self.label, self.method, self.bound, self.calls = label, method, bound, 0
+
+    def __call__(self, *args, **kwargs):
+        self.calls += 1
+        try:
+            return self.bound(*args, **kwargs)
+        except SdrDiError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the user's code: its failure, in one line
+            text = " ".join(str(exc).split())
+            raise PluginError(f"filter plugin {self.label!r}: {self.method}() raised "
+                              f"{type(exc).__name__}"
+                              + (f": {text[:200]}" if text else "")
+                              + f" (call {self.calls})") from None

@@ -159,7 +159,7 @@ def _make_plugin(name: str, process_model, measurement_model, x0, P0, Q0, R0,
                  options: dict) -> KalmanFilterBase:
     """A plugin filter (:mod:`.plugins`): its factory with the inputs and the options; ``dt``
     only where the factory takes it. The result's ``name`` is set to ``name``."""
-    from .plugins import check_interface, resolve_plugin
+    from .plugins import check_interface, guard_plugin, resolve_plugin
     from .spec import _factory_params
 
     factory = resolve_plugin(name)
@@ -186,7 +186,7 @@ def _make_plugin(name: str, process_model, measurement_model, x0, P0, Q0, R0,
         filt.name = label
     except AttributeError:
         pass
-    return filt
+    return guard_plugin(label, filt)
 
 
 def filter_table() -> list[dict]:
