@@ -30,6 +30,8 @@ exception: one line and exit 1 from the CLI, a failed run of that filter alone i
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import importlib
 import importlib.metadata
 import os
@@ -55,6 +57,28 @@ REQUIRED_ARRAYS = ("x", "P", "Q")
 REQUIRED_ATTRS = ("nis", "adaptation_time_s", "rule")
 
 _REGISTERED: dict[str, Callable] = {}
+
+#: True while a specification is checked before its plugins may run (:func:`plugins_deferred`).
+_DEFERRED: contextvars.ContextVar[bool] = contextvars.ContextVar("sdr_di_plugins_deferred",
+                                                                 default=False)
+
+
+@contextlib.contextmanager
+def plugins_deferred():
+    """Check a specification without importing its plugins: inside the block an import path
+    or an entry-point name resolves to a stand-in that takes any option, so that everything
+    else in the spec is judged first; the caller checks it again after the block, importing
+    the plugins (naming a plugin runs its module's code: issue 49 item 11)."""
+    token = _DEFERRED.set(True)
+    try:
+        yield
+    finally:
+        _DEFERRED.reset(token)
+
+
+def _stand_in(*args, **options):
+    """The factory of a plugin not yet imported (:func:`plugins_deferred`); never built."""
+    raise FilterError("a plugin was built while plugins were deferred")
 
 
 def _builtin_names() -> tuple[str, ...]:
@@ -157,6 +181,9 @@ def resolve_plugin(name: str) -> Callable | None:
     """
     name = str(name).strip()
     if is_import_path(name):
+        mod_name, _, attr = name.partition(":")
+        if _DEFERRED.get() and mod_name and attr:
+            return _stand_in
         factory = _import(name)
     else:
         key = name.lower()
@@ -165,6 +192,8 @@ def resolve_plugin(name: str) -> Callable | None:
             ep = _entry_points().get(key)
             if ep is None:
                 return None
+            if _DEFERRED.get():
+                return _stand_in
             try:
                 factory = ep.load()
             except Exception as exc:

@@ -227,6 +227,10 @@ def _factor_values(cell_over: dict) -> dict:
 def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
     """Check a study table (as read from TOML) and expand its cells.
 
+    The spec is checked first with its plugin filters unimported
+    (:func:`~sdr_di.filters.plugins.plugins_deferred`), then again with them: a spec refused
+    for anything else has run no plugin code.
+
     Raises
     ------
     StudyError
@@ -234,6 +238,15 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
         experiment's own check), duplicate cell names, a claim naming an unknown filter,
         quantity or cell. The message names the spec and the key.
     """
+    from ..filters.plugins import plugins_deferred
+
+    with plugins_deferred():
+        _parse_study(raw, source)
+    return _parse_study(raw, source)
+
+
+def _parse_study(raw: dict, source: Path | None) -> StudySpec:
+    """:func:`parse_study` once."""
     from ..experiments._deep import check_truth
 
     where = f"study {source}" if source is not None else "study"
