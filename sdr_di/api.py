@@ -463,9 +463,9 @@ def study(spec: PathLike | Mapping[str, Any] | StudySpec, out: PathLike, *,
     if isinstance(spec, StudySpec):
         parsed = spec
     elif isinstance(spec, Mapping):
-        parsed = parse_study(dict(spec))
+        parsed = parse_study(dict(spec), force=force)
     else:
-        parsed = load_study(spec)
+        parsed = load_study(spec, force=force)
     out_dir = check_output_dir(Path(out))
     return run_study(parsed, out_dir, runs=runs, scheduler=scheduler, workers=workers,
                      force=force, on_record=on_record, render=report)

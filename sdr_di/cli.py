@@ -684,6 +684,7 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     from .ins.imu import ImuErrorModel
     from .integration.assumptions import apply_to_lc, resolve_assumptions
     from .integration.loose import (
+        check_lc_duration,
         lc_summary,
         load_lc_scenario,
         make_inputs,
@@ -726,10 +727,8 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     st = st.replace(**kw)
     out = check_output_dir(args.out or (REPO_ROOT / "signals" / "out"))
     shortest = min_lc_duration_s(st)
-    if args.duration is not None and not (math.isfinite(args.duration)
-                                          and args.duration >= shortest):
-        raise ScenarioError(f"--duration must be >= {shortest:g} s (one GNSS interval: the "
-                            f"first filter update), got {args.duration:g}")
+    if args.duration is not None:
+        check_lc_duration(args.duration, st, "--duration")
     if args.seed is not None and args.seed < 0:
         raise ScenarioError(f"--seed must be >= 0, got {args.seed}")
     seed = sc.seed if args.seed is None else args.seed
@@ -753,6 +752,7 @@ def _cmd_lc(args: argparse.Namespace) -> int:
         if sc.duration_s < shortest:
             raise ScenarioError(f"{sc.source}: duration {sc.duration_s:g} s is shorter than one "
                                 f"GNSS interval ({shortest:g} s): no filter update, no result")
+        check_lc_duration(sc.duration_s, st, f"{sc.source}: duration_s")
         truth, imu, model = make_inputs(sc, st)
     from .io.paths import check_outputs, file_safe
 

@@ -288,6 +288,29 @@ def min_lc_duration_s(settings: LcSettings) -> float:
     return 1.0 / settings.gnss_rate_hz
 
 
+#: Longest loosely coupled run [s]: one hour holds about 0.3 GB of 200 Hz truth, IMU and error
+#: rows in memory (``lc --duration 1e9`` ran silently, issue 49 item 5). A longer span is a
+#: campaign of shorter runs.
+MAX_LC_DURATION_S = 3600.0
+
+
+def check_lc_duration(duration_s: float, settings: LcSettings, what: str) -> None:
+    """``duration_s`` of an ``lc`` run (``what``: the option or key that set it) within
+    [:func:`min_lc_duration_s`, :data:`MAX_LC_DURATION_S`].
+
+    Raises
+    ------
+    ScenarioError
+    """
+    shortest = min_lc_duration_s(settings)
+    if not (math.isfinite(duration_s) and duration_s >= shortest):
+        raise ScenarioError(f"{what} must be >= {shortest:g} s (one GNSS interval: the "
+                            f"first filter update), got {duration_s:g}")
+    if duration_s > MAX_LC_DURATION_S:
+        raise ScenarioError(f"{what} must be <= {MAX_LC_DURATION_S:g} s (one hour of 200 Hz "
+                            f"rows is about 0.3 GB of memory), got {duration_s:g}")
+
+
 def make_inputs(sc: Scenario, settings: LcSettings | None = None):
     """Truth and measured IMU of a scenario (seeded from the scenario)."""
     from ..sim.generate import simulate_truth

@@ -87,7 +87,8 @@ def add_parsers(subparsers) -> None:
                    help="local worker processes (default: number of cores; 0: run in this "
                    "process, no cluster)")
     p.add_argument("--force", action="store_true",
-                   help="replace a different study's runs in --out (runs of unchanged cells are kept)")
+                   help="replace a different study's runs in --out (runs of unchanged cells "
+                   "are kept); run a study beyond 10,000 (cell, seed) runs")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.set_defaults(func=cmd_study)
 
@@ -199,7 +200,7 @@ def cmd_study(args: argparse.Namespace) -> int:
     from .study import _check_folder, run_study
     from .spec import load_study
 
-    spec = load_study(args.spec)
+    spec = load_study(args.spec, force=args.force)
     check_output_dir(args.out)
     if args.runs is not None and args.runs < 1:
         raise CampaignError(f"--runs must be >= 1, got {args.runs}")

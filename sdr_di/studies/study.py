@@ -54,7 +54,7 @@ from .execute import (
 )
 from .paired import Comparison, claim_verdict, compare_pair, holm, ratio_of_log
 from ..experiments.registry import get_experiment
-from .spec import QUANTITY_KEYS, StudySpec, spec_summary
+from .spec import QUANTITY_KEYS, StudySpec, check_study_size, spec_summary
 from .tables import write_table
 from .tasks import Task, run_tasks, run_tasks_here
 from ..experiments.variants import entry_label
@@ -205,6 +205,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
         raise StudyError(f"--workers must be an integer >= 0, got {workers!r}")
     if scheduler is not None and workers is not None:
         raise StudyError("--workers applies to the local cluster only")
+    check_study_size(f"study {spec.name}", len(spec.cells), runs, force)
     out = Path(out_dir)
     _check_folder(spec, out, force)
     exp = get_experiment(spec.experiment)
