@@ -677,7 +677,6 @@ def _add_lc(sub) -> None:
 def _cmd_lc(args: argparse.Namespace) -> int:
     import dataclasses
     import json
-    import math
 
     from .errors import ImuDataError, ScenarioError
     from .filters import parse_filter_spec
