@@ -288,7 +288,7 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
     NoSatelliteError
         Scalar mode: no satellite acquired.
     """
-    from .constants import parse_prn
+    from .constants import parse_prns
     from .io.atomic import check_output_dir
     from .receiver.run_scalar import open_source
 
@@ -323,7 +323,7 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
     if iono_wait_s is not None and not (math.isfinite(iono_wait_s) and iono_wait_s >= 0):
         raise ValueError(f"iono_wait_s must be a finite number >= 0, got {iono_wait_s!r}")
     tracking = _tracking_config(pll_bw_hz)
-    prn_list = None if prns is None else [parse_prn(p) for p in prns]
+    prn_list = None if prns is None else parse_prns(prns, "prns")
     source = open_source(if_file, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
                          sample_format=sample_format, spectrum_inverted=inverted,
                          start_week=start_week, start_sow=start_sow, rfch=rfch)

@@ -178,7 +178,7 @@ def _add_acquire(sub) -> None:
 def _cmd_acquire(args: argparse.Namespace) -> int:
     import math
 
-    from .constants import parse_prn
+    from .constants import parse_prns
     from .io.atomic import check_output_dir, output_dir_removed_on_failure
     from .receiver.acquisition import (
         LIKELY_CAUSES,
@@ -191,7 +191,7 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     check_search(args.coherent_ms, args.noncoherent, args.doppler_range, args.pfa)
     if not math.isfinite(args.doppler_center):
         raise UsageError(f"--doppler-center must be finite, got {args.doppler_center}")
-    prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
+    prns = None if args.prn is None else parse_prns(args.prn)
     _check_file_options(args)
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_acq"))
@@ -349,7 +349,7 @@ def _add_run(sub) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .constants import parse_prn
+    from .constants import parse_prns
     from .errors import RunFailed
     from .io.atomic import check_output_dir, output_dir_removed_on_failure
     from .receiver.run_scalar import run_scalar
@@ -369,7 +369,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.approx_pos is not None and (args.mode != "scalar" or args.ephemeris is None):
         raise UsageError("--approx-pos: only in scalar mode, with --ephemeris")
     _check_run_options(args)
-    prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
+    prns = None if args.prn is None else parse_prns(args.prn)
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_run"))
     if args.mode != "scalar":

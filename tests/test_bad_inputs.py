@@ -67,7 +67,6 @@ CASES: list[tuple] = [
     ("generate-prn-c99", [*GD, "--prn", "C99", "--out", "{d}/o"]),
     ("generate-prn-text", [*GD, "--prn", "GPS", "--out", "{d}/o"]),
     ("generate-prn-empty", [*GD, "--prn", ",", "--out", "{d}/o"]),
-    ("generate-prn-duplicate", [*GD, "--prn", "C10,C10", "--out", "{d}/o"]),
     ("generate-seed-neg", [*GD, "--seed", "-1", "--out", "{d}/o"]),
     ("generate-scenario-missing", [*GD, "--scenario", "{d}/nope.toml", "--out", "{d}/o"]),
     ("generate-scenario-dir", [*GD, "--scenario", "{d}", "--out", "{d}/o"]),

@@ -19,7 +19,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ..constants import parse_prn
+from ..constants import parse_prn, parse_prns
 from ..errors import ScenarioError, SdrDiError
 from ..oscillator import OscillatorSpec, oscillator_from_table
 from ..timebase import datetime_to_bdt, utc_to_bdt
@@ -445,9 +445,9 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     if sel == "auto":
         prns = None
     elif isinstance(sel, list) and sel:
-        prns = tuple(_parse_prn(p, f"{where}: [satellites].prns") for p in sel)
-        if len(set(prns)) != len(prns):
-            raise ScenarioError(f"{where}: [satellites].prns: duplicate PRN in {sel!r}")
+        for p in sel:
+            _parse_prn(p, f"{where}: [satellites].prns")  # the message names the key
+        prns = tuple(parse_prns(sel, f"{where}: [satellites].prns"))
     else:
         raise ScenarioError(f"{where}: [satellites].prns: expected \"auto\" or a list of PRNs")
     count = sa.int_("count", len(prns) if prns else 7, lo=1, hi=63)
