@@ -48,6 +48,7 @@ import numpy as np
 
 from ..errors import ImuDataError
 from ..integration.assumptions import deep_beliefs, sidecar_truth
+from ..ins.truth import Truth
 from ..integration.consistency import SD_COLUMNS
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..io.sidecar import companion_files
@@ -154,6 +155,48 @@ def _progress_stage(mode: str, n_channels: int, n_used: int | None) -> str:
     return f"ranges and rates of {n_used} satellites into the filter"
 
 
+class ReferenceGridWarning(UserWarning):
+    """The reference file's rate differs from the IMU's: taken at the IMU's times."""
+
+
+def reference_on_imu_grid(truth, imu, truth_path) -> Truth:
+    """The reference at the IMU's sample times, on which the loop writes its error columns
+    (issue 49 item 7: a 50 Hz IMU beside a 200 Hz reference gave every error column NaN and
+    null metrics, in silence). The same grid: as is. A finer reference holding every IMU
+    time: its rows at those times, with one warning. Otherwise refused.
+
+    Raises
+    ------
+    ImuDataError
+        Some IMU time is not a sample of the reference.
+    """
+    if len(truth.t) == len(imu.t) and np.allclose(truth.t, imu.t, atol=1e-6):
+        return truth
+    on = truth.at_times(imu.t)
+    if on is None:
+        raise ImuDataError(
+            f"reference {truth_path} ({truth.rate_hz:g} Hz) does not hold the IMU's sample "
+            f"times ({imu.rate_hz:g} Hz, {imu.t[0]:g}..{imu.t[-1]:g} s): the error columns "
+            "need the reference at every IMU time (a reference at a multiple of the IMU "
+            "rate, covering its span)")
+    warnings.warn(f"IMU at {imu.rate_hz:g} Hz, reference {truth_path} at {truth.rate_hz:g} Hz: "
+                  "the errors are taken at the IMU's times", ReferenceGridWarning, stacklevel=3)
+    return on
+
+
+def metrics_note(metrics: dict, truth_path) -> str | None:
+    """Why a run's error metrics are null (None when they are not): no reference, or no
+    row after the hand-over with a finite error."""
+    if metrics.get("n") and metrics.get("pos_m_rmse") == metrics.get("pos_m_rmse"):
+        return None
+    if truth_path is None:
+        return "no reference file (--truth, or the sidecar's truth_file): no errors computed"
+    if not metrics.get("n"):
+        return "no solution row after the hand-over: no errors computed"
+    return (f"the reference {truth_path} gave no finite error on the {metrics['n']} rows "
+            "after the hand-over")
+
+
 def solution_names(out_dir: Path, stem: str, cfg: IntegrationConfig) -> dict[str, Path]:
     """The solution CSV and summary of an integrated run: ``STEM_MODE.csv`` and
     ``STEM_MODE_summary.json`` with the default filter, ``STEM_MODE_FILTER.csv`` and
@@ -210,6 +253,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
                            "without one")
     imu = read_imu(imu_path)
     truth = read_truth(truth_path)[0] if truth_path is not None else None
+    if truth is not None:
+        truth = reference_on_imu_grid(truth, imu, truth_path)
     nav = None
     if assist:
         nav_path = Path(nav_path) if nav_path is not None else comp["ephemeris"]
@@ -265,6 +310,9 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     wall = time.perf_counter() - t_wall
     metrics = res.metrics()
+    note = metrics_note(metrics, truth_path)
+    if note is not None and truth_path is not None:   # a reference given, no errors: say why
+        warnings.warn(f"metrics are null: {note}", ReferenceGridWarning, stacklevel=2)
     t_iono = iono_take_up_s(res)
     m_iono = None if t_iono is None else res.metrics(t0=t_iono)
     write_deep_csv(files["solution"], res)
@@ -275,6 +323,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         "channels_always_used": bool(res.used.all()) if res.used.size else False,
         "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],
         "metrics": {k: _finite(v) for k, v in metrics.items()},
+        "metrics_note": note,
         "consistency": _finite_tree(res.consistency()),
         "iono_from_s": t_iono,
         "metrics_after_iono": None if m_iono is None else {k: _finite(v)
