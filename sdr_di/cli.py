@@ -621,9 +621,7 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
                   f"{mi['vel_mps_rmse']:.4f} m/s, position {mi['pos_m_rmse']:.3f} m "
                   f"(max {mi['pos_m_max']:.3f})")
     else:  # null metrics say why (issue 49 item 7)
-        from .integration.run_integrated import metrics_note
-
-        print(f"errors vs reference: none ({metrics_note(m, args.truth or 'the sidecar's')})")
+        print(f"errors vs reference: none ({res.metrics_note})")
     if args.plots:
         import numpy as np
 

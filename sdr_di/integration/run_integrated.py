@@ -84,6 +84,8 @@ class DeepRunSummary:
     iono_from_s: float | None = None
     #: ``metrics`` over the rows from ``iono_from_s`` on (None when it is None)
     metrics_after_iono: dict | None = None
+    #: why ``metrics`` are null (:func:`metrics_note`; None when they are not)
+    metrics_note: str | None = None
 
 
 def iono_in_force(res: IntegrationResult) -> np.ndarray:
@@ -340,4 +342,4 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         json.dump(summary, fh, indent=2)
         fh.write("\n")
     return DeepRunSummary(files=files, result=res, metrics=metrics, wall_s=wall,
-                          iono_from_s=t_iono, metrics_after_iono=m_iono)
+                          iono_from_s=t_iono, metrics_after_iono=m_iono, metrics_note=note)
