@@ -55,19 +55,25 @@ class GeneratedFiles:
         200 Hz reference trajectory (``NAME_truth.csv``).
     metadata : Path
         Sidecar (``NAME.json``): sample format, start time, satellites, the files above.
+    sigmf_data, sigmf_meta : Path or None
+        The SigMF pair (``NAME.sigmf-data``, ``NAME.sigmf-meta``) with ``sigmf=True``.
     """
 
     if_file: Path
     imu: Path
     truth: Path
     metadata: Path
+    sigmf_data: Path | None = None
+    sigmf_meta: Path | None = None
 
     @property
     def files(self) -> dict[str, Path]:
         """The paths by the labels ``sdr-di generate`` prints (``if``, ``imu``, ``truth``,
-        ``metadata``)."""
+        ``metadata``, and ``sigmf-data``, ``sigmf-meta`` when written): every file."""
+        extra = {k: p for k, p in (("sigmf-data", self.sigmf_data),
+                                   ("sigmf-meta", self.sigmf_meta)) if p is not None}
         return {"if": self.if_file, "imu": self.imu, "truth": self.truth,
-                "metadata": self.metadata}
+                "metadata": self.metadata, **extra}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,7 +204,8 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
     files = generate_files(sc, REPO_ROOT / "signals" / "out" if out is None else Path(out),
                            name=name, progress=progress, sigmf=sigmf)
     return GeneratedFiles(if_file=files["if"], imu=files["imu"], truth=files["truth"],
-                          metadata=files["metadata"])
+                          metadata=files["metadata"], sigmf_data=files.get("sigmf-data"),
+                          sigmf_meta=files.get("sigmf-meta"))
 
 
 @guarded

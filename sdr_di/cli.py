@@ -866,9 +866,12 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
-        if argv[:1] in (["run"], ["generate"]) and not {"--no-progress", "-h", "--help"} & {
-                a.split("=")[0] for a in argv}:  # before build_parser: it imports numba
-            _show_status("sdr-di: loading the signal-processing kernels ...")
+        if argv[:1] in (["run"], ["generate"], ["acquire"]) and not {
+                "--no-progress", "-h", "--help"} & {a.split("=")[0] for a in argv}:
+            from .kernel_cache import NOTE, kernels_cached  # imports no kernel
+
+            _show_status("sdr-di: " + ("loading the signal-processing kernels ..."
+                                       if kernels_cached() else NOTE + " ..."))
         parser = build_parser()
         argv = attach_negative_values(argv)
         args = parser.parse_args(argv)

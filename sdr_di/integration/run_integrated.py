@@ -276,12 +276,15 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     if progress:
         from tqdm import tqdm
 
+        from ..kernel_cache import first_use_note
+
         total = source.duration_s if duration_s is None else min(source.duration_s,
                                                                   duration_s)
         bar = tqdm(total=round(total, 2), unit="s",
                    desc=f"run {cfg.mode} {cfg.filter}",
                    bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
-                              "{postfix}]", postfix="scalar start-up: acquisition")
+                              "{postfix}]", postfix="; ".join(filter(None, [
+                                  "scalar start-up: acquisition", first_use_note()])))
 
         def cb(done, n_ch, n_used):
             rt = done / max(time.perf_counter() - t_wall, 1e-9)

@@ -287,9 +287,12 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     if progress:
         from tqdm import tqdm
 
+        from ..kernel_cache import first_use_note
+
         bar = tqdm(total=round(processed_s, 2), unit="s", desc="run scalar: tracking and fixes",
                    bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
-                              "{postfix}]", postfix="acquisition")  # shown before epoch 1
+                              "{postfix}]",  # shown before epoch 1
+                   postfix="; ".join(filter(None, ["acquisition", first_use_note()])))
 
     def on_epoch(sample, observations, ephemerides):
         engine.ephemerides = engine.navdata.offer_decoded(
