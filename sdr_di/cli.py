@@ -414,18 +414,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _no_fix_diagnosis(args: argparse.Namespace, source, res) -> str:
     """One line for a run that ended without a single fix: what it got, and the likely
-    causes, most likely first (a wrong description of the file far more often than a
-    receiver problem)."""
-    n_trk = len(res.channels)
-    n_eph = sum(bool(r["ephemeris_decoded"]) for r in res.channels)
-    given = "given" if args.fs is not None or args.sample_format is not None else "read"
-    return (f"no fix in {res.n_epochs} epochs ({n_trk} channels acquired, {n_eph} with "
-            f"ephemeris; outputs kept in {res.files['pvt'].parent}); likely causes, most "
-            f"likely first: the sample format ({source.format.name} {given}: --format), the "
-            f"IF sign ({source.declared_if_hz:g} Hz: --if with the other sign, or "
-            f"--inverted), the sample rate ({source.sampling_rate_hz:g} Hz: --fs), the start "
-            "time (--start-week, --start-sow), a file too short for the navigation data "
-            f"({source.duration_s:.1f} s)")
+    causes in the order the run's evidence gives (:mod:`sdr_di.receiver.diagnosis`)."""
+    from .receiver.diagnosis import no_fix_diagnosis
+
+    return no_fix_diagnosis(source, res, given=args.fs is not None
+                            or args.sample_format is not None)
 
 
 def _scalar_plots(res, source, truth_path) -> None:
