@@ -359,3 +359,142 @@ def test_integrated_runs_of_two_filters_have_their_own_files(tmp_path):
     assert names[0]["solution"].name == "s_deep.csv"           # the default keeps its name
     assert names[2]["solution"].name == "s_deep_ukf.csv"
     assert names[4]["summary"].name == "s_deep_pkg.mod_My_summary.json"
+
+
+# -- item 14: a notice while the kernels compile on first use ------------------------------
+
+def test_the_first_run_on_a_machine_says_the_kernels_compile(work, tmp_path, capsys,
+                                                            monkeypatch):
+    import sdr_di.kernel_cache as kc
+
+    monkeypatch.setattr(kc, "kernels_cached", lambda: False)
+    main(["run", str(work / "s.bin"), "--out", str(tmp_path / "r")])   # with its bar
+    assert kc.NOTE in capsys.readouterr().err
+    monkeypatch.undo()
+    assert kc.first_use_note() in ("", kc.NOTE)
+
+
+# -- item 15: acquire writes where the docs say ----------------------------------------------
+
+def test_acquire_writes_where_the_readme_and_the_guide_say(work, capsys):
+    assert main(["acquire", str(work / "s.bin")]) == 0
+    out = capsys.readouterr().out
+    assert f"table     {work / 's_acq' / 's_acquisition.csv'}" in out
+    assert "`STEM_acq/STEM_acquisition.csv` beside the file" in \
+        (REPO_ROOT / "README.md").read_text()
+    assert "`rec_acq/rec_acquisition.csv` beside the recording" in \
+        (REPO_ROOT / "docs" / "guides" / "own_recording.md").read_text()
+
+
+# -- item 16: generate --sigmf lists every file it wrote ------------------------------------
+
+def test_generate_sigmf_lists_its_sigmf_pair(tmp_path, capsys):
+    assert main([*GD, "--sigmf", "--out", str(tmp_path)]) == 0
+    listed = {ln.split()[0]: Path(ln.split()[1])
+              for ln in capsys.readouterr().out.splitlines()}
+    assert set(listed.values()) == set(tmp_path.iterdir())
+    assert listed["sigmf-data"].name == "default.sigmf-data"
+    assert listed["sigmf-meta"].name == "default.sigmf-meta"
+
+
+# -- item 17: sdr-di filters shows a plugin's docstring and flags one that cannot run -------
+
+def test_filters_shows_a_plugins_docstring_and_flags_one_without_update(capsys):
+    from sdr_di.filters import EKF, register_filter, unregister_filter
+
+    class Documented(EKF):
+        """An EKF that says what it is.
+
+        More text."""
+
+    class PredictOnly:
+        """Predicts, never updates."""
+
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def predict(self, dt):
+            pass
+
+    register_filter("i49-documented", Documented)
+    register_filter("i49-predict-only", PredictOnly)
+    try:
+        assert main(["filters"]) == 0
+        out = capsys.readouterr().out.splitlines()
+    finally:
+        unregister_filter("i49-documented")
+        unregister_filter("i49-predict-only")
+    doc = next(ln for ln in out if ln.startswith("i49-documented"))
+    bad = next(ln for ln in out if ln.startswith("i49-predict-only"))
+    assert doc.endswith("An EKF that says what it is.")
+    assert "NOT USABLE: lacks update; Predicts, never updates." in bad
+
+
+# -- item 20: the no-fix causes follow the evidence ----------------------------------------
+
+def test_no_fix_causes_follow_the_channels_evidence():
+    from sdr_di.receiver.diagnosis import likely_causes
+
+    kw = dict(format_name="iq_int8", given="read", if_hz=0.0, sampling_rate_hz=2.5e6)
+    tracking = [{"cn0_dbhz": 36.0, "subframes": 2, "ephemeris_decoded": False}] * 7
+    evidence, causes = likely_causes(tracking, 12.0, **kw)
+    assert evidence == "7 channels track at 36 dB-Hz, 7 decoding subframes"
+    assert causes[0].startswith("a file too short") and causes[1].startswith("the start")
+    assert causes[-3].startswith("the sample format")        # the description last
+    _, causes = likely_causes([], 12.0, **kw)
+    assert causes[0].startswith("the sample format")
+    assert causes[-1].startswith("a file too short")
+
+
+# -- item 21: a bar over a study's runs, every file named, a quiet Dask teardown -----------
+
+def test_study_progress_is_one_bar_with_failures_above_it(tmp_path):
+    import io
+
+    from sdr_di.studies.commands import StudyProgress
+
+    buf = io.StringIO()
+    with StudyProgress(3, file=buf) as show:
+        show({"status": "ok", "cell": "a", "seed_index": 0})
+        show({"status": "failed", "cell": "a", "seed_index": 1, "error": "boom"})
+        assert show.bar.n == 2 and show.failed == 1
+    assert "2/3" in buf.getvalue()
+
+
+def test_study_outputs_name_every_file(tmp_path):
+    from sdr_di.studies.study import study_outputs
+
+    for name in ("runs.csv", "cells.csv", "comparisons.csv", "tuning.csv", "study.json",
+                 "report.html"):
+        (tmp_path / name).write_text("x")
+    assert sorted(p.name for p in study_outputs(tmp_path).values()) == sorted(
+        p.name for p in tmp_path.iterdir())
+
+
+def test_dask_teardown_errors_are_not_printed(monkeypatch, capsys):
+    import contextlib
+    import logging
+
+    import distributed
+
+    from sdr_di.studies import campaign
+
+    class Fake(contextlib.AbstractContextManager):
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def __exit__(self, *exc):   # what a closing cluster logs on a closed comm
+            logging.getLogger("distributed.comm.tcp").error("CommClosedError: in teardown")
+
+    monkeypatch.setattr(distributed, "LocalCluster", Fake)
+    monkeypatch.setattr(distributed, "Client", Fake)
+    handler = logging.StreamHandler()          # stderr, as Dask's own handler
+    logging.getLogger("distributed").addHandler(handler)
+    level = logging.getLogger("distributed.comm.tcp").level
+    try:
+        with campaign._client(None, 1, 0):
+            pass
+    finally:
+        logging.getLogger("distributed").removeHandler(handler)
+    assert "CommClosedError" not in capsys.readouterr().err
+    assert logging.getLogger("distributed.comm.tcp").level == level      # restored

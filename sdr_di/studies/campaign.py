@@ -170,11 +170,29 @@ def _client(scheduler: str | None, workers: int | None, allowed_failures: int):
             yield client
         return
     n = local_workers(workers)
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                      dashboard_address=":0", silence_logs=logging.ERROR,
-                      scheduler_kwargs={"allowed_failures": allowed_failures}) as cluster, \
-            Client(cluster, set_as_default=False) as client:
-        yield client
+    muted: dict[str, int] = {}
+    try:
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                          dashboard_address=":0", silence_logs=logging.ERROR,
+                          scheduler_kwargs={"allowed_failures": allowed_failures}) as cluster, \
+                Client(cluster, set_as_default=False) as client:
+            try:
+                yield client
+            finally:  # the teardown's CommClosedError tracebacks are not the user's business
+                muted = mute_loggers(("distributed", "tornado", "asyncio"))
+    finally:
+        for name, level in muted.items():
+            logging.getLogger(name).setLevel(level)
+
+
+def mute_loggers(families: Sequence[str]) -> dict[str, int]:
+    """:func:`quiet_loggers` for a while: returns the levels to restore (issue 49 item 21:
+    one of two API studies printed a Dask ``CommClosedError`` traceback at teardown)."""
+    names = [*families, *(n for n in list(logging.root.manager.loggerDict)
+                          if n.split(".", 1)[0] in families)]
+    levels = {n: logging.getLogger(n).level for n in names}
+    quiet_loggers(families)
+    return levels
 
 
 def _collect(client, exp: Experiment, params: dict, seeds: list[int], runs_dir: Path,

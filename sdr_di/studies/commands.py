@@ -192,12 +192,39 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     return 0 if res.ok else 1
 
 
+class StudyProgress:
+    """``sdr-di study``'s progress: one tqdm bar over the (cell, seed) runs, a failed run
+    written above it in one line (issue 49 item 21: a line per finished run, no bar).
+    A context manager (closes the bar); called with each run record."""
+
+    def __init__(self, total: int, file=None) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, unit="run", desc="study", file=file or sys.stderr,
+                        dynamic_ncols=True)
+        self.failed = 0
+
+    def __call__(self, rec: dict) -> None:
+        if rec["status"] != "ok":
+            self.failed += 1
+            self.bar.write(f"  {rec['cell']}  seed {rec['seed_index']}: FAILED: "
+                           f"{rec.get('error')}", file=sys.stderr)
+            self.bar.set_postfix_str(f"{self.failed} failed", refresh=False)
+        self.bar.update(1)
+
+    def __enter__(self) -> StudyProgress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.bar.close()
+
+
 def cmd_study(args: argparse.Namespace) -> int:
     """Handler of ``sdr-di study``."""
     import dask
 
     from ..io.atomic import check_output_dir
-    from .study import _check_folder, run_study
+    from .study import _check_folder, run_study, study_outputs
     from .spec import load_study
 
     spec = load_study(args.spec, force=args.force)
@@ -208,15 +235,13 @@ def cmd_study(args: argparse.Namespace) -> int:
         raise CampaignError(f"--workers must be >= 0, got {args.workers}")
     _check_folder(spec, args.out, args.force)
 
-    def show(rec: dict) -> None:
-        state = "ok" if rec["status"] == "ok" else f"FAILED: {rec.get('error')}"
-        print(f"  {rec['cell']:>24s}  seed {rec['seed_index']:3d}  {state}", flush=True)
-
+    show = StudyProgress(len(spec.cells) * (args.runs or spec.runs))
     preload = [*dask.config.get("distributed.worker.preload", []), _WORKERS_IGNORE_SIGINT]
-    with dask.config.set({"distributed.worker.preload": preload}):
+    with dask.config.set({"distributed.worker.preload": preload}), show:
         res = run_study(spec, args.out, runs=args.runs, scheduler=args.scheduler,
                         workers=args.workers, force=args.force, on_record=show,
                         render=not args.no_report)
+        show.bar.update(res.n_skipped)          # the runs already in the folder
     print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
           f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
           f"{res.elapsed_s:.1f} s")
@@ -229,9 +254,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     for j, cl in enumerate(spec.claims, 1):
         verdicts = [f"{r['cell']}: {r[f'claim{j}']}" for r in res.cells if r[f"claim{j}"]]
         print(f"claim {j} ({cl.text}): {'; '.join(verdicts)}")
-    print(f"cells     {args.out / 'cells.csv'}")
-    if not args.no_report:
-        print(f"report    {args.out / 'report.html'}")
+    for label, path in study_outputs(args.out).items():   # every file, named
+        print(f"{label:11s} {path}")
     return 1 if res.failed else 0
 
 

@@ -59,7 +59,8 @@ from .tables import write_table
 from .tasks import Task, run_tasks, run_tasks_here
 from ..experiments.variants import entry_label
 
-__all__ = ["StudyResult", "execute_cell_run", "run_study", "summarize_study"]
+__all__ = ["StudyResult", "execute_cell_run", "run_study", "study_outputs",
+           "summarize_study"]
 
 
 def execute_cell_run(exp, params: dict, seed: int, index: int, cache_dir: str | None) -> dict:
@@ -285,6 +286,19 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
 
         render_study_report(out)
     return res
+
+
+#: The files a study writes in its folder, by the label ``sdr-di study`` prints.
+STUDY_FILES = (("runs", "runs.csv"), ("cells", "cells.csv"), ("comparisons", "comparisons.csv"),
+               ("tuning", "tuning.csv"), ("plot", "paired_ratios.png"), ("study", "study.json"),
+               ("report", "report.html"))
+
+
+def study_outputs(out: str | Path) -> dict[str, Path]:
+    """The files of :data:`STUDY_FILES` that the study folder ``out`` holds, by label (the
+    runs' own records are under ``runs/``)."""
+    out = Path(out)
+    return {label: out / name for label, name in STUDY_FILES if (out / name).is_file()}
 
 
 def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
