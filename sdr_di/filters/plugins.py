@@ -234,26 +234,26 @@ def guard_plugin(label: str, filt):
     'mod:Cls': update() raised ZeroDivisionError: ... (call 31)``.
     """
     for method in GUARDED_METHODS:
-        bound = getattr(filt, method, None)
-        if bound is None:
+        if not callable(getattr(type(filt), method, None)):
             continue
         try:
-            setattr(filt, method, _Guarded(label, method, bound))
+            setattr(filt, method, _Guarded(label, method, filt))
         except AttributeError:  # __slots__ without a __dict__: left unguarded
             pass
     return filt
 
 
 class _Guarded:
-    """A plugin's bound method behind the guard (:func:`guard_plugin`); picklable."""
+    """A plugin's method behind the guard (:func:`guard_plugin`): calls the class's method
+    on ``filt``; copies and pickles with the filter (deep-start sharing, the loop process)."""
 
-    def __init__(self, label: str, method: str, bound) -> None:
-        self.label, self.method, self.bound, self.calls = label, method, bound, 0
+    def __init__(self, label: str, method: str, filt) -> None:
+        self.label, self.method, self.filt, self.calls = label, method, filt, 0
 
     def __call__(self, *args, **kwargs):
         self.calls += 1
         try:
-            return self.bound(*args, **kwargs)
+            return getattr(type(self.filt), self.method)(self.filt, *args, **kwargs)
         except SdrDiError:
             raise
         except Exception as exc:  # noqa: BLE001 - the user's code: its failure, in one line
