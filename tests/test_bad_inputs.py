@@ -357,7 +357,7 @@ CASES: list[tuple] = [
     ("generate-duration-1e9-disk", [*G, "--duration", "1e9", "--out", "{d}/o"]),
     ("lc-duration-1e9", [*LC, "--duration", "1e9"]),
     ("study-million-cells", ["study", "{d}/study_big.toml", "--out", "{d}/st"]),
-    ("study-runs-beyond-limit", ["study", "{d}/study_typo.toml", "--runs", "6000", "--out",
+    ("study-runs-beyond-limit", ["study", "{d}/study_one.toml", "--runs", "20000", "--out",
                                  "{d}/st"]),
     ("acquire-text-as-iq-int8", ["acquire", "{d}/text.bin", "--fs", "2.5e6", "--format",
                                  "iq_int8"]),
@@ -501,6 +501,7 @@ def _issue49_inputs(d: Path, generated: Path) -> None:
         '[study]\nname = "big"\nfilters = ["ekf"]\nruns = 1\n[factorial]\n'
         + "".join(f'"truth.imu.{k}" = [{levels}]\n'
                   for k in ("gyro_bias_deg_h", "accel_bias_mg", "gyro_scale_factor_ppm")))
+    (d / "study_one.toml").write_text('[study]\nname = "one"\nfilters = ["ekf"]\nruns = 1\n')
     (d / "study_plugin.toml").write_text(
         '[study]\nname = "p"\nfilters = ["ekf", "no_such_module_i49:Filter"]\nruns = 0\n')
     (d / "text.bin").write_text(DEFAULT_SCENARIO.read_text() * 8)

@@ -164,8 +164,8 @@ class ReferenceGridWarning(UserWarning):
 def reference_on_imu_grid(truth, imu, truth_path) -> Truth:
     """The reference at the IMU's sample times, on which the loop writes its error columns
     (issue 49 item 7: a 50 Hz IMU beside a 200 Hz reference gave every error column NaN and
-    null metrics, in silence). The same grid: as is. A finer reference holding every IMU
-    time: its rows at those times, with one warning. Otherwise refused.
+    null metrics, in silence). The same grid: as is. A reference holding every IMU time: its
+    rows at those times (with one warning when its rate differs). Otherwise refused.
 
     Raises
     ------
@@ -181,8 +181,10 @@ def reference_on_imu_grid(truth, imu, truth_path) -> Truth:
             f"times ({imu.rate_hz:g} Hz, {imu.t[0]:g}..{imu.t[-1]:g} s): the error columns "
             "need the reference at every IMU time (a reference at a multiple of the IMU "
             "rate, covering its span)")
-    warnings.warn(f"IMU at {imu.rate_hz:g} Hz, reference {truth_path} at {truth.rate_hz:g} Hz: "
-                  "the errors are taken at the IMU's times", ReferenceGridWarning, stacklevel=3)
+    if abs(imu.rate_hz - truth.rate_hz) > 1e-9 * truth.rate_hz:  # same rate, other span: quiet
+        warnings.warn(f"IMU at {imu.rate_hz:g} Hz, reference {truth_path} at "
+                      f"{truth.rate_hz:g} Hz: the errors are taken at the IMU's times",
+                      ReferenceGridWarning, stacklevel=3)
     return on
 
 

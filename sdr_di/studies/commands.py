@@ -195,14 +195,22 @@ def cmd_robustness(args: argparse.Namespace) -> int:
 class StudyProgress:
     """``sdr-di study``'s progress: one tqdm bar over the (cell, seed) runs, a failed run
     written above it in one line (issue 49 item 21: a line per finished run, no bar).
-    A context manager (closes the bar); called with each run record."""
+    A context manager (closes the bar); called with each run record. The bar appears with
+    the first record: a study refused before any run prints its one line alone."""
 
     def __init__(self, total: int, file=None) -> None:
-        from tqdm import tqdm
+        self.total, self.file, self.failed = total, file or sys.stderr, 0
+        self._bar = None
 
-        self.bar = tqdm(total=total, unit="run", desc="study", file=file or sys.stderr,
-                        dynamic_ncols=True)
-        self.failed = 0
+    @property
+    def bar(self):
+        """The tqdm bar (made on first use)."""
+        if self._bar is None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=self.total, unit="run", desc="study", file=self.file,
+                             dynamic_ncols=True)
+        return self._bar
 
     def __call__(self, rec: dict) -> None:
         if rec["status"] != "ok":
@@ -216,7 +224,8 @@ class StudyProgress:
         return self
 
     def __exit__(self, *exc) -> None:
-        self.bar.close()
+        if self._bar is not None:
+            self._bar.close()
 
 
 def cmd_study(args: argparse.Namespace) -> int:
@@ -241,7 +250,8 @@ def cmd_study(args: argparse.Namespace) -> int:
         res = run_study(spec, args.out, runs=args.runs, scheduler=args.scheduler,
                         workers=args.workers, force=args.force, on_record=show,
                         render=not args.no_report)
-        show.bar.update(res.n_skipped)          # the runs already in the folder
+        if res.n_skipped:                       # the runs already in the folder
+            show.bar.update(res.n_skipped)
     print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
           f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
           f"{res.elapsed_s:.1f} s")
