@@ -296,7 +296,7 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         Scalar mode: no satellite acquired.
     """
     from .constants import parse_prns
-    from .io.atomic import check_output_dir
+    from .io.atomic import check_output_dir, output_dir_removed_on_failure
     from .receiver.run_scalar import open_source
 
     if mode not in RUN_MODES:
@@ -336,11 +336,12 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
                          start_week=start_week, start_sow=start_sow, rfch=rfch)
     out_dir = check_output_dir(Path(out) if out is not None
                                else if_file.with_name(if_file.stem + "_run"))
-    if mode == "scalar":
-        return _run_scalar(source, out_dir, prn_list, rate_hz, cold, approx_pos, ephemeris,
-                           tracking, progress)
-    return _run_integrated(source, out_dir, prn_list, mode, rate_hz, cold, tracking,
-                           progress, integrated, ephemeris, assist, gnss_rate_hz)
+    with output_dir_removed_on_failure(out_dir):   # a failed run leaves no empty folder
+        if mode == "scalar":
+            return _run_scalar(source, out_dir, prn_list, rate_hz, cold, approx_pos,
+                               ephemeris, tracking, progress)
+        return _run_integrated(source, out_dir, prn_list, mode, rate_hz, cold, tracking,
+                               progress, integrated, ephemeris, assist, gnss_rate_hz)
 
 
 def _tracking_config(pll_bw_hz: float | None):
