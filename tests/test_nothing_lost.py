@@ -498,3 +498,10 @@ def test_dask_teardown_errors_are_not_printed(monkeypatch, capsys):
         logging.getLogger("distributed").removeHandler(handler)
     assert "CommClosedError" not in capsys.readouterr().err
     assert logging.getLogger("distributed.comm.tcp").level == level      # restored
+
+
+def test_a_failed_api_run_leaves_no_folder(work, tmp_path):
+    out = tmp_path / "api_run"
+    with pytest.raises(SdrDiError):
+        sdr_di.run(work / "s.bin", prns=["C40"], out=out)      # no such satellite in the file
+    assert not out.exists()
