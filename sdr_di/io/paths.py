@@ -250,3 +250,16 @@ def _size(n: float) -> str:
             return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
         n /= 1000
     return f"{n:g}"
+
+
+@contextlib.contextmanager
+def outside_scope() -> Iterator[None]:
+    """Suspend :func:`command_scope` for code that reads and rewrites its own intermediate
+    files (a study's or an experiment's runs, in this process: their generated sets are
+    cached, read, removed and made again); the command's own inputs stay protected around
+    it."""
+    token = _INPUTS.set(None)
+    try:
+        yield
+    finally:
+        _INPUTS.reset(token)
