@@ -76,6 +76,23 @@ def plugins_deferred():
         _DEFERRED.reset(token)
 
 
+def names_unloaded_plugin(entries) -> bool:
+    """Whether filter entries (``"ekf"``, ``"pkg.mod:Cls:opt=1"``, ``"x@tight"``) name a plugin
+    whose code is not loaded yet: an import path or an installed entry point (a name
+    registered in code has run already)."""
+    from .spec import split_filter_spec
+
+    for entry in entries if isinstance(entries, (list, tuple)) else ():
+        try:
+            name = split_filter_spec(str(entry).partition("@")[0])[0]
+        except FilterError:
+            continue
+        key = name.strip().lower()
+        if is_import_path(name) or (key not in _REGISTERED and key in _entry_points()):
+            return True
+    return False
+
+
 def _stand_in(*args, **options):
     """The factory of a plugin not yet imported (:func:`plugins_deferred`); never built."""
     raise FilterError("a plugin was built while plugins were deferred")

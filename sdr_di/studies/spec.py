@@ -269,10 +269,12 @@ def parse_study(raw: dict, *, source: Path | None = None, force: bool = False) -
         experiment's own check), duplicate cell names, a claim naming an unknown filter,
         quantity or cell. The message names the spec and the key.
     """
-    from ..filters.plugins import plugins_deferred
+    from ..filters.plugins import names_unloaded_plugin, plugins_deferred
 
-    with plugins_deferred():
-        _parse_study(raw, source, force)
+    study = raw.get("study") if isinstance(raw, dict) else None
+    if isinstance(study, dict) and names_unloaded_plugin(study.get("filters")):
+        with plugins_deferred():
+            _parse_study(raw, source, force)
     return _parse_study(raw, source, force)
 
 
