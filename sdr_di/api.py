@@ -21,18 +21,34 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
-
-from .io.paths import guarded
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 if TYPE_CHECKING:
     from .studies.spec import StudySpec
     from .studies.study import StudyResult
 
 __all__ = ["GeneratedFiles", "RunResult", "generate", "run", "study"]
+
+F = TypeVar("F", bound=Callable)
+
+
+def _guarded(func: F) -> F:
+    """Run ``func`` inside :func:`sdr_di.io.paths.command_scope` (no output of the call may
+    be one of its inputs); the module is imported on the first call, not with ``sdr_di``."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from .io.paths import command_scope
+
+        with command_scope():
+            return func(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
 
 #: Receiver modes of :func:`run` (``sdr-di run --mode``).
 RUN_MODES = ("scalar", "deep", "loose", "tight")
@@ -124,7 +140,7 @@ _GENERATE_ARGUMENTS = {"duration_s": "duration_s", "seed": "seed",
                        "ephemeris": "ephemeris", "prns": "prns"}
 
 
-@guarded
+@_guarded
 def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
              name: str | None = None, duration_s: float | None = None,
              seed: int | None = None, sampling_rate_hz: float | None = None,
@@ -208,7 +224,7 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
                           sigmf_meta=files.get("sigmf-meta"))
 
 
-@guarded
+@_guarded
 def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None,
         prns: Sequence[str | int] | None = None, rate_hz: float = 5.0, cold: bool = False,
         pll_bw_hz: float | None = None,
@@ -420,7 +436,7 @@ def _run_integrated(source, out_dir: Path, prns, mode: str, rate_hz: float, cold
                      wall_s=res.wall_s, details=res)
 
 
-@guarded
+@_guarded
 def study(spec: PathLike | Mapping[str, Any] | StudySpec, out: PathLike, *,
           runs: int | None = None, scheduler: str | None = None, workers: int | None = None,
           force: bool = False, report: bool = True,

@@ -23,15 +23,11 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
-import functools
 import os
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import TypeVar
 
 from ..errors import OutputError, SdrDiError
-
-F = TypeVar("F", bound=Callable)
 
 #: Real paths (and (device, inode) pairs) of the files read by the running command; None
 #: outside :func:`command_scope`.
@@ -81,17 +77,6 @@ def command_scope() -> Iterator[None]:
         yield
     finally:
         _INPUTS.reset(token)
-
-
-def guarded(func: F) -> F:
-    """Decorator: run ``func`` inside :func:`command_scope` (the API's entry points)."""
-
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        with command_scope():
-            return func(*args, **kwargs)
-
-    return wrapper  # type: ignore[return-value]
 
 
 def note_input(*paths: str | os.PathLike | None, what: str = "input") -> None:
