@@ -207,6 +207,17 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
         fmt = get_format(sample_format)
         kind = "complex" if fmt.is_complex else "real"
         sample_format = fmt.name
+    names = _GENERATE_ARGUMENTS if _names is None else _names
+    if prns is not None:   # a repeated PRN: one warning naming the flag (the bad ones: below)
+        from .constants import parse_prn, parse_prns
+
+        try:
+            for p in prns:
+                parse_prn(p)
+        except UnknownPrnError:
+            pass
+        else:
+            prns = [f"C{p:02d}" for p in parse_prns(prns, names["prns"])]
     over = dict(
         duration_s=duration_s, seed=seed, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
         sample_format=sample_format, kind=kind, quantization_bits=bits, cn0_dbhz=cn0_dbhz,
@@ -214,7 +225,6 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
     try:
         sc = sc.with_overrides(**over)
     except (ScenarioError, UnknownPrnError) as exc:  # name the argument given, not the key
-        names = _GENERATE_ARGUMENTS if _names is None else _names
         raise with_flag_names(exc, sc, {k: names[k] for k, v in over.items()
                                         if v is not None}) from None
     files = generate_files(sc, REPO_ROOT / "signals" / "out" if out is None else Path(out),

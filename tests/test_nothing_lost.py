@@ -290,6 +290,14 @@ def test_acquire_searches_a_repeated_prn_once_with_one_warning(work, tmp_path, c
     assert [r.split(",")[0] for r in rows] == ["10", "11"] and "2 PRNs" in cap.out
 
 
+def test_generate_uses_a_repeated_prn_once_with_one_warning_naming_the_flag(tmp_path, capsys):
+    assert main([*GD, "--prn", "C10,c10", "--out", str(tmp_path)]) == 0
+    assert capsys.readouterr().err.strip() == \
+        "sdr-di: warning: --prn: C10 x2: each PRN is used once"
+    meta = json.loads((tmp_path / "default.json").read_text())
+    assert [s["prn"] for s in meta["satellites"]] == [10]
+
+
 # -- item 10: sidecars ----------------------------------------------------------------------
 
 @pytest.mark.parametrize("edit,match", [
