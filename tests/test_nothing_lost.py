@@ -513,3 +513,17 @@ def test_a_failed_api_run_leaves_no_folder(work, tmp_path):
     with pytest.raises(SdrDiError):
         sdr_di.run(work / "s.bin", prns=["C40"], out=out)      # no such satellite in the file
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_plugin_raising_in_a_tight_run_is_one_line_exit_1_and_leaves_no_folder(
+        plugins, tmp_path, capsys):
+    """The integrated loop end to end (13 s at 2.5 MHz: the hand-over at about 12.2 s, then
+    the plugin's third update raises)."""
+    assert main([*GD[:-1], "13", "--out", str(tmp_path)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "run"
+    err = one_line(capsys, ["run", tmp_path / "default.bin", "--mode", "tight", "--filter",
+                            "i49_boom:Boom", "--no-progress", "--out", out], status=1)
+    assert "filter plugin 'i49_boom:Boom': update() raised ZeroDivisionError: boom" in err
+    assert not out.exists()
