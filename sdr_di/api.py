@@ -21,16 +21,34 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 if TYPE_CHECKING:
     from .studies.spec import StudySpec
     from .studies.study import StudyResult
 
 __all__ = ["GeneratedFiles", "RunResult", "generate", "run", "study"]
+
+F = TypeVar("F", bound=Callable)
+
+
+def _guarded(func: F) -> F:
+    """Run ``func`` inside :func:`sdr_di.io.paths.command_scope` (no output of the call may
+    be one of its inputs); the module is imported on the first call, not with ``sdr_di``."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from .io.paths import command_scope
+
+        with command_scope():
+            return func(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
 
 #: Receiver modes of :func:`run` (``sdr-di run --mode``).
 RUN_MODES = ("scalar", "deep", "loose", "tight")
@@ -53,19 +71,25 @@ class GeneratedFiles:
         200 Hz reference trajectory (``NAME_truth.csv``).
     metadata : Path
         Sidecar (``NAME.json``): sample format, start time, satellites, the files above.
+    sigmf_data, sigmf_meta : Path or None
+        The SigMF pair (``NAME.sigmf-data``, ``NAME.sigmf-meta``) with ``sigmf=True``.
     """
 
     if_file: Path
     imu: Path
     truth: Path
     metadata: Path
+    sigmf_data: Path | None = None
+    sigmf_meta: Path | None = None
 
     @property
     def files(self) -> dict[str, Path]:
         """The paths by the labels ``sdr-di generate`` prints (``if``, ``imu``, ``truth``,
-        ``metadata``)."""
+        ``metadata``, and ``sigmf-data``, ``sigmf-meta`` when written): every file."""
+        extra = {k: p for k, p in (("sigmf-data", self.sigmf_data),
+                                   ("sigmf-meta", self.sigmf_meta)) if p is not None}
         return {"if": self.if_file, "imu": self.imu, "truth": self.truth,
-                "metadata": self.metadata}
+                "metadata": self.metadata, **extra}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,6 +140,7 @@ _GENERATE_ARGUMENTS = {"duration_s": "duration_s", "seed": "seed",
                        "ephemeris": "ephemeris", "prns": "prns"}
 
 
+@_guarded
 def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
              name: str | None = None, duration_s: float | None = None,
              seed: int | None = None, sampling_rate_hz: float | None = None,
@@ -182,6 +207,17 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
         fmt = get_format(sample_format)
         kind = "complex" if fmt.is_complex else "real"
         sample_format = fmt.name
+    names = _GENERATE_ARGUMENTS if _names is None else _names
+    if prns is not None:   # a repeated PRN: one warning naming the flag (the bad ones: below)
+        from .constants import parse_prn, parse_prns
+
+        try:
+            for p in prns:
+                parse_prn(p)
+        except UnknownPrnError:
+            pass
+        else:
+            prns = [f"C{p:02d}" for p in parse_prns(prns, names["prns"])]
     over = dict(
         duration_s=duration_s, seed=seed, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
         sample_format=sample_format, kind=kind, quantization_bits=bits, cn0_dbhz=cn0_dbhz,
@@ -189,15 +225,16 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
     try:
         sc = sc.with_overrides(**over)
     except (ScenarioError, UnknownPrnError) as exc:  # name the argument given, not the key
-        names = _GENERATE_ARGUMENTS if _names is None else _names
         raise with_flag_names(exc, sc, {k: names[k] for k, v in over.items()
                                         if v is not None}) from None
     files = generate_files(sc, REPO_ROOT / "signals" / "out" if out is None else Path(out),
                            name=name, progress=progress, sigmf=sigmf)
     return GeneratedFiles(if_file=files["if"], imu=files["imu"], truth=files["truth"],
-                          metadata=files["metadata"])
+                          metadata=files["metadata"], sigmf_data=files.get("sigmf-data"),
+                          sigmf_meta=files.get("sigmf-meta"))
 
 
+@_guarded
 def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None,
         prns: Sequence[str | int] | None = None, rate_hz: float = 5.0, cold: bool = False,
         pll_bw_hz: float | None = None,
@@ -284,8 +321,8 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
     NoSatelliteError
         Scalar mode: no satellite acquired.
     """
-    from .constants import parse_prn
-    from .io.atomic import check_output_dir
+    from .constants import parse_prns
+    from .io.atomic import check_output_dir, output_dir_removed_on_failure
     from .receiver.run_scalar import open_source
 
     if mode not in RUN_MODES:
@@ -319,17 +356,18 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
     if iono_wait_s is not None and not (math.isfinite(iono_wait_s) and iono_wait_s >= 0):
         raise ValueError(f"iono_wait_s must be a finite number >= 0, got {iono_wait_s!r}")
     tracking = _tracking_config(pll_bw_hz)
-    prn_list = None if prns is None else [parse_prn(p) for p in prns]
+    prn_list = None if prns is None else parse_prns(prns, "prns")
     source = open_source(if_file, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
                          sample_format=sample_format, spectrum_inverted=inverted,
                          start_week=start_week, start_sow=start_sow, rfch=rfch)
     out_dir = check_output_dir(Path(out) if out is not None
                                else if_file.with_name(if_file.stem + "_run"))
-    if mode == "scalar":
-        return _run_scalar(source, out_dir, prn_list, rate_hz, cold, approx_pos, ephemeris,
-                           tracking, progress)
-    return _run_integrated(source, out_dir, prn_list, mode, rate_hz, cold, tracking,
-                           progress, integrated, ephemeris, assist, gnss_rate_hz)
+    with output_dir_removed_on_failure(out_dir):   # a failed run leaves no empty folder
+        if mode == "scalar":
+            return _run_scalar(source, out_dir, prn_list, rate_hz, cold, approx_pos,
+                               ephemeris, tracking, progress)
+        return _run_integrated(source, out_dir, prn_list, mode, rate_hz, cold, tracking,
+                               progress, integrated, ephemeris, assist, gnss_rate_hz)
 
 
 def _tracking_config(pll_bw_hz: float | None):
@@ -408,6 +446,7 @@ def _run_integrated(source, out_dir: Path, prns, mode: str, rate_hz: float, cold
                      wall_s=res.wall_s, details=res)
 
 
+@_guarded
 def study(spec: PathLike | Mapping[str, Any] | StudySpec, out: PathLike, *,
           runs: int | None = None, scheduler: str | None = None, workers: int | None = None,
           force: bool = False, report: bool = True,
@@ -458,9 +497,9 @@ def study(spec: PathLike | Mapping[str, Any] | StudySpec, out: PathLike, *,
     if isinstance(spec, StudySpec):
         parsed = spec
     elif isinstance(spec, Mapping):
-        parsed = parse_study(dict(spec))
+        parsed = parse_study(dict(spec), force=force)
     else:
-        parsed = load_study(spec)
+        parsed = load_study(spec, force=force)
     out_dir = check_output_dir(Path(out))
     return run_study(parsed, out_dir, runs=runs, scheduler=scheduler, workers=workers,
                      force=force, on_record=on_record, render=report)

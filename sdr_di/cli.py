@@ -182,7 +182,7 @@ def _add_acquire(sub) -> None:
 def _cmd_acquire(args: argparse.Namespace) -> int:
     import math
 
-    from .constants import parse_prn
+    from .constants import parse_prns
     from .io.atomic import check_output_dir, output_dir_removed_on_failure
     from .receiver.acquisition import (
         LIKELY_CAUSES,
@@ -195,7 +195,7 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     check_search(args.coherent_ms, args.noncoherent, args.doppler_range, args.pfa)
     if not math.isfinite(args.doppler_center):
         raise UsageError(f"--doppler-center must be finite, got {args.doppler_center}")
-    prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
+    prns = None if args.prn is None else parse_prns(args.prn)
     _check_file_options(args)
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_acq"))
@@ -364,7 +364,7 @@ def _add_run(sub) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .constants import parse_prn
+    from .constants import parse_prns
     from .errors import RunFailed
     from .io.atomic import check_output_dir, output_dir_removed_on_failure
     from .receiver.run_scalar import run_scalar
@@ -387,7 +387,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.approx_pos is not None and (args.mode != "scalar" or args.ephemeris is None):
         raise UsageError("--approx-pos: only in scalar mode, with --ephemeris")
     _check_run_options(args)
-    prns = None if args.prn is None else [parse_prn(p) for p in args.prn]
+    prns = None if args.prn is None else parse_prns(args.prn)
     source = _open_source(args)
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_run"))
     if args.mode != "scalar":
@@ -432,18 +432,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _no_fix_diagnosis(args: argparse.Namespace, source, res) -> str:
     """One line for a run that ended without a single fix: what it got, and the likely
-    causes, most likely first (a wrong description of the file far more often than a
-    receiver problem)."""
-    n_trk = len(res.channels)
-    n_eph = sum(bool(r["ephemeris_decoded"]) for r in res.channels)
-    given = "given" if args.fs is not None or args.sample_format is not None else "read"
-    return (f"no fix in {res.n_epochs} epochs ({n_trk} channels acquired, {n_eph} with "
-            f"ephemeris; outputs kept in {res.files['pvt'].parent}); likely causes, most "
-            f"likely first: the sample format ({source.format.name} {given}: --format), the "
-            f"IF sign ({source.declared_if_hz:g} Hz: --if with the other sign, or "
-            f"--inverted), the sample rate ({source.sampling_rate_hz:g} Hz: --fs), the start "
-            "time (--start-week, --start-sow), a file too short for the navigation data "
-            f"({source.duration_s:.1f} s)")
+    causes in the order the run's evidence gives (:mod:`sdr_di.receiver.diagnosis`)."""
+    from .receiver.diagnosis import no_fix_diagnosis
+
+    return no_fix_diagnosis(source, res, given=args.fs is not None
+                            or args.sample_format is not None)
 
 
 def _scalar_plots(res) -> None:
@@ -636,6 +629,8 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
                   f"epochs; the rows before it have iono = 0): velocity "
                   f"{mi['vel_mps_rmse']:.4f} m/s, position {mi['pos_m_rmse']:.3f} m "
                   f"(max {mi['pos_m_max']:.3f})")
+    else:  # null metrics say why (issue 49 item 7)
+        print(f"errors vs reference: none ({res.metrics_note})")
     if args.plots:      # the report's figures, drawn from the files the run wrote
         from .report import write_run_plots
 
@@ -684,13 +679,13 @@ def _add_lc(sub) -> None:
 def _cmd_lc(args: argparse.Namespace) -> int:
     import dataclasses
     import json
-    import math
 
     from .errors import ImuDataError, ScenarioError
     from .filters import parse_filter_spec
     from .ins.imu import ImuErrorModel
     from .integration.assumptions import apply_to_lc, resolve_assumptions
     from .integration.loose import (
+        check_lc_duration,
         lc_summary,
         load_lc_scenario,
         make_inputs,
@@ -698,7 +693,12 @@ def _cmd_lc(args: argparse.Namespace) -> int:
         run_loose,
     )
     from .integration.noise import NoiseWindow
-    from .io.atomic import atomic_open, check_output_dir, ensure_output_dir
+    from .io.atomic import (
+        atomic_open,
+        check_output_dir,
+        ensure_output_dir,
+        output_dir_removed_on_failure,
+    )
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
 
     sc, st = load_lc_scenario(args.scenario or DEFAULT_SCENARIO)
@@ -728,10 +728,8 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     st = st.replace(**kw)
     out = check_output_dir(args.out or (REPO_ROOT / "signals" / "out"))
     shortest = min_lc_duration_s(st)
-    if args.duration is not None and not (math.isfinite(args.duration)
-                                          and args.duration >= shortest):
-        raise ScenarioError(f"--duration must be >= {shortest:g} s (one GNSS interval: the "
-                            f"first filter update), got {args.duration:g}")
+    if args.duration is not None:
+        check_lc_duration(args.duration, st, "--duration")
     if args.seed is not None and args.seed < 0:
         raise ScenarioError(f"--seed must be >= 0, got {args.seed}")
     seed = sc.seed if args.seed is None else args.seed
@@ -755,16 +753,21 @@ def _cmd_lc(args: argparse.Namespace) -> int:
         if sc.duration_s < shortest:
             raise ScenarioError(f"{sc.source}: duration {sc.duration_s:g} s is shorter than one "
                                 f"GNSS interval ({shortest:g} s): no filter update, no result")
+        check_lc_duration(sc.duration_s, st, f"{sc.source}: duration_s")
         truth, imu, model = make_inputs(sc, st)
-    out = ensure_output_dir(out)  # created only now that every input is checked
+    from .io.paths import check_outputs, file_safe
+
+    stem = file_safe(name)  # an import path's ':' out of file names
+    csv, summary = out / f"{sc.name}_lc_{stem}.csv", out / f"{sc.name}_lc_{stem}_summary.json"
+    check_outputs([csv, summary])
     model = filter_imu or model  # the filter's IMU spec: assumed, else the truth's
-    res = run_loose(truth, imu, model, st, seed=seed, duration_s=args.duration)
-    stem = re.sub(r"[^A-Za-z0-9_.-]", "_", name)  # an import path's ':' out of file names
-    csv = res.write_csv(out / f"{sc.name}_lc_{stem}.csv")
-    summary = out / f"{sc.name}_lc_{stem}_summary.json"
-    with atomic_open(summary, "w") as fh:
-        json.dump(lc_summary(sc, st, model, assumed, res, seed=seed), fh, indent=2)
-        fh.write("\n")
+    with output_dir_removed_on_failure(out):  # a failed run leaves no empty folder
+        ensure_output_dir(out)  # created only now that every input is checked
+        res = run_loose(truth, imu, model, st, seed=seed, duration_s=args.duration)
+        csv = res.write_csv(csv)
+        with atomic_open(summary, "w") as fh:
+            json.dump(lc_summary(sc, st, model, assumed, res, seed=seed), fh, indent=2)
+            fh.write("\n")
     head = (f"{'filter':14s} {'span_s':>11s} {'att_rmse_deg':>12s} {'att_max_deg':>11s} "
             f"{'vel_rmse':>9s} {'vel_max':>8s} {'pos_rmse_m':>10s} {'pos_max_m':>9s}")
     print(head)
@@ -863,13 +866,24 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _show_warning
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
-        if argv[:1] in (["run"], ["generate"]) and not {"--no-progress", "-h", "--help"} & {
-                a.split("=")[0] for a in argv}:  # before build_parser: it imports numba
-            _show_status("sdr-di: loading the signal-processing kernels ...")
+        if argv[:1] in (["run"], ["generate"], ["acquire"]) and not {
+                "--no-progress", "-h", "--help"} & {a.split("=")[0] for a in argv}:
+            from .kernel_cache import NOTE, kernels_cached  # imports no kernel
+
+            _show_status("sdr-di: " + ("loading the signal-processing kernels ..."
+                                       if kernels_cached() else NOTE + " ..."))
         parser = build_parser()
         argv = attach_negative_values(argv)
         args = parser.parse_args(argv)
-        return args.func(args)
+        from .io.paths import command_scope, path_error
+
+        with command_scope():  # no output may land on an input (sdr_di.io.paths)
+            try:
+                return args.func(args)
+            except OSError as exc:  # a path the system refused: a bad input, one line
+                raise path_error(exc) from None
+            except RecursionError:
+                raise UsageError("an input is nested too deeply to be read") from None
     except SdrDiError as exc:
         _clear_status()
         print(f"sdr-di: error: {_one_line(str(exc))}", file=sys.stderr)

@@ -80,6 +80,32 @@ def parse_prn(value) -> int:
     return prn
 
 
+class PrnListWarning(UserWarning):
+    """A PRN list named a satellite more than once: each is searched (or simulated) once."""
+
+
+def parse_prns(values, what: str = "--prn") -> list[int]:
+    """PRNs of a list (``["C21", 22, "c21"]``) in order, each once (:func:`parse_prn`); a
+    repeated PRN is dropped with one :class:`PrnListWarning` naming ``what`` (every command
+    treats a list this way: issue 49 item 9).
+
+    Raises
+    ------
+    UnknownPrnError
+        An entry that is not a BDS PRN.
+    """
+    import collections
+    import warnings
+
+    prns = [parse_prn(v) for v in values]
+    counts = collections.Counter(prns)
+    twice = [f"C{p:02d} x{n}" for p, n in counts.items() if n > 1]
+    if twice:
+        warnings.warn(f"{what}: {', '.join(twice)}: each PRN is used once",
+                      PrnListWarning, stacklevel=2)
+    return list(dict.fromkeys(prns))
+
+
 def is_geo(prn: int) -> bool:
     """Return True for a GEO PRN (D2 message, GEO orbit computation)."""
     return int(prn) in GEO_PRNS

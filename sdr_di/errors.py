@@ -86,6 +86,14 @@ class CovarianceError(FilterError):
             "eigenvalues instead of failing")
 
 
+class PluginError(FilterError):
+    """Code a user brought (a plugin filter) raised during a run: one line naming the
+    plugin, the call and the exception. The run failed, not the input: exit status 1
+    (:attr:`exit_status`); in a study only that filter's runs fail."""
+
+    exit_status = 1
+
+
 class AssumptionsError(SdrDiError):
     """Bad assumptions file or ``[assume]`` table (what the integration filter believes):
     unknown table, key or preset, negative sigma or h-parameter, or assumptions given to a

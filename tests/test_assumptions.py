@@ -238,7 +238,7 @@ def test_deep_run_with_assumptions_records_both_worlds(tmp_path, capsys):
     rc = main(["run", str(paths["if"]), "--mode", "deep", "--filter", "ukf", "--assume",
                str(f), "--no-progress", "--out", str(out)])
     assert rc == 0, capsys.readouterr()
-    summ = json.loads((out / "default_deep_summary.json").read_text())
+    summ = json.loads((out / "default_deep_ukf_summary.json").read_text())
     assert summ["truth"]["oscillator"]["preset"] == "tcxo"
     a = summ["assumptions"]
     assert a["oscillator"]["preset"] == "ocxo" and a["given"]["source"] == str(f)
@@ -246,7 +246,7 @@ def test_deep_run_with_assumptions_records_both_worlds(tmp_path, capsys):
     assert a["initial_covariance"]["att_deg"][2] == 20.0
     assert a["measurement_noise"] == {"policy": "fixed", "sigma_range_m": 2.0,
                                       "sigma_rate_mps": 0.1}
-    rows = np.genfromtxt(out / "default_deep.csv", delimiter=",", names=True, skip_header=1)
+    rows = np.genfromtxt(out / "default_deep_ukf.csv", delimiter=",", names=True, skip_header=1)
     head = np.abs(rows["att_err_u_deg"])
     assert head[0] > 5.0               # the injected error is there after the first update
     assert head[-1] < 0.5 * head[0]    # and the filter pulls it in

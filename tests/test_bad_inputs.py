@@ -67,7 +67,6 @@ CASES: list[tuple] = [
     ("generate-prn-c99", [*GD, "--prn", "C99", "--out", "{d}/o"]),
     ("generate-prn-text", [*GD, "--prn", "GPS", "--out", "{d}/o"]),
     ("generate-prn-empty", [*GD, "--prn", ",", "--out", "{d}/o"]),
-    ("generate-prn-duplicate", [*GD, "--prn", "C10,C10", "--out", "{d}/o"]),
     ("generate-seed-neg", [*GD, "--seed", "-1", "--out", "{d}/o"]),
     ("generate-scenario-missing", [*GD, "--scenario", "{d}/nope.toml", "--out", "{d}/o"]),
     ("generate-scenario-dir", [*GD, "--scenario", "{d}", "--out", "{d}/o"]),
@@ -342,6 +341,41 @@ CASES: list[tuple] = [
     ("run-deep-too-short-for-handover", ["run", "{d}/set/s.bin", "--mode", "deep",
                                          "--no-progress"], 1),
     ("study-cell-unknown-truth-key", ["study", "{d}/study_typo.toml", "--out", "{d}/st"]),
+    # -- issue 49: nothing lost, nothing misleading --------------------------------------------
+    ("run-output-is-the-ephemeris", ["run", "{d}/navset/s.bin", "--ephemeris",
+                                     "{d}/navset/s_nav.rnx", "--out", "{d}/navset",
+                                     "--no-progress"]),
+    ("generate-output-is-the-scenario", [*GD, "--scenario", "{d}/navset/x.json", "--name", "x",
+                                         "--out", "{d}/navset"]),
+    ("lc-output-is-the-scenario", [*LC, "--scenario", "{d}/navset/default_lc_ekf.csv",
+                                   "--duration", "2", "--out", "{d}/navset"]),
+    ("generate-out-name-300-chars", [*GD, "--out", "{d}/" + "x" * 300]),
+    ("generate-name-250-chars", [*GD, "--name", "n" * 250, "--out", "{d}/o"]),
+    ("run-out-name-300-chars", ["run", "{d}/set/s.bin", "--out", "{d}/" + "x" * 300]),
+    ("run-path-5kb", ["run", "{d}/" + "/".join(["y" * 200] * 25) + "/s.bin"]),
+    ("acquire-out-5kb", ["acquire", "{d}/set/s.bin", "--out",
+                         "{d}/" + "/".join(["y" * 200] * 25)]),
+    ("lc-out-name-300-chars", [*LC, "--duration", "2", "--out", "{d}/" + "x" * 300]),
+    ("report-dir-name-300-chars", ["report", "{d}/" + "x" * 300]),
+    ("generate-scenario-nested-3000", [*GD, "--scenario", "{d}/nested.toml", "--out", "{d}/o"]),
+    ("study-spec-nested-3000", ["study", "{d}/nested.toml", "--out", "{d}/st"]),
+    ("lc-assume-nested-3000", [*LC, "--assume", "{d}/nested.toml"]),
+    ("generate-duration-1e9-disk", [*G, "--duration", "1e9", "--out", "{d}/o"]),
+    ("lc-duration-1e9", [*LC, "--duration", "1e9"]),
+    ("study-million-cells", ["study", "{d}/study_big.toml", "--out", "{d}/st"]),
+    ("study-runs-beyond-limit", ["study", "{d}/study_one.toml", "--runs", "20000", "--out",
+                                 "{d}/st"]),
+    ("acquire-text-as-iq-int8", ["acquire", "{d}/text.bin", "--fs", "2.5e6", "--format",
+                                 "iq_int8"]),
+    ("acquire-constant-bytes", ["acquire", "{d}/zeros.bin", "--fs", "2.5e6", "--format",
+                                "iq_int8"]),
+    ("acquire-periodic-pattern", ["acquire", "{d}/pattern.bin", "--fs", "2.5e6", "--format",
+                                  "iq_int8"]),
+    ("run-sidecar-duplicate-key", ["run", "{d}/set/dup_key.json"]),
+    ("run-sidecar-rate-1e308", ["run", "{d}/set/rate_huge.json"]),
+    ("acquire-sidecar-rate-vs-n-samples", ["acquire", "{d}/set/rate_vs_n.json"]),
+    ("run-sidecar-if-outside-band", ["run", "{d}/set/if_out.json"]),
+    ("study-bad-spec-with-plugin", ["study", "{d}/study_plugin.toml", "--out", "{d}/st"]),
 ]
 
 #: Exit status of a case: 2 (bad input) unless its third element says otherwise (1: a run
@@ -376,6 +410,11 @@ def _sidecar_variants(set_dir: Path) -> None:
     put("week_huge.json", start={**meta["start"], "week": 123456})
     put("sow_neg.json", start={**meta["start"], "sow": -1.0})
     put("carrier_null.json", carrier_hz=None)
+    put("rate_huge.json", sampling_rate_hz=1e308)
+    put("rate_vs_n.json", sampling_rate_hz=5e6)
+    put("if_out.json", if_hz=5e6)
+    (set_dir / "dup_key.json").write_text((set_dir / "s.json").read_text().replace(
+        '"sampling_rate_hz":', '"sampling_rate_hz": 5000000.0, "sampling_rate_hz":', 1))
     (set_dir / "no_imu_file.json").write_text(
         json.dumps({k: v for k, v in meta.items() if k != "imu_file"}))
 
@@ -404,6 +443,7 @@ def make_workdir(d: Path, generated: Path) -> None:
     data = (d / "trunc" / "s.bin").read_bytes()
     (d / "trunc" / "s.bin").write_bytes(data[:len(data) // 2])
     (d / "afile").write_text("not a folder\n")
+    _issue49_inputs(d, generated)
     (d / "bad.toml").write_text("[scenario\nname = 'x'\n")
     (d / "empty.toml").write_text("")
     (d / "types.toml").write_text(
@@ -454,6 +494,39 @@ def make_workdir(d: Path, generated: Path) -> None:
                                ("res_types", "result.json", '{"status": 5, "tables": 3}')):
         (d / folder).mkdir()
         (d / folder / name).write_text(text)
+
+
+def _issue49_inputs(d: Path, generated: Path) -> None:
+    """Inputs of issue 49's cases: a set beside its ephemeris and a scenario named like the
+    outputs, a TOML nested 3000 deep, a million-cell study, text, constant and periodic
+    bytes, a study spec with a plugin and a bad key."""
+    import gzip
+
+    import numpy as np
+
+    from sdr_di.scenario import REPO_ROOT
+
+    shutil.copytree(generated, d / "navset")
+    nav = REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
+    (d / "navset" / "s_nav.rnx").write_bytes(gzip.decompress(nav.read_bytes()))
+    scenario = DEFAULT_SCENARIO.read_text().replace('"../ephemeris/',
+                                                    f'"{REPO_ROOT}/ephemeris/')
+    (d / "navset" / "x.json").write_text(scenario)
+    (d / "navset" / "default_lc_ekf.csv").write_text(scenario)
+    (d / "nested.toml").write_text("x = " + "[" * 3000 + "]" * 3000 + "\n")
+    levels = ", ".join(str(float(v)) for v in range(1, 101))
+    (d / "study_big.toml").write_text(
+        '[study]\nname = "big"\nfilters = ["ekf"]\nruns = 1\n[factorial]\n'
+        + "".join(f'"truth.imu.{k}" = [{levels}]\n'
+                  for k in ("gyro_bias_deg_h", "accel_bias_mg", "gyro_scale_factor_ppm")))
+    (d / "study_one.toml").write_text('[study]\nname = "one"\nfilters = ["ekf"]\nruns = 1\n')
+    (d / "study_plugin.toml").write_text(
+        '[study]\nname = "p"\nfilters = ["ekf", "no_such_module_i49:Filter"]\nruns = 0\n')
+    (d / "text.bin").write_text(DEFAULT_SCENARIO.read_text() * 8)
+    (d / "zeros.bin").write_bytes(bytes(200_000))
+    rng = np.random.default_rng(1)
+    (d / "pattern.bin").write_bytes(
+        np.tile(rng.integers(-3, 4, 1000).astype(np.int8), 200).tobytes())
 
 
 def _sigmf_pairs(d: Path) -> None:

@@ -311,7 +311,7 @@ def test_deep_mode_end_to_end(gen26, capsys):
                "--no-progress", "--out", str(out)])
     text = capsys.readouterr().out
     assert rc == 0, text
-    summ = json.loads((out / "default_deep_summary.json").read_text())
+    summ = json.loads((out / "default_deep_ff-aukf_summary.json").read_text())
     assert summ["prns"] and len(summ["prns"]) == 7
     assert float(DUR) - summ["handover_s"] >= 10.0
     assert summ["channels_always_used"] is True
@@ -319,7 +319,7 @@ def test_deep_mode_end_to_end(gen26, capsys):
     assert m["n"] >= 50
     assert m["pos_m_rmse"] < 2.0, m
     assert m["vel_mps_rmse"] < 0.2, m
-    rows = np.loadtxt(out / "default_deep.csv", delimiter=",", skiprows=2)
+    rows = np.loadtxt(out / "default_deep_ff-aukf.csv", delimiter=",", skiprows=2)
     assert rows.shape[0] == m["n"] and np.all(rows[:, 14] == 7)
     assert np.all(np.diff(rows[:, 0]) == pytest.approx(0.2))          # 5 Hz output
 

@@ -307,7 +307,7 @@ def test_run_deep_with_a_plugin_by_import_path(plugin, tmp_path, capsys):
     rc = main(["run", str(tmp_path / "default.bin"), "--mode", "deep", "--no-progress",
                "--filter", f"{plugin}:TunedEKF:scale=2", "--out", str(out)])
     assert rc == 0, capsys.readouterr()
-    summ = json.loads((out / "default_deep_summary.json").read_text())
+    summ = json.loads((out / f"default_deep_{plugin}_TunedEKF_summary.json").read_text())
     assert summ["filter"] == f"{plugin}:TunedEKF" and summ["metrics"]["n"] > 0
     used = summ["assumptions"]["filter"]
     assert used["spec"] == f"{plugin}:TunedEKF:scale=2.0"
@@ -321,7 +321,7 @@ def test_run_deep_with_a_plugin_by_import_path(plugin, tmp_path, capsys):
                                gyro_bias_si=imu.gyro_bias_si, accel_bias_si=imu.accel_bias_si,
                                bias_time_s=3600.0)[:15, :15])
     np.testing.assert_allclose(used["Q0_diag"][:15], 2.0 * q0, rtol=1e-9)
-    head = (out / "default_deep.csv").read_text().splitlines()[0]
+    head = (out / f"default_deep_{plugin}_TunedEKF.csv").read_text().splitlines()[0]
     assert f"filter {plugin}:TunedEKF:scale=2.0," in head
 
 

@@ -31,6 +31,11 @@ def tag_text(fmt, fs_mhz="4", f_lo="1268.52", iq=None, bits=None, prog="Pocket S
     return "\n".join(lines) + "\n"
 
 
+#: 10240 bytes of noise: a file the format check takes for a recording (a repeating pattern
+#: is refused: ifreader.content_problem).
+NOISE_BYTES = np.random.default_rng(7).integers(0, 256, 10240, dtype=np.uint8).tobytes()
+
+
 def write(tmp_path, data: bytes, tag: str, name="x.bin") -> Path:
     p = tmp_path / name
     p.write_bytes(data)
@@ -184,7 +189,7 @@ def test_default_channel_is_nearest_lo_and_flags_override(tmp_path):
 
 
 def test_json_sidecar_wins_over_tag(tmp_path):
-    p = write(tmp_path, bytes(range(256)) * 40, tag_text("INT4X2", prog="IFDataGen"))
+    p = write(tmp_path, NOISE_BYTES, tag_text("INT4X2", prog="IFDataGen"))
     meta = {"schema": "sdr-di-if/1", "if_file": "x.bin", "sampling_rate_hz": 1e6, "if_hz": 0.0,
             "sample_format": "iq_int8", "n_samples": 5120, "start": {"week": 1, "sow": 2.0}}
     (tmp_path / "x.json").write_text(json.dumps(meta))
@@ -200,7 +205,7 @@ def test_foreign_json_named_like_the_file_is_refused_with_the_way_out(tmp_path, 
     from sdr_di.cli import main
     from sdr_di.errors import SidecarError
 
-    p = write(tmp_path, bytes(range(256)) * 40, tag_text("INT4X2", prog="IFDataGen"))
+    p = write(tmp_path, NOISE_BYTES, tag_text("INT4X2", prog="IFDataGen"))
     (tmp_path / "x.json").write_text(json.dumps({"time": {"type": "UTC"},
                                                  "output": {"format": "IQ4"}}))
     with pytest.raises(SidecarError, match=r"not an sdr-di sidecar .*sidecar of x\.bin "

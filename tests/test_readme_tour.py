@@ -3,8 +3,9 @@
 The commands are read from the README's ``bash`` block that follows the ``<!-- tour:``
 marker, in order, and run in-process through :func:`sdr_di.cli.main` with four changes that
 keep them small and out of the repository: ``signals/out`` becomes a temporary folder,
-``generate`` gets ``--fs 2.5e6`` and ``--duration 15`` (13x smaller; the deep, loose
-and tight runs still hand over at about 12.2 s and report errors after it), runs and generation get
+``generate`` gets ``--fs 2.5e6`` (10x smaller: the README's figures are for this file, 20 s
+at 2.5 MHz; the deep, loose and tight runs hand over at about 12.2 s and report errors
+after it, which are checked against the README's figures), runs and generation get
 ``--no-progress``, and the study gets ``--runs 1 --workers 0`` (one seed, in process).
 Each command is one test, in the README's order; a command whose predecessor failed is
 skipped rather than failed again.
@@ -13,6 +14,7 @@ skipped rather than failed again.
 from __future__ import annotations
 
 import json
+import re
 import shlex
 from pathlib import Path
 
@@ -40,6 +42,24 @@ def tour_commands(readme: Path = REPO / "README.md") -> list[str]:
 
 
 TOUR = tour_commands()
+
+_FIGURES = re.compile(r"position is\s+about ([\d.]+) m RMSE in all three, velocity about "
+                      r"([\d.]+) m/s in deep and ([\d.]+) m/s in loose and\s+tight "
+                      r"\(`tests/test_readme_tour.py` holds each figure within (\d+) %")
+
+
+def readme_figures(mode: str, readme: Path = REPO / "README.md") -> tuple[float, float, float]:
+    """The README's position and velocity RMSE for ``mode`` [m, m/s] and the tolerance it
+    states (a fraction)."""
+    m = _FIGURES.search(" ".join(readme.read_text().split()))
+    assert m, "the README's sentence of tour figures is missing"
+    pos, vel_deep, vel_other, pct = (float(v) for v in m.groups())
+    return pos, vel_deep if mode == "deep" else vel_other, pct / 100.0
+
+
+def test_the_readme_states_its_tour_figures_and_tolerance():
+    assert readme_figures("deep") == (0.25, 0.01, 0.3)
+    assert readme_figures("tight")[1] == 0.02
 _state: dict[str, object] = {"failed": None}
 
 
@@ -50,8 +70,6 @@ def _small(cmd: str, place: Path) -> list[str]:
     sub = argv[0]
     if sub == "generate":
         argv += ["--fs", "2.5e6", "--no-progress"]
-        if "--duration" in argv:      # 15 s: past the hand-over (~12.2 s) with 2.8 s to spare
-            argv[argv.index("--duration") + 1] = "15"
         if "--out" not in argv:
             argv += ["--out", str(place / "signals" / "out")]
     elif sub == "run":
@@ -114,6 +132,10 @@ def _check(argv: list[str], out: str, place: Path) -> None:
             assert "errors vs reference" in out, out
             summary = json.loads((run_dir / f"{ifp.stem}_{mode}_summary.json").read_text())
             assert summary["mode"] == mode
+            pos, vel, tol = readme_figures(mode)
+            m = summary["metrics"]
+            assert abs(m["pos_m_rmse"] - pos) <= tol * pos, (mode, m["pos_m_rmse"], pos)
+            assert abs(m["vel_mps_rmse"] - vel) <= tol * vel, (mode, m["vel_mps_rmse"], vel)
             assert (run_dir / f"{ifp.stem}_{mode}.csv").is_file()
     elif sub == "study":
         d = Path(argv[argv.index("--out") + 1])

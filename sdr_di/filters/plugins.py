@@ -20,10 +20,18 @@ entry-point group ``sdr_di.filters``
 
 A plugin that cannot be imported, is not callable, or returns an object without the interface
 raises :class:`~sdr_di.errors.FilterError` (one line; the CLI exits 2 before any work).
+Naming a plugin imports its module, which runs the module's code.
+
+Once built, a plugin's methods are called through one guard (:func:`guard_plugin`): an
+exception it raises during the run (other than sdr-di's own errors, which keep their
+meaning) becomes a :class:`~sdr_di.errors.PluginError` naming the plugin, the call and the
+exception: one line and exit 1 from the CLI, a failed run of that filter alone in a study.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import importlib
 import importlib.metadata
 import os
@@ -32,9 +40,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import FilterError
+from ..errors import FilterError, PluginError, SdrDiError
 
-__all__ = ["ENTRY_POINT_GROUP", "check_interface", "is_import_path", "plugin_names",
+__all__ = ["ENTRY_POINT_GROUP", "check_interface", "guard_plugin", "is_import_path",
+           "plugin_names",
            "register_filter", "resolve_plugin", "unregister_filter"]
 
 #: Entry-point group through which installed packages add filter names.
@@ -48,6 +57,45 @@ REQUIRED_ARRAYS = ("x", "P", "Q")
 REQUIRED_ATTRS = ("nis", "adaptation_time_s", "rule")
 
 _REGISTERED: dict[str, Callable] = {}
+
+#: True while a specification is checked before its plugins may run (:func:`plugins_deferred`).
+_DEFERRED: contextvars.ContextVar[bool] = contextvars.ContextVar("sdr_di_plugins_deferred",
+                                                                 default=False)
+
+
+@contextlib.contextmanager
+def plugins_deferred():
+    """Check a specification without importing its plugins: inside the block an import path
+    or an entry-point name resolves to a stand-in that takes any option, so that everything
+    else in the spec is judged first; the caller checks it again after the block, importing
+    the plugins (naming a plugin runs its module's code: issue 49 item 11)."""
+    token = _DEFERRED.set(True)
+    try:
+        yield
+    finally:
+        _DEFERRED.reset(token)
+
+
+def names_unloaded_plugin(entries) -> bool:
+    """Whether filter entries (``"ekf"``, ``"pkg.mod:Cls:opt=1"``, ``"x@tight"``) name a plugin
+    whose code is not loaded yet: an import path or an installed entry point (a name
+    registered in code has run already)."""
+    from .spec import split_filter_spec
+
+    for entry in entries if isinstance(entries, (list, tuple)) else ():
+        try:
+            name = split_filter_spec(str(entry).partition("@")[0])[0]
+        except FilterError:
+            continue
+        key = name.strip().lower()
+        if is_import_path(name) or (key not in _REGISTERED and key in _entry_points()):
+            return True
+    return False
+
+
+def _stand_in(*args, **options):
+    """The factory of a plugin not yet imported (:func:`plugins_deferred`); never built."""
+    raise FilterError("a plugin was built while plugins were deferred")
 
 
 def _builtin_names() -> tuple[str, ...]:
@@ -150,6 +198,9 @@ def resolve_plugin(name: str) -> Callable | None:
     """
     name = str(name).strip()
     if is_import_path(name):
+        mod_name, _, attr = name.partition(":")
+        if _DEFERRED.get() and mod_name and attr:
+            return _stand_in
         factory = _import(name)
     else:
         key = name.lower()
@@ -158,6 +209,8 @@ def resolve_plugin(name: str) -> Callable | None:
             ep = _entry_points().get(key)
             if ep is None:
                 return None
+            if _DEFERRED.get():
+                return _stand_in
             try:
                 factory = ep.load()
             except Exception as exc:
@@ -183,3 +236,46 @@ def check_interface(name: str, filt, n_states: int) -> None:
         got = np.shape(getattr(filt, a))
         if got != shape:
             raise FilterError(f"filter {name!r}: {a} has shape {got}, expected {shape}")
+
+
+#: The methods of a plugin the receiver calls during a run, each through :func:`guard_plugin`.
+GUARDED_METHODS = ("predict", "update")
+
+
+def guard_plugin(label: str, filt):
+    """Route the run-time calls of the plugin filter ``filt`` (:data:`GUARDED_METHODS`)
+    through one guard; returns ``filt``.
+
+    An exception of the plugin's code (not an :class:`~sdr_di.errors.SdrDiError`, not an
+    interrupt) is raised again as :class:`~sdr_di.errors.PluginError`: ``filter plugin
+    'mod:Cls': update() raised ZeroDivisionError: ... (call 31)``.
+    """
+    for method in GUARDED_METHODS:
+        if not callable(getattr(type(filt), method, None)):
+            continue
+        try:
+            setattr(filt, method, _Guarded(label, method, filt))
+        except AttributeError:  # __slots__ without a __dict__: left unguarded
+            pass
+    return filt
+
+
+class _Guarded:
+    """A plugin's method behind the guard (:func:`guard_plugin`): calls the class's method
+    on ``filt``; copies and pickles with the filter (deep-start sharing, the loop process)."""
+
+    def __init__(self, label: str, method: str, filt) -> None:
+        self.label, self.method, self.filt, self.calls = label, method, filt, 0
+
+    def __call__(self, *args, **kwargs):
+        self.calls += 1
+        try:
+            return getattr(type(self.filt), self.method)(self.filt, *args, **kwargs)
+        except SdrDiError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - the user's code: its failure, in one line
+            text = " ".join(str(exc).split())
+            raise PluginError(f"filter plugin {self.label!r}: {self.method}() raised "
+                              f"{type(exc).__name__}"
+                              + (f": {text[:200]}" if text else "")
+                              + f" (call {self.calls})") from None

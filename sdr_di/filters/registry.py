@@ -159,7 +159,7 @@ def _make_plugin(name: str, process_model, measurement_model, x0, P0, Q0, R0,
                  options: dict) -> KalmanFilterBase:
     """A plugin filter (:mod:`.plugins`): its factory with the inputs and the options; ``dt``
     only where the factory takes it. The result's ``name`` is set to ``name``."""
-    from .plugins import check_interface, resolve_plugin
+    from .plugins import check_interface, guard_plugin, resolve_plugin
     from .spec import _factory_params
 
     factory = resolve_plugin(name)
@@ -186,7 +186,28 @@ def _make_plugin(name: str, process_model, measurement_model, x0, P0, Q0, R0,
         filt.name = label
     except AttributeError:
         pass
-    return filt
+    return guard_plugin(label, filt)
+
+
+def plugin_summary(name: str) -> str:
+    """What ``sdr-di filters`` says of a plugin: the first line of its factory's docstring,
+    and, first, ``NOT USABLE: lacks update`` where a class factory lacks a method the
+    receiver calls (:data:`~.plugins.REQUIRED_METHODS`; issue 49 item 17)."""
+    import inspect
+
+    from .plugins import REQUIRED_METHODS, resolve_plugin
+
+    try:
+        factory = resolve_plugin(name)
+    except FilterError as exc:
+        return str(exc)
+    doc = (inspect.getdoc(factory) or "").strip().splitlines()
+    text = doc[0] if doc else "(plugin without a docstring)"
+    if isinstance(factory, type):
+        missing = [m for m in REQUIRED_METHODS if not callable(getattr(factory, m, None))]
+        if missing:
+            text = f"NOT USABLE: lacks {', '.join(missing)}; {text}"
+    return text
 
 
 def filter_table() -> list[dict]:
@@ -208,7 +229,7 @@ def filter_table() -> list[dict]:
             "name": name,
             "core": entry[0].__name__ if entry else "plugin",
             "rule": entry[1].__name__ if entry and entry[1] else "",
-            "equations": _EQUATIONS.get(name, "(plugin)"),
+            "equations": _EQUATIONS.get(name) or plugin_summary(name),
             "options": [dataclasses.asdict(i) for i in infos],
             "open": open_ended,
         })

@@ -70,6 +70,26 @@ class Truth:
         """Sample interval [s]."""
         return 1.0 / self.rate_hz
 
+    def at_times(self, t, atol_s: float = 1e-6) -> Truth | None:
+        """The rows at the times ``t`` [s] (every ``t`` one of :attr:`t` within ``atol_s``:
+        a 200 Hz reference on a 50 Hz IMU's grid); None when some ``t`` is not a sample
+        time. ``f_b`` and ``w_ib_b`` keep their own (shorter) averaging intervals."""
+        t = np.asarray(t, float)
+        idx = np.clip(np.searchsorted(self.t, t - atol_s), 0, len(self.t) - 1)
+        if not np.all(np.abs(self.t[idx] - t) <= atol_s):
+            return None
+        rate = self.rate_hz * (len(t) - 1) / max(int(idx[-1] - idx[0]), 1) if len(t) > 1 \
+            else self.rate_hz
+
+        def take(a):
+            return None if a is None else np.asarray(a)[idx]
+
+        return Truth(t=self.t[idx], llh=take(self.llh), v_n=take(self.v_n), att=take(self.att),
+                     C_b_n=take(self.C_b_n), f_b=take(self.f_b), w_ib_b=take(self.w_ib_b),
+                     r_e=take(self.r_e), v_e=take(self.v_e), a_e=take(self.a_e),
+                     rate_hz=float(rate), clock_bias_s=take(self.clock_bias_s),
+                     clock_drift_s_s=take(self.clock_drift_s_s))
+
     def ecef_at(self, t) -> tuple[np.ndarray, np.ndarray]:
         """ECEF position [m] and velocity [m/s] at times ``t`` [s] by quintic Hermite interpolation.
 

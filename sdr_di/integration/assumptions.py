@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -265,14 +264,10 @@ def load_assumptions(path: str | Path) -> Assumptions:
     AssumptionsError
         Unreadable file, not TOML, or a bad table/key (:func:`parse_assumptions`).
     """
+    from ..io.paths import read_toml
+
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except OSError as exc:
-        raise AssumptionsError(f"assumptions {path}: cannot read "
-                               f"({exc.strerror or exc})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise AssumptionsError(f"assumptions {path}: not valid TOML ({exc})") from None
+    raw = read_toml(path, "assumptions", AssumptionsError)
     return parse_assumptions(raw, str(path))
 
 

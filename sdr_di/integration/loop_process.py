@@ -95,10 +95,17 @@ class LoopChild:
     """
 
     def __init__(self) -> None:
-        # the child imports this very sdr_di, wherever the parent found it
+        # the child imports this very sdr_di, wherever the parent found it, and the folders
+        # the parent added to sys.path (a plugin filter's module, found there or in the
+        # current folder: unpickling the loop imports it; issue 49 item 2); the
+        # interpreter's own folders it has already, in their order
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+        own = tuple(os.path.abspath(p) for p in {sys.prefix, sys.base_prefix, sys.exec_prefix})
+        added = [p for p in sys.path if p and os.path.isdir(p)
+                 and not os.path.abspath(p).startswith(own)]
+        env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(
+            p for p in (root, env.get("PYTHONPATH"), *added) if p))
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "sdr_di.integration.loop_process"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)

@@ -49,7 +49,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -197,13 +196,10 @@ def load_lc_scenario(path: str | Path) -> tuple[Scenario, LcSettings]:
     ScenarioError
         Unreadable file, bad scenario or bad ``[lc]`` key.
     """
+    from ..io.paths import read_toml
+
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_bytes().decode("utf-8"))
-    except OSError as exc:
-        raise ScenarioError(f"scenario {path}: cannot read ({exc.strerror or exc})") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"scenario {path}: not valid TOML ({exc})") from None
+    raw = read_toml(path, "scenario", ScenarioError)
     lc = raw.pop("lc", {})
     sc = parse_scenario(raw, source=path, base_dir=path.parent)
     return sc, _parse_lc(lc, str(path))
@@ -290,6 +286,29 @@ def min_lc_duration_s(settings: LcSettings) -> float:
     """Shortest run that gives a result [s]: one GNSS interval (``1 / gnss_rate_hz``, 1 s by
     default), the time to the first filter update; a shorter run has no epoch to report."""
     return 1.0 / settings.gnss_rate_hz
+
+
+#: Longest loosely coupled run [s]: one hour holds about 0.3 GB of 200 Hz truth, IMU and error
+#: rows in memory (``lc --duration 1e9`` ran silently, issue 49 item 5). A longer span is a
+#: campaign of shorter runs.
+MAX_LC_DURATION_S = 3600.0
+
+
+def check_lc_duration(duration_s: float, settings: LcSettings, what: str) -> None:
+    """``duration_s`` of an ``lc`` run (``what``: the option or key that set it) within
+    [:func:`min_lc_duration_s`, :data:`MAX_LC_DURATION_S`].
+
+    Raises
+    ------
+    ScenarioError
+    """
+    shortest = min_lc_duration_s(settings)
+    if not (math.isfinite(duration_s) and duration_s >= shortest):
+        raise ScenarioError(f"{what} must be >= {shortest:g} s (one GNSS interval: the "
+                            f"first filter update), got {duration_s:g}")
+    if duration_s > MAX_LC_DURATION_S:
+        raise ScenarioError(f"{what} must be <= {MAX_LC_DURATION_S:g} s (one hour of 200 Hz "
+                            f"rows is about 0.3 GB of memory), got {duration_s:g}")
 
 
 def make_inputs(sc: Scenario, settings: LcSettings | None = None):

@@ -59,6 +59,7 @@ import numpy as np
 
 from ..errors import ImuDataError
 from ..integration.assumptions import deep_beliefs, sidecar_truth
+from ..ins.truth import Truth
 from ..integration.consistency import NIS_BLOCKS, SD_COLUMNS
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..io.sidecar import companion_files
@@ -68,6 +69,9 @@ from ..receiver.run_scalar import search_assistance
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import TrackingConfig
 from .receiver import IntegrationConfig, IntegratedReceiver, IntegrationResult, check_imu_span
+
+#: The filter whose runs keep the plain names ``STEM_MODE.csv`` (:func:`solution_names`).
+DEFAULT_FILTER = IntegrationConfig.filter
 
 __all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_channel_series",
            "write_deep_csv", "write_nis_series"]
@@ -92,6 +96,8 @@ class DeepRunSummary:
     iono_from_s: float | None = None
     #: ``metrics`` over the rows from ``iono_from_s`` on (None when it is None)
     metrics_after_iono: dict | None = None
+    #: why ``metrics`` are null (:func:`metrics_note`; None when they are not)
+    metrics_note: str | None = None
 
 
 def iono_in_force(res: IntegrationResult) -> np.ndarray:
@@ -206,6 +212,64 @@ def _progress_stage(mode: str, n_channels: int, n_used: int | None) -> str:
     return f"ranges and rates of {n_used} satellites into the filter"
 
 
+class ReferenceGridWarning(UserWarning):
+    """The reference file's rate differs from the IMU's: taken at the IMU's times."""
+
+
+def reference_on_imu_grid(truth, imu, truth_path) -> Truth:
+    """The reference at the IMU's sample times, on which the loop writes its error columns
+    (issue 49 item 7: a 50 Hz IMU beside a 200 Hz reference gave every error column NaN and
+    null metrics, in silence). The same grid: as is. A reference holding every IMU time: its
+    rows at those times (with one warning when its rate differs). Otherwise refused.
+
+    Raises
+    ------
+    ImuDataError
+        Some IMU time is not a sample of the reference.
+    """
+    if len(truth.t) == len(imu.t) and np.allclose(truth.t, imu.t, atol=1e-6):
+        return truth
+    on = truth.at_times(imu.t)
+    if on is None:
+        raise ImuDataError(
+            f"reference {truth_path} ({truth.rate_hz:g} Hz) does not hold the IMU's sample "
+            f"times ({imu.rate_hz:g} Hz, {imu.t[0]:g}..{imu.t[-1]:g} s): the error columns "
+            "need the reference at every IMU time (a reference at a multiple of the IMU "
+            "rate, covering its span)")
+    if abs(imu.rate_hz - truth.rate_hz) > 1e-9 * truth.rate_hz:  # same rate, other span: quiet
+        warnings.warn(f"IMU at {imu.rate_hz:g} Hz, reference {truth_path} at "
+                      f"{truth.rate_hz:g} Hz: the errors are taken at the IMU's times",
+                      ReferenceGridWarning, stacklevel=3)
+    return on
+
+
+def metrics_note(metrics: dict, truth_path) -> str | None:
+    """Why a run's error metrics are null (None when they are not): no reference, or no
+    row after the hand-over with a finite error."""
+    if metrics.get("n") and metrics.get("pos_m_rmse") == metrics.get("pos_m_rmse"):
+        return None
+    if truth_path is None:
+        return "no reference file (--truth, or the sidecar's truth_file): no errors computed"
+    if not metrics.get("n"):
+        return "no solution row after the hand-over: no errors computed"
+    return (f"the reference {truth_path} gave no finite error on the {metrics['n']} rows "
+            "after the hand-over")
+
+
+def solution_names(out_dir: Path, stem: str, cfg: IntegrationConfig) -> dict[str, Path]:
+    """The files of an integrated run: ``STEM_MODE.csv``, ``STEM_MODE_summary.json``,
+    ``STEM_MODE_channels.csv`` and ``STEM_MODE_nis.csv`` with the default filter,
+    ``STEM_MODE_FILTER...`` with any other, so that runs of two filters into one folder
+    never share a file (issue 49 item 13)."""
+    from ..io.paths import file_safe
+
+    tag = cfg.mode if cfg.filter == DEFAULT_FILTER else f"{cfg.mode}_{file_safe(cfg.filter)}"
+    return {"solution": out_dir / f"{stem}_{tag}.csv",
+            "summary": out_dir / f"{stem}_{tag}_summary.json",
+            "channels": out_dir / f"{stem}_{tag}_channels.csv",
+            "nis": out_dir / f"{stem}_{tag}_nis.csv"}
+
+
 def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig | None = None,
              imu_path: str | Path | None = None, truth_path: str | Path | None = None,
              nav_path: str | Path | None = None, assist: bool = True, prns=None,
@@ -250,6 +314,8 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
                            "without one")
     imu = read_imu(imu_path)
     truth = read_truth(truth_path)[0] if truth_path is not None else None
+    if truth is not None:
+        truth = reference_on_imu_grid(truth, imu, truth_path)
     nav = None
     if assist:
         nav_path = Path(nav_path) if nav_path is not None else comp["ephemeris"]
@@ -258,24 +324,26 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     fs = source.sampling_rate_hz
     check_imu_span(source, imu, source.n_samples if duration_s is None else min(
         source.n_samples, round(duration_s * fs)))            # before any output or work
+    from ..io.paths import check_outputs
+
+    files = solution_names(Path(out_dir), stem or source.path.stem, cfg)
+    check_outputs(files.values())
     out_dir = ensure_output_dir(out_dir)
-    stem = stem or source.path.stem
-    files = {"solution": out_dir / f"{stem}_{cfg.mode}.csv",
-             "summary": out_dir / f"{stem}_{cfg.mode}_summary.json",
-             "channels": out_dir / f"{stem}_{cfg.mode}_channels.csv",
-             "nis": out_dir / f"{stem}_{cfg.mode}_nis.csv"}
     bar = None
     t_wall = time.perf_counter()
     cb = None
     if progress:
         from tqdm import tqdm
 
+        from ..kernel_cache import first_use_note
+
         total = source.duration_s if duration_s is None else min(source.duration_s,
                                                                   duration_s)
         bar = tqdm(total=round(total, 2), unit="s",
                    desc=f"run {cfg.mode} {cfg.filter}",
                    bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
-                              "{postfix}]", postfix="scalar start-up: acquisition")
+                              "{postfix}]", postfix="; ".join(filter(None, [
+                                  "scalar start-up: acquisition", first_use_note()])))
 
         def cb(done, n_ch, n_used):
             rt = done / max(time.perf_counter() - t_wall, 1e-9)
@@ -306,6 +374,9 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     wall = time.perf_counter() - t_wall
     metrics = res.metrics()
+    note = metrics_note(metrics, truth_path)
+    if note is not None and truth_path is not None:   # a reference given, no errors: say why
+        warnings.warn(f"metrics are null: {note}", ReferenceGridWarning, stacklevel=2)
     t_iono = iono_take_up_s(res)
     m_iono = None if t_iono is None else res.metrics(t0=t_iono)
     write_deep_csv(files["solution"], res)
@@ -321,6 +392,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         "channels_always_used": bool(res.used.all()) if res.used.size else False,
         "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],
         "metrics": {k: _finite(v) for k, v in metrics.items()},
+        "metrics_note": note,
         "consistency": _finite_tree(res.consistency()),
         "iono_from_s": t_iono,
         "metrics_after_iono": None if m_iono is None else {k: _finite(v)
@@ -337,4 +409,4 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         json.dump(summary, fh, indent=2)
         fh.write("\n")
     return DeepRunSummary(files=files, result=res, metrics=metrics, wall_s=wall,
-                          iono_from_s=t_iono, metrics_after_iono=m_iono)
+                          iono_from_s=t_iono, metrics_after_iono=m_iono, metrics_note=note)

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import BinaryIO, Iterator
 
 from ..errors import OutputError
+from .paths import check_not_input
 
 
 def ensure_output_dir(path: str | Path) -> Path:
@@ -118,6 +119,7 @@ def atomic_open(final: str | Path, mode: str = "wb") -> Iterator[BinaryIO]:
         Any OSError while writing (disk full, permission...), with the partial file removed.
     """
     final = Path(final)
+    check_not_input(final)
     part = final.with_name(final.name + ".part")
     try:
         fh = open(part, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""}))
@@ -188,6 +190,7 @@ class OutputSet:
         final = Path(final)
         if any(f == final for f, _ in self._members):
             raise ValueError(f"{final}: already a member of this output set")
+        check_not_input(final)
         part = self.part_name(final)
         try:
             fh = open(part, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""}))
@@ -216,6 +219,7 @@ class OutputSet:
             raise ValueError(f"{source}: not a member of this output set")
         if any(f == final for f, _ in self._members):
             raise ValueError(f"{final}: already a member of this output set")
+        check_not_input(final)
         part = self.part_name(final)
         part.unlink(missing_ok=True)  # a .part left by a killed run
         self._members.append((final, part))

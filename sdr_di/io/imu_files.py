@@ -53,6 +53,7 @@ from ..frames import euler_to_C_b_n
 from ..ins.imu import ImuData
 from ..ins.truth import Truth
 from .atomic import OutputSet, atomic_open
+from .paths import note_input
 
 IMU_COLUMNS = ("t", "gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
 TRUTH_COLUMNS = (
@@ -296,6 +297,7 @@ def read_imu(path: str | Path, rate_hz: float | None = None) -> ImuData:
     """
     path = Path(path)
     meta, data, rate = _read(path, "IMU", IMU_COLUMNS, rate_hz)
+    note_input(path, what="IMU file")
     week, sow = _epoch(meta, path, "IMU")
     extra = {}
     for key, attr in _TRUE_KEYS:
@@ -328,6 +330,7 @@ def read_truth(path: str | Path) -> tuple[Truth, int | None, float | None]:
     """
     path = Path(path)
     meta, d, rate = _read(path, "truth", TRUTH_COLUMNS, None, TRUTH_CLOCK_COLUMNS)
+    note_input(path, what="truth file")
     week, sow = _epoch(meta, path, "truth")
     llh = np.column_stack([np.radians(d[:, 1:3]), d[:, 3]])
     att = np.radians(d[:, 7:10])

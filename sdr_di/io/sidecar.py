@@ -237,6 +237,47 @@ def companion_files(source, skip: tuple[str, ...] = ()) -> dict:
     return out
 
 
+class DuplicateKeyError(ValueError):
+    """A JSON object with a key twice (JSON readers silently keep the last)."""
+
+
+def unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``object_pairs_hook`` of :func:`json.loads` that refuses a key given twice."""
+    out: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in out:
+            raise DuplicateKeyError(f"key {k!r} given twice ({out[k]!r:.40} and {v!r:.40}); "
+                                    "a reader would silently keep the last")
+        out[k] = v
+    return out
+
+
+#: Sampling rates a sidecar may declare [Hz]: from the generator's lowest (below it the B3I
+#: code's main lobe is mostly cut) to well above any front end's.
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0e6, 1.0e9
+
+
+def _check_physics(path: Path, meta: dict[str, Any]) -> None:
+    """The sidecar's numbers against physics and each other: a rate within
+    [:data:`MIN_RATE_HZ`, :data:`MAX_RATE_HZ`], an IF inside the band the rate samples, and
+    ``duration_s`` equal to ``n_samples / sampling_rate_hz`` (to a sample)."""
+    fs, f_if, n = meta["sampling_rate_hz"], meta["if_hz"], meta["n_samples"]
+    if not MIN_RATE_HZ <= fs <= MAX_RATE_HZ:
+        raise SidecarError(f"sidecar {path}: sampling_rate_hz {fs:.6g} Hz is outside "
+                           f"[{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz")
+    if abs(f_if) > fs / 2.0:
+        raise SidecarError(f"sidecar {path}: if_hz {f_if:.6g} Hz is outside the band "
+                           f"+-{fs / 2:g} Hz that sampling_rate_hz {fs:g} Hz holds")
+    dur = meta.get("duration_s")
+    if dur is not None:
+        if not _is_num(dur):
+            raise SidecarError(f"sidecar {path}: duration_s must be a finite number, got "
+                               f"{dur!r:.60}")
+        if abs(dur - n / fs) > max(1.0 / fs, 1e-9 * abs(dur)):
+            raise SidecarError(f"sidecar {path}: duration_s {dur:.6g} s, but n_samples / "
+                               f"sampling_rate_hz = {n} / {fs:g} Hz = {n / fs:.6g} s")
+
+
 def read_sidecar(path: str | Path) -> dict[str, Any]:
     """Read and check a sidecar.
 
@@ -253,7 +294,9 @@ def read_sidecar(path: str | Path) -> dict[str, Any]:
     """
     path = Path(path)
     try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
+        meta = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=unique_keys)
+    except DuplicateKeyError as exc:
+        raise SidecarError(f"sidecar {path}: {exc}") from None
     except FileNotFoundError:
         raise SidecarError(f"sidecar {path}: not found") from None
     except OSError as exc:
@@ -277,6 +320,7 @@ def read_sidecar(path: str | Path) -> dict[str, Any]:
             continue
         if not (meta[key] is None and key in _NULLABLE) and not ok(meta[key]):
             raise SidecarError(f"sidecar {path}: {key} must be {what}, got {meta[key]!r:.60}")
+    _check_physics(path, meta)
     start = meta["start"]
     week, sow = start.get("week"), start.get("sow")
     if week is not None and not (_is_int(week) and 0 <= week <= 9999):

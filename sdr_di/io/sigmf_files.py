@@ -151,10 +151,16 @@ def _load(meta_path: Path):
     if len(raw) > _MAX_META_BYTES:
         raise SampleFormatError(f"SigMF {meta_path}: larger than {_MAX_META_BYTES >> 20} MiB, "
                                 "not a metadata file")
+    from .sidecar import DuplicateKeyError, unique_keys
+
     try:
-        doc = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        doc = json.loads(raw.decode("utf-8"), object_pairs_hook=unique_keys)
+    except DuplicateKeyError as exc:
+        raise SampleFormatError(f"SigMF {meta_path}: {exc}") from None
+    except (UnicodeDecodeError, ValueError) as exc:
         raise SampleFormatError(f"SigMF {meta_path}: not JSON ({exc})") from None
+    except RecursionError:
+        raise SampleFormatError(f"SigMF {meta_path}: not JSON (nested too deeply)") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("global"), dict):
         raise SampleFormatError(f"SigMF {meta_path}: no \"global\" object")
     try:

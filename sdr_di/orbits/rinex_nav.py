@@ -618,8 +618,11 @@ def load_nav(path: str | Path, crosscheck: bool = False) -> NavData:
         file, no BDS record, malformed/blank required/non-finite field, truncated record,
         inconsistent week, georinex disagreement. The message is one line naming the file.
     """
+    from ..io.paths import note_input
+
     path = Path(path)
     text = _read_text(path)
+    note_input(path, what="ephemeris")
     lines = text.splitlines()
     version, body, iono, iono_gps = _parse_header(lines, path)
     _crosscheck_header(text, iono, path)

@@ -96,6 +96,7 @@ from ..constants import F_B3I, SECONDS_PER_WEEK
 from ..errors import SampleFormatError
 from ..io.sample_formats import SampleFormat, byte_layout, get_format
 from ..io.page_cache import aligned_empty, open_uncached, pread_uncached, release_read_behind
+from ..io.paths import note_input
 from ..io.sidecar import check_member, member_path, read_sidecar
 
 __all__ = ["FormatCheckError", "IfFileWarning", "IfSource", "check_format_statistics"]
@@ -263,6 +264,7 @@ class IfSource:
             raise SampleFormatError(f"IF file {self.path}: not a regular file")
         if not os.access(self.path, os.R_OK):
             raise SampleFormatError(f"IF file {self.path}: not readable")
+        note_input(self.path, what="IF file")
         bps = self.format.bytes_per_sample
         if size == 0:
             raise SampleFormatError(f"IF file {self.path}: empty file")
@@ -270,11 +272,6 @@ class IfSource:
         if whole == 0:
             raise SampleFormatError(f"IF file {self.path}: {size} bytes, shorter than one "
                                     f"{self.format.name} sample ({bps} bytes)")
-        if rest:
-            warnings.warn(f"IF file {self.path}: size {size} bytes is not a whole number of "
-                          f"{self.format.name} samples ({bps} bytes each); ignoring the "
-                          f"{rest} trailing byte(s) of a partial sample", IfFileWarning,
-                          stacklevel=2)
         if n_samples is not None:
             n_samples = int(n_samples)
             if whole < n_samples:
@@ -292,6 +289,11 @@ class IfSource:
             if problem:
                 raise FormatCheckError(f"IF file {self.path}: declared {self.format.name} but "
                                        f"{problem}", "pass check_format=False to read anyway")
+        if rest:  # after the format check: a refused file gets one line
+            warnings.warn(f"IF file {self.path}: size {size} bytes is not a whole number of "
+                          f"{self.format.name} samples ({bps} bytes each); ignoring the "
+                          f"{rest} trailing byte(s) of a partial sample", IfFileWarning,
+                          stacklevel=2)
 
     # -- construction from a sidecar ---------------------------------------------------------
     @classmethod
@@ -313,6 +315,7 @@ class IfSource:
         """
         path = Path(path)
         meta = read_sidecar(path)
+        note_input(path, what="sidecar")
         if_path = member_path(path, meta, "if_file")
         if not if_path.exists():
             raise SampleFormatError(f"sidecar {path}: IF file {if_path} not found")
@@ -883,6 +886,34 @@ def _float_like(b: np.ndarray) -> bool:
     return float(np.mean(ok)) >= 0.99
 
 
+#: Longest repetition period looked for by :func:`content_problem` [bytes]: a sampled
+#: signal with receiver noise never repeats exactly; a file that does is a test pattern, a
+#: copied block or not samples at all.
+MAX_PERIOD_BYTES = 4096
+
+
+def content_problem(b: np.ndarray) -> str | None:
+    """What makes the bytes ``b`` (the start of an IF file) no recording of any format, or
+    None: text (printable ASCII with line breaks), one value throughout, or a pattern that
+    repeats exactly with a period of at most :data:`MAX_PERIOD_BYTES` bytes (issue 49 item 8:
+    a text file read as ``iq_int8`` gave two satellites "detected")."""
+    n = b.size
+    if n < 2 * _CHECK_MIN_PAIRS:
+        return None
+    printable = (b >= 32) & (b <= 126) | (b == 9) | (b == 10) | (b == 13)
+    if printable.mean() > 0.99 and np.any(b == 10):
+        return "its bytes are text (printable characters and line breaks), not samples"
+    if np.all(b == b[0]):
+        return f"every byte is {int(b[0]):#04x}: the file holds no signal"
+    m = min(n // 2, _CHECK_MIN_PAIRS)
+    for p in np.nonzero(b[1:MAX_PERIOD_BYTES + 1] == b[0])[0] + 1:
+        p = int(p)
+        if p + m <= n and np.array_equal(b[p:], b[:n - p]):
+            return (f"its bytes repeat exactly every {p} bytes: a pattern, not a recording "
+                    "with receiver noise")
+    return None
+
+
 def check_format_statistics(path: str | os.PathLike, fmt: SampleFormat | str,
                             n_samples: int | None = None) -> str | None:
     """Heuristic check that the bytes of an IF file fit the declared layout.
@@ -920,9 +951,10 @@ def check_format_statistics(path: str | os.PathLike, fmt: SampleFormat | str,
         for s in starts:
             fh.seek(s)
             parts.append(np.frombuffer(fh.read(win), dtype=np.uint8))
+    problem = content_problem(parts[0])
+    if problem:
+        return problem
     b = np.concatenate(parts)
-    if not np.any(b):
-        return None
     name = fmt.name
     if name == "gr_complex":
         with np.errstate(invalid="ignore", over="ignore"):

@@ -122,7 +122,10 @@ def run_acquisition(source: IfSource, out_dir: str | Path, *, prns=None, coheren
     OutputError
         The table cannot be written.
     """
+    from ..io.paths import check_outputs
+
     stem = stem or source.path.stem
+    check_outputs([Path(out_dir) / f"{stem}_acquisition.csv"])
     prn_list = list(range(1, 64)) if prns is None else list(prns)
     results = acquire_source(source, 0, prns=prn_list, coherent_ms=coherent_ms,
                              noncoherent=noncoherent, doppler_center_hz=doppler_center_hz,

@@ -145,7 +145,10 @@ def open_sigmf(meta_path: str | Path, *, rfch: int | None = None, **options) -> 
     if rfch not in (None, 1):
         raise SampleFormatError(f"{meta_path}: --rfch {rfch}: a SigMF recording read here has "
                                 "one channel")
+    from ..io.paths import note_input
+
     ss = sigmf_source(meta_path, **options)
+    note_input(meta_path, what="SigMF metadata")
     return IfSource(ss.data_path, ss.sampling_rate_hz, ss.if_hz, ss.sample_format,
                     spectrum_inverted=ss.spectrum_inverted, start_week=ss.start_week,
                     start_sow=ss.start_sow)
@@ -262,8 +265,16 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     OutputError
         Outputs cannot be written (nothing is left under the final names).
     """
-    out_dir = ensure_output_dir(out_dir)
+    from ..io.paths import check_outputs
+
+    out_dir = Path(out_dir)
     stem = stem or source.path.stem
+    files = {"pvt": out_dir / f"{stem}_pvt.csv", "nmea": out_dir / f"{stem}.nmea",
+             "channels": out_dir / f"{stem}_channels.csv",
+             "summary": out_dir / f"{stem}_scalar_summary.json"}
+    files["rinex_obs"], files["rinex_nav"] = (out_dir / n for n in rinex_names(stem))
+    check_outputs(files.values())  # none of them an input (--ephemeris ... --out)
+    out_dir = ensure_output_dir(out_dir)
     rx = receiver or ScalarReceiver(log=False)
     engine = PvtEngine(source.sampling_rate_hz, {}, None)
     engine.navdata = NavDataInForce(nav)
@@ -275,10 +286,6 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     processed_s = stop / source.sampling_rate_hz
     # after a blockage, lost channels are searched around, and timed from, the last fix
     rx.predictor = FixPredictor(engine, source.sampling_rate_hz, source.carrier_hz)
-    files = {"pvt": out_dir / f"{stem}_pvt.csv", "nmea": out_dir / f"{stem}.nmea",
-             "channels": out_dir / f"{stem}_channels.csv",
-             "summary": out_dir / f"{stem}_scalar_summary.json"}
-    files["rinex_obs"], files["rinex_nav"] = (out_dir / n for n in rinex_names(stem))
     csv_w = SolutionCsvWriter(files["pvt"])
     nmea_w = NmeaWriter(files["nmea"], rate_hz=None)
     rinex_w = RinexOutputs(files["rinex_obs"], files["rinex_nav"], marker_name=stem,
@@ -290,9 +297,12 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     if progress:
         from tqdm import tqdm
 
+        from ..kernel_cache import first_use_note
+
         bar = tqdm(total=round(processed_s, 2), unit="s", desc="run scalar: tracking and fixes",
                    bar_format="{l_bar}{bar}| {n:.1f}/{total:.1f} s [{elapsed}<{remaining}"
-                              "{postfix}]", postfix="acquisition")  # shown before epoch 1
+                              "{postfix}]",  # shown before epoch 1
+                   postfix="; ".join(filter(None, ["acquisition", first_use_note()])))
 
     def on_epoch(sample, observations, ephemerides):
         engine.ephemerides = engine.navdata.offer_decoded(

@@ -16,11 +16,10 @@ import datetime as _dt
 import hashlib
 import json
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
-from ..constants import parse_prn
+from ..constants import parse_prn, parse_prns
 from ..errors import ScenarioError, SdrDiError
 from ..ins.grades import IMU_GRADES
 from ..oscillator import OscillatorSpec, oscillator_from_table
@@ -300,15 +299,10 @@ def load_scenario(path: str | Path) -> Scenario:
     ScenarioError
         The file is missing, not TOML, or any key is missing, of the wrong type or impossible.
     """
+    from ..io.paths import read_toml
+
     path = Path(path)
-    try:
-        text = path.read_bytes()
-    except OSError as exc:
-        raise ScenarioError(f"scenario {path}: cannot read ({exc.strerror or exc})") from None
-    try:
-        raw = tomllib.loads(text.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"scenario {path}: not valid TOML ({exc})") from None
+    raw = read_toml(path, "scenario", ScenarioError)
     return parse_scenario(raw, source=path, base_dir=path.parent)
 
 
@@ -508,9 +502,9 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     if sel == "auto":
         prns = None
     elif isinstance(sel, list) and sel:
-        prns = tuple(_parse_prn(p, f"{where}: [satellites].prns") for p in sel)
-        if len(set(prns)) != len(prns):
-            raise ScenarioError(f"{where}: [satellites].prns: duplicate PRN in {sel!r}")
+        for p in sel:
+            _parse_prn(p, f"{where}: [satellites].prns")  # the message names the key
+        prns = tuple(parse_prns(sel, f"{where}: [satellites].prns"))
     else:
         raise ScenarioError(f"{where}: [satellites].prns: expected \"auto\" or a list of PRNs")
     count = sa.int_("count", len(prns) if prns else 7, lo=1, hi=63)

@@ -32,9 +32,15 @@ from .. import __version__
 from ..constants import F_B3I
 from ..errors import OutputError, ScenarioError
 from ..ins.imu import ImuErrorModel
-from ..io.atomic import OutputSet, check_output_dir, ensure_output_dir
+from ..io.atomic import (
+    OutputSet,
+    check_output_dir,
+    ensure_output_dir,
+    output_dir_removed_on_failure,
+)
 from ..io.imu_files import write_imu, write_truth
 from ..io.page_cache import ReleaseBehind
+from ..io.paths import check_free_space, check_outputs
 from ..io.sample_formats import get_format
 from ..io.sidecar import file_fingerprint, write_sidecar
 from ..io.sigmf_files import check_b3i_in_band, sigmf_metadata
@@ -117,91 +123,116 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
         check_b3i_in_band(F_B3I - sig.if_hz, sig.sampling_rate_hz,
                           get_format(sig.sample_format).is_complex, where="--sigmf: ",
                           hint="choose --if inside that range or leave out --sigmf")
-    truth = simulate_truth(sc)
-    gen = make_generator(sc, truth)
-    rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
-    imu = imu_model(sc).apply(truth, rng)
-
-    out_dir = ensure_output_dir(out_dir)
     paths = {
         "if": out_dir / f"{name}.bin",
         "imu": out_dir / f"{name}_imu.csv",
         "truth": out_dir / f"{name}_truth.csv",
         "metadata": out_dir / f"{name}.json",
     }
-    duration = gen.n_samples / gen.fs
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    # none of them an input, none too long, room for them: before any work
+    check_outputs([*paths.values(), *(sigmf_names(out_dir / name) if sigmf else ())])
+    check_free_space(out_dir, estimated_bytes(sc), f"a {sc.duration_s:g} s set at "
+                     f"{sc.signal.sampling_rate_hz:g} Hz ({sc.signal.sample_format})")
+    truth = simulate_truth(sc)
+    gen = make_generator(sc, truth)
+    rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
+    imu = imu_model(sc).apply(truth, rng)
 
-        # counted in samples (integers), shown in seconds: the bar ends exactly at its total
-        bar = tqdm(total=gen.n_samples, unit="s", unit_scale=1.0 / gen.fs,
-                   desc=f"generate {name}",
-                   bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s [{elapsed}<{remaining}]")
-    with OutputSet() as files:  # any error or interrupt: the .part files go, old files stay
-        try:
-            with files.open(paths["if"]) as fh:
-                write_overlapped(fh, gen.chunks(reuse=True), bar)
-        finally:
-            if bar is not None:
-                bar.close()
-        week, sow = sc.week, sc.sow
-        bdt = bdt_to_datetime(week, sow)
-        write_imu(paths["imu"], imu, week=week, sow=sow, output_set=files)
-        clock = gen.clock_truth or scenario_clock(sc, truth)
-        draws = truth_draws(imu, gen)
-        write_truth(paths["truth"], dataclasses.replace(
-            truth, clock_bias_s=clock.bias_s, clock_drift_s_s=clock.drift_s_s),
-            week=week, sow=sow, output_set=files,
-            records={k: json.dumps(v, separators=(",", ":")) for k, v in draws.items()})
-        utc = bdt - _dt.timedelta(seconds=bdt_minus_utc(bdt))
-        jams, cn0_eff = gen.jammers.records({s.prn: s.cn0_dbhz for s in gen.sats},
-                                            sc.satellites.cn0_dbhz)
-        sats = gen.start_summary()
-        for row in sats:
-            row["effective_cn0_dbhz"] = cn0_eff[row["prn"]]
-        meta = {
-            "if_file": paths["if"].name,
-            "sampling_rate_hz": gen.fs,
-            "if_hz": sc.signal.if_hz,
-            "carrier_hz": 1268.52e6,
-            "sample_format": sc.signal.sample_format,
-            "quantization_bits": sc.signal.quantization_bits,
-            "spectrum_inverted": False,
-            "n_samples": gen.n_samples,
-            "duration_s": duration,
-            "start": {"week": week, "sow": sow, "bdt": bdt.isoformat(), "utc": utc.isoformat()},
-            "receiver_clock": {"bias_s": sc.clock.bias_s, "drift_s_s": sc.clock.drift_s_s},
-            "oscillator": None if sc.oscillator is None else sc.oscillator.as_dict(),
-            "imu": sc.imu.as_dict(),
-            "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain,
-                    **gen.jammers.agc.as_dict()},
-            "interference": jams,
-            "ionosphere": "klobuchar" if gen.iono is not None else "none",
-            "klobuchar_source": gen.iono_source,
-            "klobuchar": None if gen.iono is None else {"alpha": list(gen.iono.alpha),
-                                                        "beta": list(gen.iono.beta)},
-            "troposphere": sc.signal.troposphere,
-            "scenario": {"name": sc.name, "hash": sc.hash, "seed": sc.seed,
-                         "file": str(sc.source) if sc.source else None},
-            "satellites": sats,
-            "outages": [{"prn": o.prn, "start_s": o.start_s, "end_s": o.end_s,
-                         "attenuation_db": None if math.isinf(o.attenuation_db)
-                         else o.attenuation_db} for o in sc.outages],
-            "imu_file": paths["imu"].name,
-            "truth_file": paths["truth"].name,
-            "ephemeris_file": str(sc.satellites.ephemeris),
-            "generator": {"name": "sdr-di", "version": __version__,
-                          "synthesis_version": SYNTHESIS_VERSION},
-        }
-        meta.update(draws)  # only with a grade's unit errors or atmosphere residuals
-        meta["files"] = {paths[k].name: _fingerprint(paths[k], files)
-                         for k in ("if", "imu", "truth")}
-        if sigmf:
-            paths.update(_write_sigmf_pair(out_dir / name, paths["if"], meta, sc, files))
-        write_sidecar(paths["metadata"], meta, output_set=files)  # opened last: renamed last
-        files.commit()
+    with output_dir_removed_on_failure(out_dir):  # a failure leaves no empty folder
+        out_dir = ensure_output_dir(out_dir)
+        duration = gen.n_samples / gen.fs
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            # counted in samples (integers), shown in seconds: the bar ends exactly at its total
+            bar = tqdm(total=gen.n_samples, unit="s", unit_scale=1.0 / gen.fs,
+                       desc=f"generate {name}",
+                       bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s [{elapsed}<{remaining}]")
+        with OutputSet() as files:  # any error or interrupt: the .part files go, old files stay
+            try:
+                with files.open(paths["if"]) as fh:
+                    write_overlapped(fh, gen.chunks(reuse=True), bar)
+            finally:
+                if bar is not None:
+                    bar.close()
+            week, sow = sc.week, sc.sow
+            bdt = bdt_to_datetime(week, sow)
+            write_imu(paths["imu"], imu, week=week, sow=sow, output_set=files)
+            clock = gen.clock_truth or scenario_clock(sc, truth)
+            draws = truth_draws(imu, gen)
+            write_truth(paths["truth"], dataclasses.replace(
+                truth, clock_bias_s=clock.bias_s, clock_drift_s_s=clock.drift_s_s),
+                week=week, sow=sow, output_set=files,
+                records={k: json.dumps(v, separators=(",", ":")) for k, v in draws.items()})
+            utc = bdt - _dt.timedelta(seconds=bdt_minus_utc(bdt))
+            jams, cn0_eff = gen.jammers.records({s.prn: s.cn0_dbhz for s in gen.sats},
+                                                sc.satellites.cn0_dbhz)
+            sats = gen.start_summary()
+            for row in sats:
+                row["effective_cn0_dbhz"] = cn0_eff[row["prn"]]
+            meta = {
+                "if_file": paths["if"].name,
+                "sampling_rate_hz": gen.fs,
+                "if_hz": sc.signal.if_hz,
+                "carrier_hz": 1268.52e6,
+                "sample_format": sc.signal.sample_format,
+                "quantization_bits": sc.signal.quantization_bits,
+                "spectrum_inverted": False,
+                "n_samples": gen.n_samples,
+                "duration_s": duration,
+                "start": {"week": week, "sow": sow, "bdt": bdt.isoformat(),
+                          "utc": utc.isoformat()},
+                "receiver_clock": {"bias_s": sc.clock.bias_s, "drift_s_s": sc.clock.drift_s_s},
+                "oscillator": None if sc.oscillator is None else sc.oscillator.as_dict(),
+                "imu": sc.imu.as_dict(),
+                "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain,
+                        **gen.jammers.agc.as_dict()},
+                "interference": jams,
+                "ionosphere": "klobuchar" if gen.iono is not None else "none",
+                "klobuchar_source": gen.iono_source,
+                "klobuchar": None if gen.iono is None else {"alpha": list(gen.iono.alpha),
+                                                            "beta": list(gen.iono.beta)},
+                "troposphere": sc.signal.troposphere,
+                "scenario": {"name": sc.name, "hash": sc.hash, "seed": sc.seed,
+                             "file": str(sc.source) if sc.source else None},
+                "satellites": sats,
+                "outages": [{"prn": o.prn, "start_s": o.start_s, "end_s": o.end_s,
+                             "attenuation_db": None if math.isinf(o.attenuation_db)
+                             else o.attenuation_db} for o in sc.outages],
+                "imu_file": paths["imu"].name,
+                "truth_file": paths["truth"].name,
+                "ephemeris_file": str(sc.satellites.ephemeris),
+                "generator": {"name": "sdr-di", "version": __version__,
+                              "synthesis_version": SYNTHESIS_VERSION},
+            }
+            meta.update(draws)  # only with a grade's unit errors or atmosphere residuals
+            meta["files"] = {paths[k].name: _fingerprint(paths[k], files)
+                             for k in ("if", "imu", "truth")}
+            if sigmf:
+                paths.update(_write_sigmf_pair(out_dir / name, paths["if"], meta, sc, files))
+            write_sidecar(paths["metadata"], meta, output_set=files)  # opened last: renamed last
+            files.commit()
     return paths
+
+
+#: Bytes per row of the IMU and truth CSV files, rounded up (for :func:`estimated_bytes`).
+_IMU_ROW_BYTES, _TRUTH_ROW_BYTES = 160, 520
+
+
+def estimated_bytes(sc: Scenario) -> float:
+    """The size of the set :func:`generate_files` writes for ``sc`` [bytes]: the IF samples
+    exactly, the IMU and truth files from their row sizes (a SigMF data file is a hard
+    link)."""
+    n = sc.duration_s * sc.signal.sampling_rate_hz
+    rows = sc.duration_s * sc.imu.rate_hz
+    return n * get_format(sc.signal.sample_format).bytes_per_sample \
+        + rows * (_IMU_ROW_BYTES + _TRUTH_ROW_BYTES)
+
+
+def sigmf_names(base: Path) -> tuple[Path, Path]:
+    """``BASE.sigmf-data`` and ``BASE.sigmf-meta``."""
+    return base.with_name(base.name + ".sigmf-data"), base.with_name(base.name + ".sigmf-meta")
 
 
 def truth_draws(imu, gen: IfGenerator) -> dict:
@@ -221,8 +252,7 @@ def truth_draws(imu, gen: IfGenerator) -> dict:
 def _write_sigmf_pair(base: Path, if_path: Path, meta: dict, sc: Scenario,
                       files: OutputSet) -> dict[str, Path]:
     """``BASE.sigmf-data`` (the IF file's content, linked) and ``BASE.sigmf-meta``."""
-    data, meta_path = base.with_name(base.name + ".sigmf-data"), \
-        base.with_name(base.name + ".sigmf-meta")
+    data, meta_path = sigmf_names(base)
     files.link(if_path, data)
     text = sigmf_metadata(
         sample_format=meta["sample_format"], sampling_rate_hz=meta["sampling_rate_hz"],

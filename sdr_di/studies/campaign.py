@@ -134,6 +134,29 @@ def _positive_int(value, what: str) -> int:
     return int(value)
 
 
+class WorkersCappedWarning(UserWarning):
+    """More local workers asked for than the machine has cores: capped."""
+
+
+def local_workers(workers: int | None) -> int:
+    """Worker processes of a local cluster: ``workers``, at most the cores this process may
+    run on (more only queue for the same cores and start slowly: 64 workers on 2 cores took
+    93 s instead of 1.2 s, issue 49 item 6), with a warning when capped; default the cores."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    if workers is None or workers == 0:
+        return cores
+    if workers > cores:
+        import warnings
+
+        warnings.warn(f"--workers {workers}: this machine has {cores} cores; starting "
+                      f"{cores} workers", WorkersCappedWarning, stacklevel=2)
+        return cores
+    return workers
+
+
 @contextlib.contextmanager
 def _client(scheduler: str | None, workers: int | None, allowed_failures: int):
     from distributed import Client, LocalCluster
@@ -146,12 +169,30 @@ def _client(scheduler: str | None, workers: int | None, allowed_failures: int):
         with client:
             yield client
         return
-    n = workers or os.cpu_count() or 1
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                      dashboard_address=":0", silence_logs=logging.ERROR,
-                      scheduler_kwargs={"allowed_failures": allowed_failures}) as cluster, \
-            Client(cluster, set_as_default=False) as client:
-        yield client
+    n = local_workers(workers)
+    muted: dict[str, int] = {}
+    try:
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                          dashboard_address=":0", silence_logs=logging.ERROR,
+                          scheduler_kwargs={"allowed_failures": allowed_failures}) as cluster, \
+                Client(cluster, set_as_default=False) as client:
+            try:
+                yield client
+            finally:  # the teardown's CommClosedError tracebacks are not the user's business
+                muted = mute_loggers(("distributed", "tornado", "asyncio"))
+    finally:
+        for name, level in muted.items():
+            logging.getLogger(name).setLevel(level)
+
+
+def mute_loggers(families: Sequence[str]) -> dict[str, int]:
+    """:func:`quiet_loggers` for a while: returns the levels to restore (issue 49 item 21:
+    one of two API studies printed a Dask ``CommClosedError`` traceback at teardown)."""
+    names = [*families, *(n for n in list(logging.root.manager.loggerDict)
+                          if n.split(".", 1)[0] in families)]
+    levels = {n: logging.getLogger(n).level for n in names}
+    quiet_loggers(families)
+    return levels
 
 
 def _collect(client, exp: Experiment, params: dict, seeds: list[int], runs_dir: Path,

@@ -87,7 +87,8 @@ def add_parsers(subparsers) -> None:
                    help="local worker processes (default: number of cores; 0: run in this "
                    "process, no cluster)")
     p.add_argument("--force", action="store_true",
-                   help="replace a different study's runs in --out (runs of unchanged cells are kept)")
+                   help="replace a different study's runs in --out (runs of unchanged cells "
+                   "are kept); run a study beyond 10,000 (cell, seed) runs")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.set_defaults(func=cmd_study)
 
@@ -194,15 +195,51 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     return 0 if res.ok else 1
 
 
+class StudyProgress:
+    """``sdr-di study``'s progress: one tqdm bar over the (cell, seed) runs, a failed run
+    written above it in one line (issue 49 item 21: a line per finished run, no bar).
+    A context manager (closes the bar); called with each run record. The bar appears with
+    the first record: a study refused before any run prints its one line alone."""
+
+    def __init__(self, total: int, file=None) -> None:
+        self.total, self.file, self.failed = total, file or sys.stderr, 0
+        self._bar = None
+
+    @property
+    def bar(self):
+        """The tqdm bar (made on first use)."""
+        if self._bar is None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=self.total, unit="run", desc="study", file=self.file,
+                             dynamic_ncols=True)
+        return self._bar
+
+    def __call__(self, rec: dict) -> None:
+        if rec["status"] != "ok":
+            self.failed += 1
+            self.bar.write(f"  {rec['cell']}  seed {rec['seed_index']}: FAILED: "
+                           f"{rec.get('error')}", file=sys.stderr)
+            self.bar.set_postfix_str(f"{self.failed} failed", refresh=False)
+        self.bar.update(1)
+
+    def __enter__(self) -> StudyProgress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
 def cmd_study(args: argparse.Namespace) -> int:
     """Handler of ``sdr-di study``."""
     import dask
 
     from ..io.atomic import check_output_dir
-    from .study import _check_folder, run_study
+    from .study import _check_folder, run_study, study_outputs
     from .spec import load_study
 
-    spec = load_study(args.spec)
+    spec = load_study(args.spec, force=args.force)
     check_output_dir(args.out)
     if args.runs is not None and args.runs < 1:
         raise CampaignError(f"--runs must be >= 1, got {args.runs}")
@@ -210,15 +247,14 @@ def cmd_study(args: argparse.Namespace) -> int:
         raise CampaignError(f"--workers must be >= 0, got {args.workers}")
     _check_folder(spec, args.out, args.force)
 
-    def show(rec: dict) -> None:
-        state = "ok" if rec["status"] == "ok" else f"FAILED: {rec.get('error')}"
-        print(f"  {rec['cell']:>24s}  seed {rec['seed_index']:3d}  {state}", flush=True)
-
+    show = StudyProgress(len(spec.cells) * (args.runs or spec.runs))
     preload = [*dask.config.get("distributed.worker.preload", []), _WORKERS_IGNORE_SIGINT]
-    with dask.config.set({"distributed.worker.preload": preload}):
+    with dask.config.set({"distributed.worker.preload": preload}), show:
         res = run_study(spec, args.out, runs=args.runs, scheduler=args.scheduler,
                         workers=args.workers, force=args.force, on_record=show,
                         render=not args.no_report)
+        if res.n_skipped:                       # the runs already in the folder
+            show.bar.update(res.n_skipped)
     print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
           f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
           f"{res.elapsed_s:.1f} s")
@@ -231,9 +267,8 @@ def cmd_study(args: argparse.Namespace) -> int:
     for j, cl in enumerate(spec.claims, 1):
         verdicts = [f"{r['cell']}: {r[f'claim{j}']}" for r in res.cells if r[f"claim{j}"]]
         print(f"claim {j} ({cl.text}): {'; '.join(verdicts)}")
-    print(f"cells     {args.out / 'cells.csv'}")
-    if not args.no_report:
-        print(f"report    {args.out / 'report.html'}")
+    for label, path in study_outputs(args.out).items():   # every file, named
+        print(f"{label:11s} {path}")
     return 1 if res.failed else 0
 
 

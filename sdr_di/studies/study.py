@@ -54,12 +54,13 @@ from .execute import (
 )
 from .paired import Comparison, claim_verdict, compare_pair, holm, ratio_of_log
 from ..experiments.registry import get_experiment
-from .spec import QUANTITY_KEYS, StudySpec, spec_summary
+from .spec import QUANTITY_KEYS, StudySpec, check_study_size, spec_summary
 from .tables import write_table
 from .tasks import Task, run_tasks, run_tasks_here
 from ..experiments.variants import entry_label
 
-__all__ = ["StudyResult", "execute_cell_run", "run_study", "summarize_study"]
+__all__ = ["StudyResult", "execute_cell_run", "run_study", "study_outputs",
+           "summarize_study"]
 
 
 def execute_cell_run(exp, params: dict, seed: int, index: int, cache_dir: str | None) -> dict:
@@ -205,6 +206,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
         raise StudyError(f"--workers must be an integer >= 0, got {workers!r}")
     if scheduler is not None and workers is not None:
         raise StudyError("--workers applies to the local cluster only")
+    check_study_size(f"study {spec.name}", len(spec.cells), runs, force)
     out = Path(out_dir)
     _check_folder(spec, out, force)
     exp = get_experiment(spec.experiment)
@@ -284,6 +286,19 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
 
         render_study_report(out)
     return res
+
+
+#: The files a study writes in its folder, by the label ``sdr-di study`` prints.
+STUDY_FILES = (("runs", "runs.csv"), ("cells", "cells.csv"), ("comparisons", "comparisons.csv"),
+               ("tuning", "tuning.csv"), ("plot", "paired_ratios.png"), ("study", "study.json"),
+               ("report", "report.html"))
+
+
+def study_outputs(out: str | Path) -> dict[str, Path]:
+    """The files of :data:`STUDY_FILES` that the study folder ``out`` holds, by label (the
+    runs' own records are under ``runs/``)."""
+    out = Path(out)
+    return {label: out / name for label, name in STUDY_FILES if (out / name).is_file()}
 
 
 def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
