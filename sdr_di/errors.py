@@ -1,12 +1,22 @@
 """Exception hierarchy.
 
 Every bad input raises a subclass of :class:`SdrDiError` naming the input and what is wrong;
-the CLI prints ``error: <message>`` on one line and exits with status 2.
+the CLI prints ``error: <message>`` on one line and exits with status 2. The public API
+(``sdr_di.generate``, ``sdr_di.run``, ``sdr_di.study``) raises the same classes, exported from
+``sdr_di``; those of a bad value (:class:`OptionsError`, :class:`AcquisitionError`) are also
+``ValueError``.
 """
 
 
 class SdrDiError(Exception):
     """Base class of all sdr-di input and processing errors."""
+
+
+class OptionsError(SdrDiError, ValueError):
+    """Options of a command (or arguments of the API function that mirrors it) out of range
+    or that do not fit together: a bad mode, a number that must be positive, an option of
+    another mode, a PLL bandwidth beyond the loop's stability limit. The message names the
+    option as it was given (the CLI's flag, the API's argument)."""
 
 
 class ScenarioError(SdrDiError):
@@ -45,6 +55,23 @@ class SidecarError(SampleFormatError):
 class FileSetError(SidecarError):
     """A file of a generated set (IF, IMU, truth) is missing or is not the file its sidecar was
     written with (size or digest differ: a mixed set)."""
+
+
+class FormatCheckError(SampleFormatError):
+    """The layout heuristic says the bytes are not in the declared format (:mod:`sdr_di.receiver.ifreader` notes).
+
+    ``str()`` ends with how to read the file anyway (``hint``); :attr:`finding` is the
+    message without it, for a caller that names its own switch (the CLI's
+    ``--no-format-check``).
+    """
+
+    def __init__(self, finding: str, hint: str):
+        super().__init__(f"{finding} ({hint})")
+        self.finding = finding
+
+
+class SolutionFileError(SdrDiError, ValueError):
+    """A solution file that cannot be read (wrong header, columns or values)."""
 
 
 class ImuDataError(SdrDiError):
@@ -118,3 +145,22 @@ class RunFailed(SdrDiError):
     is what failed."""
 
     exit_status = 1
+
+
+class NoSatelliteError(RunFailed):
+    """Acquisition found no satellite in the IF file (a run without a fix: exit status 1)."""
+
+
+class ImplausibleAcquisition(RunFailed):
+    """A run's acquisition gave detections that real signals cannot give: the samples are
+    read wrongly (the CLI's exit status 1)."""
+
+
+class HandoverError(RunFailed):
+    """The scalar start-up never reached a state the vector loop can take over (a run
+    without a fix: exit status 1)."""
+
+
+class LoopProcessError(SdrDiError):
+    """The loop failed in its child process with an exception that does not pickle (its
+    text)."""

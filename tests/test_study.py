@@ -364,7 +364,8 @@ def _run_cli(argv: list[str]) -> int:
 
 @pytest.mark.parametrize("argv, msg", [
     (["study", "nope.toml"], "nope.toml: cannot read"),
-    (["study", str(REPO / "studies" / "smoke.toml"), "--runs", "0"], "--runs must be >= 1"),
+    (["study", str(REPO / "studies" / "smoke.toml"), "--runs", "0"],
+     "--runs must be an integer >= 1"),
     (["study", str(REPO / "studies" / "smoke.toml"), "--workers", "-1"], "--workers"),
 ])
 def test_cli_bad_input_is_a_one_line_error_before_any_work(tmp_path, argv, msg):

@@ -10,10 +10,12 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from ..errors import OptionsError
 from ..ins.imu import ImuErrorModel
 from ..oscillator import CLOCK_PRESETS, OscillatorSpec
 
-__all__ = ["MODES", "NCO_LATENCIES", "SCALAR_EPOCH_S", "IntegrationConfig", "is_nco_latency"]
+__all__ = ["MODES", "NCO_LATENCIES", "SCALAR_EPOCH_S", "IntegrationConfig",
+           "build_integration_config", "imu_samples_per_interval", "is_nco_latency"]
 
 #: Coupling modes of :class:`IntegratedReceiver` (receiver notes).
 MODES = ("deep", "loose", "tight")
@@ -184,3 +186,79 @@ class IntegrationConfig:
     def gnss_every(self) -> int:
         """Scalar output epochs (0.1 s) per loose/tight measurement epoch."""
         return max(1, round(1.0 / (SCALAR_EPOCH_S * self.gnss_rate_hz)))
+
+
+def imu_samples_per_interval(imu_rate_hz: float, filter_rate_hz: float,
+                             name: str = "filter rate", where: str = "") -> int:
+    """IMU samples per integration-filter interval: the filter rate must divide the IMU rate
+    (the INS is propagated over whole IMU samples between two updates).
+
+    Parameters
+    ----------
+    imu_rate_hz, filter_rate_hz : float
+        IMU sample rate and integration-filter rate [Hz].
+    name : str
+        How the message names the filter rate (``--filter-rate``, ``filter_rate_hz``).
+    where : str
+        The IMU file, named in the message.
+
+    Raises
+    ------
+    OptionsError
+        ``imu_rate_hz / filter_rate_hz`` is not a whole number >= 1.
+    """
+    n_per = imu_rate_hz / filter_rate_hz
+    if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
+        of = f" of {where}" if where else ""
+        raise OptionsError(f"{name} {filter_rate_hz:g} Hz must divide the IMU rate "
+                           f"{imu_rate_hz:g} Hz{of}")
+    return round(n_per)
+
+
+def build_integration_config(filter: str = "ekf", *, assume=None,
+                             **fields) -> IntegrationConfig:
+    """The receiver's settings from a filter entry, settings fields and assumptions: the one
+    builder of ``sdr-di run``, ``sdr_di.run`` and the experiments.
+
+    Parameters
+    ----------
+    filter : str
+        Filter entry ``NAME[:OPT=VALUE...]`` (:func:`~sdr_di.filters.parse_filter_spec`:
+        built-in, registered, entry-point or import-path name); its options are set over
+        ``fields["filter_options"]``.
+    assume : path, Assumptions or None
+        What the filter believes (``--assume``, docs/assumptions.md): an assumptions file or
+        a parsed :class:`~sdr_di.integration.assumptions.Assumptions`, applied over the
+        defaults (:func:`~sdr_di.integration.assumptions.apply_to_deep`).
+    **fields
+        Further :class:`IntegrationConfig` fields (``mode``, ``filter_rate_hz``, ...); those
+        left out keep their defaults.
+
+    Returns
+    -------
+    IntegrationConfig
+
+    Raises
+    ------
+    FilterError
+        Unknown filter, a plugin that does not import, a bad option.
+    OptionsError
+        A field out of range or fields that do not fit together (IntegrationConfig's own
+        checks).
+    AssumptionsError
+        Bad assumptions file, or assumptions the mode cannot use.
+    """
+    from ..filters.spec import parse_filter_spec
+
+    spec = parse_filter_spec(filter)
+    options = {**fields.pop("filter_options", {}), **spec.options}
+    try:
+        cfg = IntegrationConfig(filter=spec.name, filter_options=options, **fields)
+    except ValueError as exc:
+        raise OptionsError(str(exc)) from None
+    if assume is not None:
+        from .assumptions import Assumptions, apply_to_deep, load_assumptions
+
+        cfg = apply_to_deep(cfg, assume if isinstance(assume, Assumptions)
+                            else load_assumptions(assume))
+    return cfg

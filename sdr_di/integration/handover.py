@@ -17,7 +17,7 @@ from __future__ import annotations
 from ..deep.bit_power import BitPower
 from ..deep.navdecode import ChannelNavDecoder
 from ..deep.vector_tracking import SampleClock, _Chan
-from ..errors import RunFailed
+from ..errors import HandoverError  # noqa: F401  (defined in sdr_di.errors, imported from here)
 from ..receiver.navdata import NavDataInForce
 from ..receiver.scalar import ScalarReceiver
 from ..signal.navmsg import klobuchar_of_subframe
@@ -31,9 +31,6 @@ __all__ = ["D1_BIT_RATE_HZ", "HandoverError", "handover_channels", "handover_dec
 D1_BIT_RATE_HZ = 50.0
 
 
-class HandoverError(RunFailed):
-    """The scalar start-up never reached a state the vector loop can take over (a run
-    without a fix: exit status 1)."""
 
 
 def handover_span_s(config: IntegrationConfig) -> tuple[float, float]:

@@ -53,7 +53,7 @@ import time
 import warnings
 from collections.abc import Callable
 
-from ..errors import SdrDiError
+from ..errors import LoopProcessError  # noqa: F401  (defined in sdr_di.errors)
 from .loop import BackgroundLoop, IntegrationLoop
 
 __all__ = ["LoopChild", "LoopProcess", "LoopProcessError", "start_loop_behind"]
@@ -63,9 +63,6 @@ _LEN = struct.Struct("<Q")
 _WARNING_REGISTRY: dict = {}
 
 
-class LoopProcessError(SdrDiError):
-    """The loop failed in its child process with an exception that does not pickle (its
-    text)."""
 
 
 def _write_frame(fh, data: bytes) -> None:

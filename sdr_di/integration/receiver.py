@@ -143,7 +143,7 @@ from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import ChannelState
 from .alignment import align_ins
-from .config import MODES, SCALAR_EPOCH_S, IntegrationConfig
+from .config import MODES, SCALAR_EPOCH_S, IntegrationConfig, imu_samples_per_interval
 from .filter_setup import check_filter, make_integration_filter
 from .handover import (HandoverError, handover_channels, handover_span_s,
                        offer_subframe_klobuchar)
@@ -443,11 +443,7 @@ class IntegratedReceiver:
         stop = source.n_samples if duration_s is None else min(
             source.n_samples, round(duration_s * fs))
         off = check_imu_span(source, imu, stop)
-        n_per = imu.rate_hz / cfg.filter_rate_hz
-        if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
-            raise ValueError(f"filter rate {cfg.filter_rate_hz} Hz must divide the IMU rate "
-                             f"{imu.rate_hz} Hz")
-        n_per = round(n_per)
+        n_per = imu_samples_per_interval(imu.rate_hz, cfg.filter_rate_hz)
         check_filter(cfg)              # filter name check before the (long) start-up
         if cfg.align == "truth" and truth is None:
             raise ImuDataError("align='truth' needs the reference (truth) file; use "

@@ -191,21 +191,21 @@ def cmd_robustness(args: argparse.Namespace) -> int:
     return 0 if res.ok else 1
 
 
+#: ``study``'s flags by the option they set (:class:`~sdr_di.options.StudyOptions`).
+STUDY_FLAGS = {"runs": "--runs", "workers": "--workers", "scheduler": "--scheduler",
+               "force": "--force", "report": "--no-report"}
+
+
 def cmd_study(args: argparse.Namespace) -> int:
-    """Handler of ``sdr-di study``."""
+    """Handler of ``sdr-di study``: :func:`sdr_di.api.study_with` with the parsed options."""
     import dask
 
-    from ..io.atomic import check_output_dir
-    from .study import _check_folder, run_study
-    from .spec import load_study
+    from ..api import study_with        # the front door (this handler is the CLI's)
+    from ..options import StudyOptions
 
-    spec = load_study(args.spec)
-    check_output_dir(args.out)
-    if args.runs is not None and args.runs < 1:
-        raise CampaignError(f"--runs must be >= 1, got {args.runs}")
-    if args.workers is not None and args.workers < 0:
-        raise CampaignError(f"--workers must be >= 0, got {args.workers}")
-    _check_folder(spec, args.out, args.force)
+    opts = StudyOptions(spec=args.spec, out=args.out, runs=args.runs,
+                        scheduler=args.scheduler, workers=args.workers, force=args.force,
+                        report=not args.no_report, names=STUDY_FLAGS)
 
     def show(rec: dict) -> None:
         state = "ok" if rec["status"] == "ok" else f"FAILED: {rec.get('error')}"
@@ -213,9 +213,8 @@ def cmd_study(args: argparse.Namespace) -> int:
 
     preload = [*dask.config.get("distributed.worker.preload", []), _WORKERS_IGNORE_SIGINT]
     with dask.config.set({"distributed.worker.preload": preload}):
-        res = run_study(spec, args.out, runs=args.runs, scheduler=args.scheduler,
-                        workers=args.workers, force=args.force, on_record=show,
-                        render=not args.no_report)
+        res = study_with(opts, on_record=show)
+    spec = res.spec
     print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
           f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
           f"{res.elapsed_s:.1f} s")

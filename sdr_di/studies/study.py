@@ -103,6 +103,26 @@ class StudyResult:
         return [r for r in self.runs if r["status"] != "ok"]
 
 
+def check_study_counts(runs, workers, scheduler, names: dict | None = None) -> None:
+    """Seeds per cell (an integer >= 1, or None: the spec's), local workers (an integer >= 0
+    or None) and a scheduler address, which takes no worker count: the rule of ``sdr-di
+    study`` and ``sdr_di.study``.
+
+    ``names``: how the message names ``runs`` and ``workers`` (the CLI's flags).
+
+    Raises
+    ------
+    StudyError
+        A count out of range or of the wrong type, or workers with a scheduler.
+    """
+    n = (names or {}).get
+    for key, v, low in (("runs", runs, 1), ("workers", workers, 0)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < low):
+            raise StudyError(f"{n(key, key)} must be an integer >= {low}, got {v!r}")
+    if scheduler is not None and workers is not None:
+        raise StudyError(f"{n('workers', 'workers')} applies to the local cluster only")
+
+
 def _record_path(runs_dir: Path, c: int, i: int) -> Path:
     return runs_dir / f"{c}_{i}.json"
 
@@ -198,13 +218,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
                                force=force, on_record=on_record, render=render)
     t0 = time.perf_counter()
     runs = spec.runs if runs is None else runs
-    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
-        raise StudyError(f"--runs must be an integer >= 1, got {runs!r}")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
-                                or workers < 0):
-        raise StudyError(f"--workers must be an integer >= 0, got {workers!r}")
-    if scheduler is not None and workers is not None:
-        raise StudyError("--workers applies to the local cluster only")
+    check_study_counts(runs, workers, scheduler, {"runs": "--runs", "workers": "--workers"})
     out = Path(out_dir)
     _check_folder(spec, out, force)
     exp = get_experiment(spec.experiment)
