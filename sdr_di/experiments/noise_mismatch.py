@@ -30,13 +30,9 @@ from ..integration.loose import load_lc_scenario, make_inputs, run_loose
 from ..integration.noise import NoiseWindow
 from ..scenario import REPO_ROOT
 from . import plotting
-from .filter_figures import (
-    QUANTITIES,
-    STATS,
-    filter_list,
-    filter_names_in,
-    rmse_bar_plot,
-)
+from .entries import filter_list
+from .filter_figures import QUANTITIES, STATS, filter_names_in
+from .plotting import rmse_bar_plot
 from .variants import nan_figures, plot_error_norms, variant_rows
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run", "tables"]

@@ -66,9 +66,9 @@ import tomllib
 from pathlib import Path
 
 from ..errors import SdrDiError, StudyError
-from ..experiments.filter_figures import canonical_entry, parse_filter_spec
+from ..experiments.entries import MODES, check_filter_entry, split_entry
 from ..experiments.registry import get_experiment, parse_params
-from ..experiments.variants import MODES, split_entry
+from ..filters.spec import canonical_entry
 from .tuning_spec import TuningSpec, parse_tuning
 
 __all__ = ["QUANTITY_KEYS", "Cell", "Claim", "StudySpec", "load_study", "parse_study"]
@@ -260,7 +260,7 @@ def parse_study(raw: dict, *, source: Path | None = None) -> StudySpec:
     _need(len(set(filters)) == len(filters), where, "[study] filters has duplicates")
     for f in filters:
         try:
-            parse_filter_spec(f"{where}: [study] filters",
+            check_filter_entry(f"{where}: [study] filters",
                               split_entry(f"{where}: [study] filters", f)[0])
         except SdrDiError as exc:
             raise StudyError(str(exc)) from None
