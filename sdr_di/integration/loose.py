@@ -454,13 +454,8 @@ def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, as
     """Summary of an ``lc`` run: metrics, the truth (scenario, IMU, GNSS noise) and what the
     filter assumed (its IMU spec, ``R``, ``P0`` sigmas, initial errors, scales, and the
     assumptions mapping given, if any)."""
+    from ..io.json_values import json_safe
     from .assumptions import truth_record
-
-    def _f(v):
-        v = v.tolist() if isinstance(v, (np.ndarray, np.generic)) else v
-        if isinstance(v, list):
-            return [_f(a) for a in v]
-        return None if isinstance(v, float) and not math.isfinite(v) else v
 
     noise = settings.noise
     truth = truth_record(sc)
@@ -486,7 +481,6 @@ def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, as
         "filter": res.filter_used,
     }
     return {"filter": res.filter_name,
-            "metrics": {k: _f(v) for k, v in res.metrics().items()},
-            "consistency": {k: {kk: _f(vv) for kk, vv in v.items()} if isinstance(v, dict)
-                            else v for k, v in res.consistency().items()},
+            "metrics": json_safe(res.metrics()),
+            "consistency": json_safe(res.consistency()),
             "truth": truth, "assumptions": beliefs}

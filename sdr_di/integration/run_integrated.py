@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import sys
 import time
 import warnings
@@ -50,6 +49,7 @@ from ..errors import ImuDataError
 from ..integration.assumptions import deep_beliefs, sidecar_truth
 from ..integration.consistency import SD_COLUMNS
 from ..io.atomic import atomic_open, ensure_output_dir
+from ..io.json_values import json_safe
 from ..io.sidecar import companion_files
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
@@ -124,20 +124,6 @@ def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
         fh.write(",".join(DEEP_COLUMNS) + "\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.12g")
     return path
-
-
-def _finite(v):
-    if isinstance(v, np.ndarray):
-        return [_finite(x) for x in v.tolist()]
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
-def _finite_tree(d: dict) -> dict:
-    """``d`` with non-finite floats as None, one level of nesting deep."""
-    return {k: {kk: _finite(vv) for kk, vv in v.items()} if isinstance(v, dict)
-            else _finite(v) for k, v in d.items()}
 
 
 def _progress_stage(mode: str, n_channels: int, n_used: int | None) -> str:
@@ -257,22 +243,21 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         "nco_latency": cfg.nco_latency if res.mode == "deep" else None,
         "prns": list(res.prns), "rows": int(res.t.size),
         "channels_always_used": bool(res.used.all()) if res.used.size else False,
-        "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],
-        "metrics": {k: _finite(v) for k, v in metrics.items()},
-        "consistency": _finite_tree(res.consistency()),
+        "used_fraction": res.used.mean(axis=0) if res.used.size else [],
+        "metrics": metrics,
+        "consistency": res.consistency(),
         "iono_from_s": t_iono,
-        "metrics_after_iono": None if m_iono is None else {k: _finite(v)
-                                                           for k, v in m_iono.items()},
+        "metrics_after_iono": m_iono,
         "adaptation_s": res.adaptation_s,
-        "profile": {k: _finite(v) for k, v in res.profile.items()},
+        "profile": res.profile,
         "wall_s": wall,
         "navigation": res.navigation,
         "warnings": notes,
         "truth": sidecar_truth(getattr(source, "meta", None)),
         "assumptions": {**deep_beliefs(cfg), "filter": res.filter_used},
     }
-    with atomic_open(files["summary"], "w") as fh:
-        json.dump(summary, fh, indent=2)
+    with atomic_open(files["summary"], "w") as fh:   # NaN and inf as null (io.json_values)
+        json.dump(json_safe(summary), fh, indent=2)
         fh.write("\n")
     return DeepRunSummary(files=files, result=res, metrics=metrics, wall_s=wall,
                           iono_from_s=t_iono, metrics_after_iono=m_iono)
