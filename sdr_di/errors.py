@@ -3,8 +3,11 @@
 Every bad input raises a subclass of :class:`SdrDiError` naming the input and what is wrong;
 the CLI prints ``error: <message>`` on one line and exits with status 2. The public API
 (``sdr_di.generate``, ``sdr_di.run``, ``sdr_di.study``) raises the same classes, exported from
-``sdr_di``; those of a bad value (:class:`OptionsError`, :class:`AcquisitionError`) are also
-``ValueError``.
+``sdr_di``. Those of a bad value of an option or argument (:class:`OptionsError`,
+:class:`FilterError`, :class:`AcquisitionError`, :class:`SolutionFileError`) are also
+``ValueError``; the errors of a file's content (scenario, sidecar, IMU data, study spec)
+are not, so that the numerical-failure handlers (``except ValueError``) never mistake one
+for a failed computation.
 """
 
 
@@ -78,9 +81,10 @@ class ImuDataError(SdrDiError):
     """IMU data with NaN, gaps or non-monotonic time."""
 
 
-class FilterError(SdrDiError):
+class FilterError(SdrDiError, ValueError):
     """Bad filter input or configuration: unknown filter name, wrong-size ``z``/``R``/``Q``,
-    non-finite values, non-positive-definite initial covariance, unknown option."""
+    non-finite values, non-positive-definite initial covariance, unknown option (a bad
+    value: also a ``ValueError``)."""
 
 
 class CovarianceError(FilterError):
