@@ -102,7 +102,7 @@ class RunResult:
     details : object
         The internal record the run returned
         (:class:`~sdr_di.receiver.run_scalar.RunSummary` or
-        :class:`~sdr_di.integration.run_integrated.DeepRunSummary`, whose ``result`` holds
+        :class:`~sdr_di.integration.run_integrated.IntegratedRunSummary`, whose ``result`` holds
         the solution arrays); internal, may change between releases.
     inputs : dict of str to Path
         Input files by label: ``if``; in scalar mode the ``ephemeris`` (assistance) and
@@ -394,10 +394,10 @@ def _run_scalar(opts: RunOptions, source, out_dir: Path, assist, nav_path: Path 
 
 
 def _run_integrated(opts: RunOptions, source, out_dir: Path, cfg) -> RunResult:
-    """Deep, loose or tight: :func:`~sdr_di.integration.run_integrated.run_deep`."""
-    from .integration.run_integrated import run_deep
+    """Deep, loose or tight: :func:`~sdr_di.integration.run_integrated.run_integrated`."""
+    from .integration.run_integrated import run_integrated
 
-    res = run_deep(source, out_dir, config=cfg, imu_path=opts.imu, truth_path=opts.truth,
+    res = run_integrated(source, out_dir, config=cfg, imu_path=opts.imu, truth_path=opts.truth,
                    nav_path=opts.ephemeris, assist=opts.assist, prns=opts.prns,
                    progress=opts.progress, duration_s=opts.duration_s, search=not opts.cold,
                    tracking=opts.tracking_config())

@@ -488,7 +488,7 @@ def _probe_filter(name: str, options: dict, dt: float) -> None:
 
     from .filters import make_filter
     from .ins.error_model import InsErrorModel
-    from .integration.measurements import RangeRateMeasurementModel
+    from .coupling.measurements import RangeRateMeasurementModel
 
     make_filter(name, InsErrorModel(), RangeRateMeasurementModel(), np.zeros(17), np.eye(17),
                 np.eye(17), None, dt=dt, **options)
@@ -538,16 +538,11 @@ def _cmd_lc(args: argparse.Namespace) -> int:
     from .filters import parse_filter_spec
     from .ins.imu import ImuErrorModel
     from .integration.assumptions import apply_to_lc, resolve_assumptions
-    from .integration.loose import (
-        lc_summary,
-        load_lc_scenario,
-        make_inputs,
-        min_lc_duration_s,
-        run_loose,
-    )
+    from .integration.loose import lc_summary, load_lc_scenario, min_lc_duration_s, run_loose
     from .integration.noise import NoiseWindow
     from .io.atomic import atomic_open, check_output_dir, ensure_output_dir
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
+    from .sim.lc_inputs import make_inputs
 
     sc, st = load_lc_scenario(args.scenario or DEFAULT_SCENARIO)
     assumed = resolve_assumptions(sc, args.assume)  # checked before any work
@@ -653,6 +648,74 @@ def _cmd_filters(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_study(sub) -> None:
+    p = sub.add_parser(
+        "study", help="cells x filters x seeds, paired on the same files, with statistics",
+        description="Run a study spec (docs/studies.md): every cell's experiment with every "
+        "filter on the same generated files per seed, on a local Dask cluster (or "
+        "--scheduler), each (cell, seed) written as it finishes; then paired differences "
+        "against the baseline filter with Holm-corrected intervals, the claims' verdicts, "
+        "cells.csv, runs.csv and report.html. Re-running the same spec into the same folder "
+        "resumes it.")
+    p.add_argument("spec", type=Path, help="study TOML file (studies/*.toml)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--runs", type=int, default=None, metavar="N",
+                   help="seeds per cell (default: the spec's runs)")
+    p.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="Dask scheduler address (tcp://host:8786); default: local processes")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="local worker processes (default: number of cores; 0: run in this "
+                   "process, no cluster)")
+    p.add_argument("--force", action="store_true",
+                   help="replace a different study's runs in --out (runs of unchanged cells are "
+                   "kept)")
+    p.add_argument("--no-report", action="store_true", help="do not write report.html")
+    p.set_defaults(func=_cmd_study)
+
+
+#: ``study``'s flags by the option they set (:class:`~sdr_di.options.StudyOptions`).
+STUDY_FLAGS = {"runs": "--runs", "workers": "--workers", "scheduler": "--scheduler",
+               "force": "--force", "report": "--no-report"}
+
+
+def _cmd_study(args: argparse.Namespace) -> int:
+    """``sdr-di study``: :func:`sdr_di.api.study_with` with the parsed options."""
+    import dask
+
+    from .api import study_with
+    from .options import StudyOptions
+    from .studies.commands import WORKERS_IGNORE_SIGINT
+
+    opts = StudyOptions(spec=args.spec, out=args.out, runs=args.runs,
+                        scheduler=args.scheduler, workers=args.workers, force=args.force,
+                        report=not args.no_report, names=STUDY_FLAGS)
+
+    def show(rec: dict) -> None:
+        state = "ok" if rec["status"] == "ok" else f"FAILED: {rec.get('error')}"
+        print(f"  {rec['cell']:>24s}  seed {rec['seed_index']:3d}  {state}", flush=True)
+
+    preload = [*dask.config.get("distributed.worker.preload", []), WORKERS_IGNORE_SIGINT]
+    with dask.config.set({"distributed.worker.preload": preload}):
+        res = study_with(opts, on_record=show)
+    spec = res.spec
+    print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
+          f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
+          f"{res.elapsed_s:.1f} s")
+    for c in (res.tuning or {}).values():
+        where = f" in {c.cell}" if c.cell else ""
+        print(f"tuned: {c.filter}{where} -> {c.entry} (training score {c.score:.4g})")
+    for r in res.failed:
+        print(f"  failed: {r['cell']} seed {r['seed_index']} {r['filter']}: {r['error']}",
+              file=sys.stderr)
+    for j, cl in enumerate(spec.claims, 1):
+        verdicts = [f"{r['cell']}: {r[f'claim{j}']}" for r in res.cells if r[f"claim{j}"]]
+        print(f"claim {j} ({cl.text}): {'; '.join(verdicts)}")
+    print(f"cells     {args.out / 'cells.csv'}")
+    if not args.no_report:
+        print(f"report    {args.out / 'report.html'}")
+    return 1 if res.failed else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``sdr-di`` argument parser."""
     from . import __version__
@@ -671,6 +734,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .studies.commands import add_parsers as add_experiment_parsers
 
     add_experiment_parsers(sub)
+    _add_study(sub)
     return parser
 
 

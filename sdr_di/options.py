@@ -17,7 +17,7 @@ file description, IF file      :class:`IfFileOptions` (``run`` and ``acquire``)
 visible-satellite assistance   :meth:`RunOptions.search_assistance`
 companion files (scalar)       :meth:`RunOptions.scalar_companions`
 filter entry, ``--assume``     :meth:`RunOptions.integration_config`
-                               (:func:`~sdr_di.integration.config.build_integration_config`)
+                               (:func:`~sdr_di.integration.settings.build_integration_config`)
 filter rate divides IMU rate   :meth:`RunOptions.check_integrated_inputs`
 scenario overrides             :meth:`GenerateOptions.scenario_config`
 seeds per cell, workers        :meth:`StudyOptions.__post_init__`
@@ -246,7 +246,7 @@ class RunOptions:
         if self.nco_latency is not None:
             if self.mode != "deep":
                 self._fail(f"{n('nco_latency')}: only with {n('mode')} deep")
-            from .integration.config import is_nco_latency
+            from .coupling.config import is_nco_latency
 
             if not is_nco_latency(self.nco_latency):
                 self._fail(f"{n('nco_latency')} must be 0 or 1 (filter intervals), got "
@@ -353,14 +353,14 @@ class RunOptions:
 
     def integration_config(self):
         """The integrated receiver's settings: the filter entry, the given fields and the
-        assumptions file (:func:`~sdr_di.integration.config.build_integration_config`).
+        assumptions file (:func:`~sdr_di.integration.settings.build_integration_config`).
 
         Raises
         ------
         FilterError, OptionsError, AssumptionsError
-            See :func:`~sdr_di.integration.config.build_integration_config`.
+            See :func:`~sdr_di.integration.settings.build_integration_config`.
         """
-        from .integration.config import build_integration_config
+        from .integration.settings import build_integration_config
 
         fields = {"gnss_rate_hz": self.gnss_rate_hz, "filter_rate_hz": self.filter_rate_hz,
                   "align": self.align, "iono_wait_s": self.iono_wait_s,
@@ -385,7 +385,7 @@ class RunOptions:
         check_filter(cfg)
         if self.filter_rate_hz is None:
             return
-        from .integration.config import imu_samples_per_interval
+        from .coupling.config import imu_samples_per_interval
         from .io.imu_files import read_imu
         from .io.sidecar import companion_files
 

@@ -103,7 +103,7 @@ def test_nco_latency_goes_to_deep_variants_only(monkeypatch):
     """One experiment with ``nco_latency=1`` and modes ``deep,loose``: the deep variant's
     configuration gets it, the loose one's does not (it would be refused: no NCOs)."""
     from sdr_di.experiments._deep import run_deep_variant
-    from sdr_di.integration import config
+    from sdr_di.integration import settings
 
     made = []
 
@@ -112,7 +112,7 @@ def test_nco_latency_goes_to_deep_variants_only(monkeypatch):
         raise ValueError("recorded")
 
     # the one builder (build_integration_config) makes every configuration
-    monkeypatch.setattr(config, "IntegrationConfig", recorder)
+    monkeypatch.setattr(settings, "IntegrationConfig", recorder)
     for mode in ("deep", "loose"):
         dr = run_deep_variant(None, "ekf", mode=mode, nco_latency=1, filter_rate_hz=50.0)
         assert dr.error == "OptionsError: recorded"

@@ -116,7 +116,7 @@ def short_file(tmp_path_factory):
 @pytest.mark.parametrize("mode", ["deep", "loose", "tight"])
 def test_run_builds_the_config_from_an_entry(short_file, tmp_path, monkeypatch, mode):
     """``run --filter ff-aukf:q_states=nominal:adapt_q=false`` and ``ekf:psd_fallback=clip``:
-    the configuration handed to ``run_deep`` carries the name and the typed options."""
+    the configuration handed to ``run_integrated`` carries the name and the typed options."""
     import sdr_di.integration.run_integrated as rd
 
     seen = []
@@ -124,11 +124,11 @@ def test_run_builds_the_config_from_an_entry(short_file, tmp_path, monkeypatch, 
     class Stop(Exception):
         pass
 
-    def fake_run_deep(source, out_dir, *, config, **kw):
+    def fake_run_integrated(source, out_dir, *, config, **kw):
         seen.append(config)
         raise Stop
 
-    monkeypatch.setattr(rd, "run_deep", fake_run_deep)
+    monkeypatch.setattr(rd, "run_integrated", fake_run_integrated)
     for entry, name, opts in (
             ("ff-aukf:q_states=nominal:adapt_q=false", "ff-aukf",
              {"q_states": "nominal", "adapt_q": False}),

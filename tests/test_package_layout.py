@@ -31,12 +31,12 @@ MOVED_MODULES = {
 #: (old module, old name) -> (new module, new name)
 MOVED_NAMES = {
     ("sdr_di.deep", "DeepReceiver"): ("sdr_di.integration.receiver", "IntegratedReceiver"),
-    ("sdr_di.deep", "DeepConfig"): ("sdr_di.integration.config", "IntegrationConfig"),
-    ("sdr_di.deep", "IntegrationConfig"): ("sdr_di.integration.config", "IntegrationConfig"),
+    ("sdr_di.deep", "DeepConfig"): ("sdr_di.coupling.config", "IntegrationConfig"),
+    ("sdr_di.deep", "IntegrationConfig"): ("sdr_di.coupling.config", "IntegrationConfig"),
     ("sdr_di.deep", "DeepResult"): ("sdr_di.integration.receiver", "IntegrationResult"),
     ("sdr_di.deep", "HandoverError"): ("sdr_di.integration.handover", "HandoverError"),
-    ("sdr_di.deep", "MODES"): ("sdr_di.integration.config", "MODES"),
-    ("sdr_di.integration.receiver", "DeepConfig"): ("sdr_di.integration.config",
+    ("sdr_di.deep", "MODES"): ("sdr_di.coupling.config", "MODES"),
+    ("sdr_di.integration.receiver", "DeepConfig"): ("sdr_di.coupling.config",
                                                     "IntegrationConfig"),
     ("sdr_di.integration.receiver", "DeepReceiver"): ("sdr_di.integration.receiver",
                                                       "IntegratedReceiver"),
@@ -146,3 +146,97 @@ def test_studies_import_experiments_never_the_reverse():
     up = {(a, b) for a, deps in graph.items() for b in deps
           if a.startswith("sdr_di.experiments") and b.startswith("sdr_di.studies")}
     assert not up, up
+
+
+# ---- layers (issue 48 item 5) -----------------------------------------------------------------
+#: The packages (and top-level modules) of sdr_di in layers, lowest first. A package imports
+#: only packages of lower layers, at module level or inside a function: the layer of the
+#: data flow (DESIGN section 2) it belongs to. ``coupling`` holds what deep mode's
+#: measurement source and the integration loop share, below both.
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("errors",),
+    ("constants",),
+    ("timebase", "frames", "oscillator", "filters"),
+    ("orbits", "scenario", "ins"),
+    ("signal", "io", "coupling"),
+    ("receiver",),
+    ("deep",),
+    ("integration",),
+    ("sim",),
+    ("experiments",),
+    ("studies",),
+    ("options",),
+    ("api",),
+    ("cli",),
+)
+#: Private modules other packages still import, each with its reason.
+PRIVATE_MODULES_USED_AS_PUBLIC = {
+    "sdr_di._deprecated",          # the old-name hook of 0.1 (issue 48 item 6 removes it)
+    "sdr_di.experiments._deep",    # the studies' file cache and truth check (rename pending)
+}
+
+
+def _package_imports() -> list[tuple[str, str, str, list[str], Path]]:
+    """Every import of one sdr_di package by another: (importer package, imported package,
+    imported module, imported names, file); function-level imports included."""
+    out = []
+    for p in PKG.rglob("*.py"):
+        rel = p.relative_to(PKG.parent).with_suffix("").parts
+        mod = rel[:-1] if rel[-1] == "__init__" else rel
+        src = rel[1] if len(rel) > 1 else "__init__"
+        for n in ast.walk(ast.parse(p.read_text())):
+            if isinstance(n, ast.ImportFrom):
+                if n.level:
+                    base = list(mod if p.name == "__init__.py" else mod[:-1])
+                    base = base[:len(base) - n.level + 1]
+                    target = base + (n.module.split(".") if n.module else [])
+                elif (n.module or "").split(".")[0] == "sdr_di":
+                    target = n.module.split(".")
+                else:
+                    continue
+                names = [a.name for a in n.names]
+            elif isinstance(n, ast.Import):
+                hits = [a.name.split(".") for a in n.names if a.name.split(".")[0] == "sdr_di"]
+                if not hits:
+                    continue
+                target, names = hits[0], []
+            else:
+                continue
+            dst = target[1] if len(target) > 1 else "__init__"
+            if dst != src:
+                out.append((src, dst, ".".join(target), names, p))
+    return out
+
+
+def test_packages_import_only_lower_layers():
+    """The layer table above: no package imports one of its own or a higher layer (receiver
+    never imports integration or sim; deep never imports integration). ``from .. import
+    __version__`` (the package's version) is allowed anywhere."""
+    rank = {name: i for i, layer in enumerate(LAYERS) for name in layer}
+    packages = {p.stem if p.is_file() else p.name for p in PKG.iterdir()
+                if (p.suffix == ".py" or (p / "__init__.py").is_file())
+                and p.name not in ("__init__.py", "_deprecated.py")}
+    assert packages <= set(rank), f"not in LAYERS: {sorted(packages - set(rank))}"
+    rank["_deprecated"] = -1       # below everything (PRIVATE_MODULES_USED_AS_PUBLIC)
+    bad = sorted({(src, dst, str(f.relative_to(PKG.parent)))
+                  for src, dst, _, names, f in _package_imports()
+                  if not (dst == "__init__" and names == ["__version__"])
+                  and src != "__init__"
+                  and not rank[dst] < rank[src]})
+    assert not bad, bad
+
+
+def test_no_package_imports_another_packages_private_names():
+    bad = sorted((str(f.relative_to(PKG.parent)), m, n)
+                 for src, dst, m, names, f in _package_imports()
+                 for n in [*names, m.split(".")[-1]]
+                 if n.startswith("_") and not n.startswith("__")
+                 and m not in PRIVATE_MODULES_USED_AS_PUBLIC)
+    assert not bad, bad
+
+
+def test_deep_never_imports_integration():
+    """Deep mode's measurement source reads the settings, the interval and the measurement
+    model from sdr_di.coupling (the integration loop runs it; it does not know the loop)."""
+    assert not [f for src, dst, _, _, f in _package_imports()
+                if src == "deep" and dst == "integration"]

@@ -352,13 +352,9 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
 
 # ---- command line ----------------------------------------------------------------------------
 def _run_cli(argv: list[str]) -> int:
-    import argparse
+    from sdr_di.cli import build_parser
 
-    from sdr_di.studies.commands import add_parsers
-
-    parser = argparse.ArgumentParser(prog="sdr-di")
-    add_parsers(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     return args.func(args)
 
 

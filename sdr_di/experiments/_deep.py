@@ -448,7 +448,7 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     ``error`` text, not raised: a filter that fails is a result of the experiment.
     """
     from ..errors import SdrDiError
-    from ..integration.config import build_integration_config
+    from ..integration.settings import build_integration_config
     from ..integration.receiver import IntegratedReceiver, StartMismatchError
 
     if mode != "deep":

@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ExperimentError, SdrDiError
-from ..integration.loose import load_lc_scenario, make_inputs, run_loose
+from ..integration.loose import load_lc_scenario, run_loose
+from ..sim.lc_inputs import make_inputs
 from ..integration.noise import NoiseWindow
 from ..scenario import REPO_ROOT
 from . import plotting

@@ -125,7 +125,7 @@ def loop_config(params: dict, **fixed: Any) -> dict:
 
 def check_nco_latency(exp: str, params: dict) -> None:
     """Reject an ``nco_latency`` other than ``None`` (the receiver's default), 0 or 1."""
-    from ..integration.config import is_nco_latency
+    from ..coupling.config import is_nco_latency
 
     v = params.get("nco_latency")
     if v is not None and not is_nco_latency(v):

@@ -16,12 +16,12 @@ from __future__ import annotations
 
 from ..deep.bit_power import BitPower
 from ..deep.navdecode import ChannelNavDecoder
-from ..deep.vector_tracking import SampleClock, _Chan
+from ..deep.vector_tracking import SampleClock, VectorChannel
 from ..errors import HandoverError  # noqa: F401  (defined in sdr_di.errors, imported from here)
 from ..receiver.navdata import NavDataInForce
 from ..receiver.scalar import ScalarReceiver
 from ..signal.navmsg import klobuchar_of_subframe
-from .config import IntegrationConfig
+from ..coupling.config import IntegrationConfig
 
 __all__ = ["D1_BIT_RATE_HZ", "HandoverError", "handover_channels", "handover_decoder", "handover_span_s",
            "offer_subframe_klobuchar"]
@@ -47,14 +47,14 @@ def handover_span_s(config: IntegrationConfig) -> tuple[float, float]:
 
 
 def handover_channels(cfg: IntegrationConfig, rx: ScalarReceiver, navdata: NavDataInForce,
-                      hand: dict, clock: SampleClock) -> list[_Chan]:
+                      hand: dict, clock: SampleClock) -> list[VectorChannel]:
     """Vector-loop state of every handed-over channel, from its scalar channel: next
     code epoch (sample and number on the satellite clock), carrier phase, C/N0, the
     ephemeris in force at the fix and the navigation decoder with its subframe in
     progress."""
     sol = hand["sol"]
     S0 = clock.S0
-    chans: list[_Chan] = []
+    chans: list[VectorChannel] = []
     for i, prn in enumerate(hand["prns"]):
         c = rx.channels[prn]
         s = int(c.next_start)
@@ -62,7 +62,7 @@ def handover_channels(cfg: IntegrationConfig, rx: ScalarReceiver, navdata: NavDa
         eph = navdata.select(prn, sol.week, sol.sow)
         e = round((o.t_tx_sow - S0) * 1000.0)
         bit_ms = 20 if c.is_d1 else 2
-        chans.append(_Chan(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s, epoch=e,
+        chans.append(VectorChannel(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s, epoch=e,
                            phase=float(c.phi),
                            power=BitPower(max(cfg.cn0_window_ms // bit_ms, 2)),
                            bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz),

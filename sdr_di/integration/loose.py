@@ -61,7 +61,7 @@ from ..ins.error_model import InsErrorModel, NavState, process_noise, rotvec_to_
 from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..scenario.schema import Scenario, parse_scenario
-from .measurements import LooseMeasurementModel, loose_measurement
+from ..coupling.measurements import LooseMeasurementModel, loose_measurement
 from .consistency import (SD_COLUMNS, block_nis, consistency_summary, enu_blocks, formal_sd,
                           nees_per_dof)
 from .metrics import nav_errors, summarize
@@ -72,9 +72,7 @@ __all__ = [
     "LcSettings",
     "lc_summary",
     "load_lc_scenario",
-    "make_inputs",
     "run_loose",
-    "run_loose_scenario",
 ]
 
 ARCMIN = math.radians(1.0 / 60.0)
@@ -292,17 +290,6 @@ def min_lc_duration_s(settings: LcSettings) -> float:
     return 1.0 / settings.gnss_rate_hz
 
 
-def make_inputs(sc: Scenario, settings: LcSettings | None = None):
-    """Truth and measured IMU of a scenario (seeded from the scenario)."""
-    from ..sim.generate import simulate_truth
-
-    settings = settings or LcSettings()
-    truth = simulate_truth(sc)
-    model = ImuErrorModel.from_spec(sc.imu, draw=settings.imu_draw)
-    rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
-    return truth, model.apply(truth, rng), model
-
-
 def _check_inputs(truth, imu) -> None:
     if len(imu.t) != len(truth.t) or not np.allclose(imu.t, truth.t, atol=1e-6):
         raise ImuDataError(f"IMU record ({len(imu.t)} samples) and truth ({len(truth.t)} "
@@ -438,15 +425,6 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
                                        else math.nan), filter_used=used,
                     sd=np.array(SD).reshape(-1, 9), nees=np.array(NEES).reshape(-1, 3),
                     nis_blocks=np.array(NISB).reshape(-1, 2))
-
-
-def run_loose_scenario(sc: Scenario, settings: LcSettings,
-                       duration_s: float | None = None) -> LcResult:
-    """Simulate truth + IMU from a scenario and run :func:`run_loose` (GNSS seed = scenario)."""
-    if duration_s is not None:
-        sc = sc.with_overrides(duration_s=duration_s)
-    truth, imu, model = make_inputs(sc, settings)
-    return run_loose(truth, imu, model, settings, seed=sc.seed)
 
 
 def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, assumed,

@@ -132,7 +132,7 @@ from ..integration.gnss_epochs import GnssEpochRecorder
 from ..integration.loop import BackgroundLoop, IntegrationLoop
 from ..integration.loop_process import LoopChild, LoopProcess, start_loop_behind
 from ..integration.loose_fixes import LooseFixSource
-from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
+from ..coupling.measurements import LooseMeasurementModel, RangeRateMeasurementModel
 from ..integration.metrics import summarize
 from ..integration.tight_ranges import TightRangeSource
 from ..receiver.ifreader import IfSource
@@ -143,7 +143,7 @@ from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import ChannelState
 from .alignment import align_ins
-from .config import MODES, SCALAR_EPOCH_S, IntegrationConfig, imu_samples_per_interval
+from ..coupling.config import MODES, SCALAR_EPOCH_S, IntegrationConfig, imu_samples_per_interval
 from .filter_setup import check_filter, make_integration_filter
 from .handover import (HandoverError, handover_channels, handover_span_s,
                        offer_subframe_klobuchar)

@@ -58,9 +58,10 @@ from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import TrackingConfig
 from .receiver import IntegrationConfig, IntegratedReceiver, IntegrationResult, check_imu_span
 
-__all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_deep_csv"]
+__all__ = ["SOLUTION_COLUMNS", "IntegratedRunSummary", "companion_files", "run_integrated",
+           "write_solution_csv"]
 
-DEEP_COLUMNS = (
+SOLUTION_COLUMNS = (
     "t_s", "bdt_week", "bdt_sow", "lat_deg", "lon_deg", "h_m", "v_e", "v_n", "v_u",
     "pitch_deg", "roll_deg", "yaw_deg", "clock_bias_m", "clock_drift_mps", "n_used",
     "att_err_e_deg", "att_err_n_deg", "att_err_u_deg", "vel_err_e", "vel_err_n", "vel_err_u",
@@ -69,8 +70,8 @@ DEEP_COLUMNS = (
 
 
 @dataclasses.dataclass
-class DeepRunSummary:
-    """What a deep run produced."""
+class IntegratedRunSummary:
+    """What an integrated run (deep, loose or tight) produced."""
 
     files: dict
     result: IntegrationResult
@@ -107,7 +108,7 @@ def iono_take_up_s(res: IntegrationResult) -> float | None:
     return float(res.t[int(np.argmax(on))])
 
 
-def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
+def write_solution_csv(path: Path, res: IntegrationResult) -> Path:
     """Write the solution rows (atomic)."""
     data = np.column_stack([
         res.t, np.full(res.t.size, res.week), res.sow, np.degrees(res.llh[:, :2]),
@@ -116,12 +117,12 @@ def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
         res.nav_change if res.nav_change.size == res.t.size else np.zeros(res.t.size),
         res.sd if res.sd.shape[0] == res.t.size else np.full((res.t.size, 9), np.nan)]) \
         if res.t.size else np.zeros(
-        (0, len(DEEP_COLUMNS)))
+        (0, len(SOLUTION_COLUMNS)))
     label = (res.filter_used or {}).get("spec", res.filter_name)  # name:options as run
     with atomic_open(path, "w") as fh:
         fh.write(f"# sdr-di {res.mode} solution, filter {label}, hand-over at "
                  f"{res.handover_s:.3f} s, channels {' '.join(f'C{p:02d}' for p in res.prns)}\n")
-        fh.write(",".join(DEEP_COLUMNS) + "\n")
+        fh.write(",".join(SOLUTION_COLUMNS) + "\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.12g")
     return path
 
@@ -137,14 +138,16 @@ def _progress_stage(mode: str, n_channels: int, n_used: int | None) -> str:
     return f"ranges and rates of {n_used} satellites into the filter"
 
 
-def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig | None = None,
-             imu_path: str | Path | None = None, truth_path: str | Path | None = None,
-             nav_path: str | Path | None = None, assist: bool = True, prns=None,
-             stem: str | None = None, progress: bool = True,
-             duration_s: float | None = None,
-             search: bool | dict[int, float | None] = True,
-             tracking: TrackingConfig | None = None) -> DeepRunSummary:
-    """Run the deep receiver over ``source`` and write the solution files (module notes).
+def run_integrated(source: IfSource, out_dir: str | Path, *,
+                   config: IntegrationConfig | None = None,
+                   imu_path: str | Path | None = None, truth_path: str | Path | None = None,
+                   nav_path: str | Path | None = None, assist: bool = True, prns=None,
+                   stem: str | None = None, progress: bool = True,
+                   duration_s: float | None = None,
+                   search: bool | dict[int, float | None] = True,
+                   tracking: TrackingConfig | None = None) -> IntegratedRunSummary:
+    """Run the integrated receiver (deep, loose or tight: ``config.mode``) over ``source``
+    and write the solution files (module notes).
 
     ``search`` is the start-up's acquisition assistance, the same rule as scalar mode's
     (:func:`~sdr_di.receiver.run_scalar.search_assistance`: True, the sidecar's list around
@@ -237,7 +240,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     metrics = res.metrics()
     t_iono = iono_take_up_s(res)
     m_iono = None if t_iono is None else res.metrics(t0=t_iono)
-    write_deep_csv(files["solution"], res)
+    write_solution_csv(files["solution"], res)
     summary = {
         "mode": res.mode, "filter": res.filter_name, "handover_s": res.handover_s,
         "nco_latency": cfg.nco_latency if res.mode == "deep" else None,
@@ -259,5 +262,5 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
     with atomic_open(files["summary"], "w") as fh:   # NaN and inf as null (io.json_values)
         json.dump(json_safe(summary), fh, indent=2)
         fh.write("\n")
-    return DeepRunSummary(files=files, result=res, metrics=metrics, wall_s=wall,
+    return IntegratedRunSummary(files=files, result=res, metrics=metrics, wall_s=wall,
                           iono_from_s=t_iono, metrics_after_iono=m_iono)

@@ -1,8 +1,10 @@
 """Settings of the integrated receiver in any coupling mode: :class:`IntegrationConfig`.
 
 The reasons for the defaults are the notes of :mod:`sdr_di.integration.receiver`. This module
-imports nothing of the receiver, so the measurement sources (deep mode's
-:mod:`~sdr_di.deep.vector_tracking`) can name the settings without an import circle.
+is in :mod:`sdr_di.coupling`, below both the integration loop and deep mode's measurement
+source (:mod:`~sdr_di.deep.vector_tracking`), which both read the settings. The one builder
+from a filter entry and assumptions is
+:func:`sdr_di.integration.settings.build_integration_config`.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from ..ins.imu import ImuErrorModel
 from ..oscillator import CLOCK_PRESETS, OscillatorSpec
 
 __all__ = ["MODES", "NCO_LATENCIES", "SCALAR_EPOCH_S", "IntegrationConfig",
-           "build_integration_config", "imu_samples_per_interval", "is_nco_latency"]
+           "imu_samples_per_interval", "is_nco_latency"]
 
 #: Coupling modes of :class:`IntegratedReceiver` (receiver notes).
 MODES = ("deep", "loose", "tight")
@@ -213,52 +215,3 @@ def imu_samples_per_interval(imu_rate_hz: float, filter_rate_hz: float,
         raise OptionsError(f"{name} {filter_rate_hz:g} Hz must divide the IMU rate "
                            f"{imu_rate_hz:g} Hz{of}")
     return round(n_per)
-
-
-def build_integration_config(filter: str = "ekf", *, assume=None,
-                             **fields) -> IntegrationConfig:
-    """The receiver's settings from a filter entry, settings fields and assumptions: the one
-    builder of ``sdr-di run``, ``sdr_di.run`` and the experiments.
-
-    Parameters
-    ----------
-    filter : str
-        Filter entry ``NAME[:OPT=VALUE...]`` (:func:`~sdr_di.filters.parse_filter_spec`:
-        built-in, registered, entry-point or import-path name); its options are set over
-        ``fields["filter_options"]``.
-    assume : path, Assumptions or None
-        What the filter believes (``--assume``, docs/assumptions.md): an assumptions file or
-        a parsed :class:`~sdr_di.integration.assumptions.Assumptions`, applied over the
-        defaults (:func:`~sdr_di.integration.assumptions.apply_to_deep`).
-    **fields
-        Further :class:`IntegrationConfig` fields (``mode``, ``filter_rate_hz``, ...); those
-        left out keep their defaults.
-
-    Returns
-    -------
-    IntegrationConfig
-
-    Raises
-    ------
-    FilterError
-        Unknown filter, a plugin that does not import, a bad option.
-    OptionsError
-        A field out of range or fields that do not fit together (IntegrationConfig's own
-        checks).
-    AssumptionsError
-        Bad assumptions file, or assumptions the mode cannot use.
-    """
-    from ..filters.spec import parse_filter_spec
-
-    spec = parse_filter_spec(filter)
-    options = {**fields.pop("filter_options", {}), **spec.options}
-    try:
-        cfg = IntegrationConfig(filter=spec.name, filter_options=options, **fields)
-    except ValueError as exc:
-        raise OptionsError(str(exc)) from None
-    if assume is not None:
-        from .assumptions import Assumptions, apply_to_deep, load_assumptions
-
-        cfg = apply_to_deep(cfg, assume if isinstance(assume, Assumptions)
-                            else load_assumptions(assume))
-    return cfg
