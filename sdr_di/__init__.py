@@ -64,7 +64,7 @@ from .errors import (
 )
 from .options import GenerateOptions, RunOptions, StudyOptions
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 #: The exception classes of :mod:`sdr_di.errors` (all subclasses of :class:`SdrDiError`).
 ERRORS = ("AcquisitionError", "AssumptionsError", "CampaignError", "CovarianceError",

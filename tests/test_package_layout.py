@@ -1,6 +1,7 @@
-"""The package tree (issue 27 item 1): old import names still work for one release with a
-DeprecationWarning, the new names import without one, and no module imports another that
-imports it back."""
+"""The package tree: the 0.1 names are gone in 0.2.0 and CHANGELOG.md says where they went
+(issue 48 item 6; issue 27 item 1 moved them), every module imports without a warning, no
+module imports another that imports it back, and the packages import only lower layers
+(issue 48 item 5)."""
 
 from __future__ import annotations
 
@@ -26,6 +27,9 @@ MOVED_MODULES = {
     **{f"sdr_di.experiments.{m}": f"sdr_di.studies.{m}" for m in (
         "aggregate", "campaign", "commands", "execute", "outputs", "paired", "single_run",
         "study", "study_report", "tables", "tasks")},
+    # 0.2.0 (issue 48)
+    "sdr_di.integration.config": "sdr_di.coupling.config",
+    "sdr_di.integration.measurements": "sdr_di.coupling.measurements",
 }
 
 #: (old module, old name) -> (new module, new name)
@@ -34,7 +38,7 @@ MOVED_NAMES = {
     ("sdr_di.deep", "DeepConfig"): ("sdr_di.coupling.config", "IntegrationConfig"),
     ("sdr_di.deep", "IntegrationConfig"): ("sdr_di.coupling.config", "IntegrationConfig"),
     ("sdr_di.deep", "DeepResult"): ("sdr_di.integration.receiver", "IntegrationResult"),
-    ("sdr_di.deep", "HandoverError"): ("sdr_di.integration.handover", "HandoverError"),
+    ("sdr_di.deep", "HandoverError"): ("sdr_di.errors", "HandoverError"),
     ("sdr_di.deep", "MODES"): ("sdr_di.coupling.config", "MODES"),
     ("sdr_di.integration.receiver", "DeepConfig"): ("sdr_di.coupling.config",
                                                     "IntegrationConfig"),
@@ -49,35 +53,50 @@ MOVED_NAMES = {
                                               "render_report"),
     ("sdr_di.experiments", "run_experiment"): ("sdr_di.studies.single_run",
                                                "run_experiment"),
+    # 0.2.0 (issue 48)
+    ("sdr_di.integration.run_integrated", "run_deep"): ("sdr_di.integration.run_integrated",
+                                                        "run_integrated"),
+    ("sdr_di.integration.run_integrated", "DeepRunSummary"): (
+        "sdr_di.integration.run_integrated", "IntegratedRunSummary"),
+    ("sdr_di.integration.run_integrated", "DEEP_COLUMNS"): (
+        "sdr_di.integration.run_integrated", "SOLUTION_COLUMNS"),
+    ("sdr_di.integration.run_integrated", "write_deep_csv"): (
+        "sdr_di.integration.run_integrated", "write_solution_csv"),
+    ("sdr_di.integration.loose", "make_inputs"): ("sdr_di.sim.lc_inputs", "make_inputs"),
+    ("sdr_di.integration.loose", "run_loose_scenario"): ("sdr_di.sim.lc_inputs",
+                                                         "run_loose_scenario"),
+    ("sdr_di.experiments.filter_figures", "parse_filter_spec"): (
+        "sdr_di.experiments.entries", "check_filter_entry"),
+    ("sdr_di.experiments.filter_figures", "canonical_entry"): ("sdr_di.filters.spec",
+                                                               "canonical_entry"),
+    ("sdr_di.experiments.filter_figures", "filter_list"): ("sdr_di.experiments.entries",
+                                                           "filter_list"),
+    ("sdr_di.experiments.filter_figures", "rmse_bar_plot"): ("sdr_di.experiments.plotting",
+                                                             "rmse_bar_plot"),
+    ("sdr_di.deep.vector_tracking", "_Chan"): ("sdr_di.deep.vector_tracking",
+                                               "VectorChannel"),
+    ("sdr_di.orbits.rinex_nav", "_toc_datetime"): ("sdr_di.orbits.rinex_nav", "toc_datetime"),
 }
 
 
+CHANGELOG = (PKG.parent / "CHANGELOG.md").read_text()
+
+
 @pytest.mark.parametrize("old, new", sorted(MOVED_MODULES.items()))
-def test_old_module_names_import_the_new_modules_with_a_warning(old, new):
+def test_old_module_names_are_gone_and_the_changelog_names_their_new_place(old, new):
     sys.modules.pop(old, None)
-    with pytest.warns(DeprecationWarning, match=f"{old} is deprecated.*{new}") as rec:
-        mod = importlib.import_module(old)
-    assert mod is importlib.import_module(new)
-    assert mod.__spec__.name == new               # the module keeps its own identity
-    assert rec[0].filename == __file__            # the warning points at the importer
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module(old)
+    assert f"`{old}`" in CHANGELOG and f"`{new}`" in CHANGELOG
+    importlib.import_module(new)
 
 
 @pytest.mark.parametrize("old, new", sorted(MOVED_NAMES.items()))
-def test_old_names_resolve_to_the_new_objects_with_a_warning(old, new):
-    with pytest.warns(DeprecationWarning, match=f"{old[0]}.{old[1]} is deprecated"):
-        obj = getattr(importlib.import_module(old[0]), old[1])
-    assert obj is getattr(importlib.import_module(new[0]), new[1])
-
-
-def test_unknown_names_still_raise_attribute_error():
-    import sdr_di.deep
-    import sdr_di.experiments
-
-    for mod in (sdr_di.deep, sdr_di.experiments, importlib.import_module(
-            "sdr_di.integration.receiver")):
-        with pytest.raises(AttributeError), warnings.catch_warnings():
-            warnings.simplefilter("error")
-            mod.no_such_name          # noqa: B018
+def test_old_names_are_gone_and_the_changelog_names_their_new_place(old, new):
+    with pytest.raises(AttributeError):
+        getattr(importlib.import_module(old[0]), old[1])
+    assert f"`{old[0]}.{old[1]}`" in CHANGELOG and f"`{new[0]}.{new[1]}`" in CHANGELOG
+    assert getattr(importlib.import_module(new[0]), new[1])
 
 
 def test_new_names_import_without_deprecation_warnings():
@@ -171,7 +190,6 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 )
 #: Private modules other packages still import, each with its reason.
 PRIVATE_MODULES_USED_AS_PUBLIC = {
-    "sdr_di._deprecated",          # the old-name hook of 0.1 (issue 48 item 6 removes it)
     "sdr_di.experiments._deep",    # the studies' file cache and truth check (rename pending)
 }
 
@@ -215,9 +233,8 @@ def test_packages_import_only_lower_layers():
     rank = {name: i for i, layer in enumerate(LAYERS) for name in layer}
     packages = {p.stem if p.is_file() else p.name for p in PKG.iterdir()
                 if (p.suffix == ".py" or (p / "__init__.py").is_file())
-                and p.name not in ("__init__.py", "_deprecated.py")}
+                and p.name != "__init__.py"}
     assert packages <= set(rank), f"not in LAYERS: {sorted(packages - set(rank))}"
-    rank["_deprecated"] = -1       # below everything (PRIVATE_MODULES_USED_AS_PUBLIC)
     bad = sorted({(src, dst, str(f.relative_to(PKG.parent)))
                   for src, dst, _, names, f in _package_imports()
                   if not (dst == "__init__" and names == ["__version__"])

@@ -122,7 +122,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .._deprecated import forwarding_getattr
 from ..deep.vector_tracking import SampleClock, VectorTracking
 from ..errors import ImuDataError
 from ..filters import filter_record
@@ -769,15 +768,3 @@ class IntegratedReceiver:
         src.keep_columns(prns, loop.rows)
         return self._result(loop, run["clock"], prns, run["kf"], run["adapt0"],
                             run["k_grid0"], prof, t_all, src.navigation)
-
-
-
-#: Names of the first release (deep mode came first), kept for one release.
-__getattr__ = forwarding_getattr(__name__, {
-    "DeepConfig": f"{__name__}:IntegrationConfig",
-    "DeepReceiver": f"{__name__}:IntegratedReceiver",
-    "DeepResult": f"{__name__}:IntegrationResult",
-    # helpers that moved to the named modules of the hand-over, alignment, filter set-up
-    "clock_model": "sdr_di.integration.filter_setup",
-    "gnss_alignment": "sdr_di.integration.alignment",
-    "_handover_decoder": "sdr_di.integration.handover:handover_decoder"})
