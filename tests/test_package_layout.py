@@ -174,7 +174,7 @@ def test_studies_import_experiments_never_the_reverse():
 #: measurement source and the integration loop share, below both.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("errors",),
-    ("constants",),
+    ("constants", "settings"),
     ("timebase", "frames", "oscillator", "filters"),
     ("orbits", "scenario", "ins"),
     ("signal", "io", "coupling"),
@@ -257,3 +257,30 @@ def test_deep_never_imports_integration():
     model from sdr_di.coupling (the integration loop runs it; it does not know the loop)."""
     assert not [f for src, dst, _, _, f in _package_imports()
                 if src == "deep" and dst == "integration"]
+
+
+# ---- environment switches (issue 48 item 6) ---------------------------------------------------
+def test_environment_switches_are_read_in_settings_only():
+    """SDR_DI_* variables are named in sdr_di/settings.py and nowhere else in the package."""
+    named = sorted(str(p.relative_to(PKG.parent)) for p in PKG.rglob("*.py")
+                   if p.name != "settings.py"
+                   and any(isinstance(n, ast.Constant) and isinstance(n.value, str)
+                           and n.value.startswith("SDR_DI_")
+                           for n in ast.walk(ast.parse(p.read_text()))))
+    assert not named, named
+
+
+def test_importing_sdr_di_sets_nothing_in_the_environment():
+    """Every module imported in a fresh interpreter: os.environ as before (the generator
+    asked for OMP_WAIT_POLICY=PASSIVE at import; now when it starts,
+    sdr_di.settings.passive_kernel_workers)."""
+    mods = sorted(".".join(p.relative_to(PKG.parent).with_suffix("").parts)
+                  for p in PKG.rglob("*.py") if p.name not in ("__init__.py", "__main__.py"))
+    code = ("import importlib, os\n"
+            "os.environ.pop('OMP_WAIT_POLICY', None)\n"
+            "before = dict(os.environ)\n"
+            f"for m in {mods!r}:\n    importlib.import_module(m)\n"
+            "print(sorted(set(os.environ.items()) ^ set(before.items())))\n")
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
+                         text=True).stdout
+    assert out.strip() == "[]"

@@ -54,6 +54,7 @@ import warnings
 from collections.abc import Callable
 
 from ..errors import LoopProcessError  # noqa: F401  (defined in sdr_di.errors)
+from ..settings import loop_on_thread
 from .loop import BackgroundLoop, IntegrationLoop
 
 __all__ = ["LoopChild", "LoopProcess", "LoopProcessError", "start_loop_behind"]
@@ -105,8 +106,7 @@ class LoopChild:
         """A child, or None where the thread will run the loop (module notes)."""
         import multiprocessing
 
-        if (os.environ.get("SDR_DI_LOOP_THREAD", "") not in ("", "0")
-                or multiprocessing.current_process().daemon):
+        if loop_on_thread() or multiprocessing.current_process().daemon:
             return None
         try:
             return cls()
