@@ -66,14 +66,12 @@ from .options import GenerateOptions, RunOptions, StudyOptions
 
 __version__ = "0.2.0"
 
-#: The exception classes of :mod:`sdr_di.errors` (all subclasses of :class:`SdrDiError`).
-ERRORS = ("AcquisitionError", "AssumptionsError", "CampaignError", "CovarianceError",
-          "EphemerisError", "ExperimentError", "FileSetError", "FilterError",
-          "FormatCheckError", "HandoverError", "ImplausibleAcquisition", "ImuDataError",
-          "LoopProcessError", "NavMessageError", "NoEphemerisError", "NoSatelliteError",
-          "OptionsError", "OutputError", "RunFailed", "SampleFormatError", "ScenarioError",
-          "SdrDiError", "SidecarError", "SolutionFileError", "StudyError", "UnknownPrnError")
-
+#: The public API, its options objects, and every exception class of :mod:`sdr_di.errors`.
 __all__ = ["GenerateOptions", "GeneratedFiles", "RunOptions", "RunResult", "StudyOptions",
-           "__version__", "generate", "generate_with", "run", "run_with", "study",
-           "study_with", *ERRORS]
+           "__version__", "generate", "generate_with", "run", "run_with", "study", "study_with",
+           "AcquisitionError", "AssumptionsError", "CampaignError", "CovarianceError",
+           "EphemerisError", "ExperimentError", "FileSetError", "FilterError", "FormatCheckError",
+           "HandoverError", "ImplausibleAcquisition", "ImuDataError", "LoopProcessError",
+           "NavMessageError", "NoEphemerisError", "NoSatelliteError", "OptionsError",
+           "OutputError", "RunFailed", "SampleFormatError", "ScenarioError", "SdrDiError",
+           "SidecarError", "SolutionFileError", "StudyError", "UnknownPrnError"]

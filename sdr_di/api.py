@@ -44,6 +44,10 @@ Mode = Literal["scalar", "deep", "loose", "tight"]
 PathLike = str | Path
 
 
+def _path(p: PathLike | None) -> Path | None:
+    return None if p is None else Path(p)
+
+
 @dataclasses.dataclass(frozen=True)
 class GeneratedFiles:
     """The file set :func:`generate` wrote (one scenario, one seed).
@@ -177,9 +181,9 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
         The files cannot be written (nothing is left under the final names).
     """
     return generate_with(GenerateOptions(
-        out=out, scenario=scenario, name=name, duration_s=duration_s, seed=seed,
+        out=_path(out), scenario=_path(scenario), name=name, duration_s=duration_s, seed=seed,
         sampling_rate_hz=sampling_rate_hz, if_hz=if_hz, sample_format=sample_format,
-        bits=bits, cn0_dbhz=cn0_dbhz, ephemeris=ephemeris,
+        bits=bits, cn0_dbhz=cn0_dbhz, ephemeris=_path(ephemeris),
         prns=None if prns is None else tuple(prns), progress=progress, sigmf=sigmf))
 
 
@@ -320,11 +324,12 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         Integrated modes: bad IMU/reference files, no hand-over.
     """
     return run_with(RunOptions(
-        if_file=if_file, mode=mode, out=out, prns=None if prns is None else tuple(prns),
-        rate_hz=rate_hz, cold=cold, pll_bw_hz=pll_bw_hz, approx_pos=approx_pos,
-        filter=filter, imu=imu, truth=truth, ephemeris=ephemeris, assist=assist,
+        if_file=Path(if_file), mode=mode, out=_path(out),
+        prns=None if prns is None else tuple(prns), rate_hz=rate_hz, cold=cold,
+        pll_bw_hz=pll_bw_hz, approx_pos=approx_pos, filter=filter, imu=_path(imu),
+        truth=_path(truth), ephemeris=_path(ephemeris), assist=assist,
         filter_rate_hz=filter_rate_hz, align=align, duration_s=duration_s,
-        gnss_rate_hz=gnss_rate_hz, iono_wait_s=iono_wait_s, assume=assume,
+        gnss_rate_hz=gnss_rate_hz, iono_wait_s=iono_wait_s, assume=_path(assume),
         nco_latency=nco_latency, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
         sample_format=sample_format, rfch=rfch, inverted=inverted, start_week=start_week,
         start_sow=start_sow, ignore_sidecar=ignore_sidecar, check_format=check_format,
@@ -454,7 +459,7 @@ def study(spec: PathLike | Mapping[str, Any] | StudySpec, out: PathLike, *,
     CampaignError
         Scheduler unreachable.
     """
-    return study_with(StudyOptions(spec=spec, out=out, runs=runs, scheduler=scheduler,
+    return study_with(StudyOptions(spec=spec, out=Path(out), runs=runs, scheduler=scheduler,
                                    workers=workers, force=force, report=report),
                       on_record=on_record)
 

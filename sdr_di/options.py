@@ -182,7 +182,7 @@ class RunOptions:
     if_file: Path
     mode: str = "scalar"
     out: Path | None = None
-    prns: tuple[int, ...] | None = None
+    prns: tuple[int | str, ...] | None = None
     rate_hz: float = 5.0
     cold: bool = False
     pll_bw_hz: float | None = None
@@ -328,6 +328,7 @@ class RunOptions:
             self._fail(f"{n('ephemeris')}/{n('approx_pos')} need the file's start time: a "
                        f"sidecar, or {n('start_week')} and {n('start_sow')}")
         lat, lon, h = self.approx_pos
+        assert self.ephemeris is not None      # construction: approx_pos needs ephemeris
         vis = visible_satellites(load_nav(self.ephemeris), source.start_week, source.start_sow,
                                  llh_to_ecef(math.radians(lat), math.radians(lon), h))
         if not vis:
@@ -420,7 +421,7 @@ class GenerateOptions:
     bits: int | None = None
     cn0_dbhz: float | None = None
     ephemeris: Path | None = None
-    prns: tuple[str, ...] | None = None
+    prns: tuple[str | int, ...] | None = None
     progress: bool = False
     sigmf: bool = False
     names: Mapping[str, str] = dataclasses.field(default_factory=dict, compare=False,

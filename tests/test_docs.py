@@ -31,7 +31,7 @@ def test_docs_build_strict_with_the_api_reference(tmp_path):
     api = (site / "reference" / "api" / "index.html").read_text()
     for name in ("generate", "run", "study", "register_filter", "parse_filter_spec",
                  "KalmanFilterBase"):
-        assert f'id="sdr_di.' in api and name in api, name
+        assert 'id="sdr_di.' in api and name in api, name
     assert (site / "guides" / "write_a_filter" / "index.html").is_file()
 
 

@@ -274,6 +274,14 @@ class KalmanFilterBase:
         if rule is not None and rule._has_after_predict:
             rule._timed_after_predict(self)
 
+    def _measurement_model(self, model: MeasurementModel | None) -> MeasurementModel:
+        """``model``, else the filter's own; FilterError when neither is given."""
+        model = model if model is not None else self.measurement_model
+        if model is None:
+            raise FilterError(f"{self.name}: no measurement model (give one to update or "
+                              "to the constructor)")
+        return model
+
     def update(self, z, R=None, measurement_model: MeasurementModel | None = None) -> None:
         """Measurement update with ``z`` (``m_k`` values; ``m_k`` may change every epoch).
 

@@ -82,8 +82,8 @@ _EQUATIONS = {
 FILTER_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 
 _BASE_OPTIONS = ("dt", "psd_fallback", "q_scale", "r_scale")
-_CORE_OPTIONS = {EKF: _BASE_OPTIONS, CKF: _BASE_OPTIONS,
-                 UKF: _BASE_OPTIONS + ("alpha", "beta", "kappa")}
+_CORE_OPTIONS: dict[type, tuple[str, ...]] = {
+    EKF: _BASE_OPTIONS, CKF: _BASE_OPTIONS, UKF: _BASE_OPTIONS + ("alpha", "beta", "kappa")}
 
 
 def _rule_options(rule_cls) -> tuple[str, ...]:
@@ -165,6 +165,7 @@ def _make_plugin(name: str, process_model, measurement_model, x0, P0, Q0, R0,
     factory = resolve_plugin(name)
     if factory is None:
         _lookup(name)  # raises: unknown filter
+    assert factory is not None
     label = name.strip() if ":" in name else name.strip().lower()
     params, var_kw = _factory_params(factory)
     takes = {p.name for p in params}

@@ -184,7 +184,8 @@ def _factory_params(factory: Callable, skip_inputs: bool = True) -> tuple[list, 
     ``**kwargs`` (a subclass of :class:`~sdr_di.filters.EKF` takes ``psd_fallback``)."""
     if not inspect.isclass(factory):
         return _params(factory, skip_inputs)
-    seen, out = set(), []
+    seen: set[str] = set()
+    out: list[inspect.Parameter] = []
     for klass in factory.__mro__:
         init = klass.__dict__.get("__init__")
         if init is None:

@@ -196,10 +196,11 @@ class ImuErrorModel:
                            accel_scale=z.copy(), gyro_scale=z.copy())
         if not isinstance(rng, np.random.Generator):
             raise TypeError("ImuErrorModel.apply needs a numpy.random.Generator")
-        if self.draw == "gaussian":
-            const = lambda sigma: sigma * rng.standard_normal(3)
-        else:
-            const = lambda sigma: np.full(3, float(sigma))
+        def const(sigma):
+            """One draw of a per-axis constant: N(0, sigma^2) per axis, or sigma itself."""
+            if self.draw == "gaussian":
+                return sigma * rng.standard_normal(3)
+            return np.full(3, float(sigma))
         s_a = const(self.accel_scale_factor_ppm * 1e-6)
         s_g = const(self.gyro_scale_factor_ppm * 1e-6)
         b_a = const(self.accel_bias_si)

@@ -53,7 +53,6 @@ clock minus BDT, times c) beside the INS.
 from __future__ import annotations
 
 import copy
-import dataclasses
 import math
 import sys
 import threading
