@@ -106,11 +106,8 @@ def test_a_false_option_reaches_the_rule_as_false():
 
 # ---- run and lc take entries with options ------------------------------------------------------
 @pytest.fixture(scope="module")
-def short_file(tmp_path_factory):
-    out = tmp_path_factory.mktemp("short")
-    assert main(["generate", "--no-progress", "--duration", "1", "--fs", "2.5e6", "--out",
-                 str(out)]) == 0
-    return out / "default.bin"
+def short_file(if_files):
+    return if_files(1.0).if_file
 
 
 @pytest.mark.parametrize("mode", ["deep", "loose", "tight"])

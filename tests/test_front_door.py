@@ -27,10 +27,9 @@ from sdr_di.options import RunOptions
 
 
 @pytest.fixture(scope="module")
-def if_file(tmp_path_factory) -> Path:
-    """16 s of the default scenario at 2.5 MHz (seed 3)."""
-    d = tmp_path_factory.mktemp("front_door")
-    return sdr_di.generate(d, duration_s=16.0, sampling_rate_hz=2.5e6, seed=3).if_file
+def if_file(if_files) -> Path:
+    """16 s of the default scenario at 2.5 MHz (seed 3), from the session's factory."""
+    return if_files(16.0, seed=3).if_file
 
 
 def _cli(argv: list[str]):
