@@ -245,7 +245,14 @@ class KalmanFilterBase:
         return 0.0 if rule is None else float(rule.adaptation_time_s)
 
     def attach_rule(self, rule) -> None:
-        """Attach an adaptive rule (replaces any previous one) and let it bind to the filter."""
+        """Attach an adaptive rule (replaces any previous one) and let it bind to the filter.
+
+        Parameters
+        ----------
+        rule : AdaptiveRule
+            The rule (:class:`~sdr_di.filters.adaptive.base.AdaptiveRule`): its ``bind``
+            captures the filter's nominal ``Q0``, floors and dimensions.
+        """
         rule.bind(self)
         self.rule = rule
 
@@ -334,7 +341,18 @@ class KalmanFilterBase:
             rule._timed_after_update(self, z_eff, R_prior)
 
     def predict_measurement(self, model: MeasurementModel | None = None) -> MeasurementPrediction:
-        """Predicted measurement, its covariance without noise and the cross covariance."""
+        """Predicted measurement, its covariance without noise and the cross covariance.
+
+        Parameters
+        ----------
+        model : MeasurementModel, optional
+            The measurement model of this update; default the filter's own.
+
+        Returns
+        -------
+        MeasurementPrediction
+            ``z_pred`` (m,), ``Pzz`` (m, m) without ``R``, ``Pxz`` (n, m) and the model.
+        """
         raise NotImplementedError
 
     # ------------------------------------------------------------------ internals
