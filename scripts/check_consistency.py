@@ -6,7 +6,9 @@ Usage::
     python scripts/check_consistency.py [--modes deep tight loose] [--cn0 40 30]
                                         [--filters ekf ukf] [--seeds 0 1] [--fs 2.5e6]
                                         [--filter-rates 50 10]
+                                        [--architectures prefilter reset discriminator]
                                         [--duration 30] [--t-step 15] [--t0 17] [--csv FILE]
+                                        [--ensemble]
 
 For every seed and C/N0 the default scenario (``signals/default.toml``; the seed draws the
 IMU errors and the signal noise; truth IMU and oscillator equal to the assumed ones) is
@@ -27,10 +29,26 @@ per degree of freedom of position, velocity and attitude, from ``--t0`` s of the
 grid. Deep runs of one file share the scalar start-up
 (:class:`~sdr_di.integration.receiver.DeepStart`).
 
-Printed: one row per mode x C/N0 x filter (x filter rate) with the mean over the seeds that ran and the
-seed count (``n``); a run that fails (no hand-over at a low C/N0, a diverged filter) is
-counted in ``failed`` and named on stderr. ``--csv`` also writes one row per run.
-Expected value of every figure: 1 (a consistent filter).
+``--architectures`` (deep mode's measurement architectures, ``--deep-measurements``;
+default the receiver's) adds another dimension for deep runs.
+
+Printed: one row per mode x C/N0 x filter (x filter rate x architecture) with the mean over
+the seeds that ran and the seed count (``n``); a run that fails (no hand-over at a low C/N0,
+a diverged filter) is counted in ``failed`` and named on stderr. ``--csv`` also writes one
+row per run. Expected value of every figure: 1 (a consistent filter).
+
+``--save`` keeps the runs' records, ``--load`` prints the tables of several saved sets
+(seeds run in parallel processes).
+
+``--ensemble`` (Bar-Shalom, Li and Kirubarajan 2001, section 5.4): also the ensemble
+averages over the seeds, at every solution row (NEES of position, velocity, attitude) and
+every filter update (NIS per block) from ``--t0`` on, at the times all runs of the cell
+share: ANEES and ANIS per degree of freedom, their mean over time, the two-sided 95 %
+chi-square band of an average of ``N`` runs
+(:func:`~sdr_di.integration.consistency.ensemble_band`, dimension 3 for NEES and the
+block's size for NIS) and the share of times inside it (95 % for a consistent filter;
+consecutive times are correlated, so the share scatters more than a binomial would), and
+the RMSE over the runs.
 """
 
 from __future__ import annotations
@@ -39,6 +57,7 @@ import argparse
 import csv
 import itertools
 import math
+import pickle
 import sys
 import time
 
@@ -65,13 +84,17 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
                                         "end_s": args.duration + 1.0,
                                         "attenuation_db": 40.0 - cn0}])
             with generated_inputs(sc) as inp:
-                for mode, f, rate in itertools.product(args.modes, args.filters,
-                                                       args.filter_rates):
+                for mode, f, rate, arch in itertools.product(
+                        args.modes, args.filters, args.filter_rates, args.architectures):
+                    if mode != "deep" and arch != args.architectures[0]:
+                        continue            # loose and tight have no architecture
                     rec = {"mode": mode, "cn0_dbhz": cn0, "filter": f, "seed": seed,
-                           "filter_rate_hz": rate}
+                           "filter_rate_hz": rate,
+                           "architecture": arch if mode == "deep" else ""}
                     t0 = time.perf_counter()
                     try:
-                        dr = run_deep_variant(inp, f, mode=mode, filter_rate_hz=rate)
+                        kw = {"deep_measurements": arch} if arch else {}
+                        dr = run_deep_variant(inp, f, mode=mode, filter_rate_hz=rate, **kw)
                         rec["error"] = dr.error or ""
                     except Exception as exc:  # noqa: BLE001 - a failed cell, named
                         rec["error"] = f"{type(exc).__name__}: {exc}"
@@ -83,12 +106,105 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
                         met = dr.result.metrics(args.t0, None)
                         rec["pos_m_rmse"] = met["pos_m_rmse"]
                         rec["vel_mps_rmse"] = met["vel_mps_rmse"]
+                        rec["att_deg_rmse"] = met["att_deg_rmse"]
+                        if args.ensemble:
+                            rec["series"] = run_series(dr.result, args.t0)
                     rec["wall_s"] = time.perf_counter() - t0
-                    print(f"{mode:5s} {cn0:4.0f} dB-Hz {f:8s} {rate:g} Hz seed {seed}: "
+                    print(f"{mode:5s} {cn0:4.0f} dB-Hz {f:8s} {rate:g} Hz {arch or '-'} "
+                          f"seed {seed}: "
                           + " ".join(f"{k} {rec[k]:.3g}" for k in FIGURES if k in rec)
                           + f" ({rec['wall_s']:.0f} s)", file=sys.stderr, flush=True)
                     recs.append(rec)
     return recs
+
+
+def run_series(res, t0: float) -> dict:
+    """A run's time series for the ensemble (module notes): per solution row from ``t0``
+    the NEES per degree of freedom (position, velocity, attitude) and the squared error
+    norms, per filter update the NIS per degree of freedom of each block and its size; keyed
+    by the time rounded to the ms."""
+    keep = res.t >= t0
+    rows = {round(float(t), 3): (nees, (pe ** 2).sum(), (ve ** 2).sum(), (ae ** 2).sum())
+            for t, nees, pe, ve, ae in zip(res.t[keep], res.nees[keep], res.pos_err[keep],
+                                          res.vel_err[keep], res.att_err[keep])}
+    up = res.updates or {}
+    t_up = np.asarray(up.get("t", []), float)
+    ups = {round(float(t), 3): (np.asarray(nis, float), int(d))
+           for t, nis, d in zip(t_up, up.get("nis", []), up.get("dof", [])) if t >= t0}
+    return {"rows": rows, "updates": ups}
+
+
+def ensemble_rows(recs: list[dict], args: argparse.Namespace) -> list[dict]:
+    """One record per cell (mode x C/N0 x filter x rate x architecture): ANEES and ANIS per
+    degree of freedom averaged over the times all its runs share, their bands for the
+    number of runs, the share of times inside, and the RMSE over the runs (module notes)."""
+    from sdr_di.integration.consistency import ensemble_band
+
+    out = []
+    cells = sorted({(r["mode"], r["cn0_dbhz"], r["filter"], r["filter_rate_hz"],
+                     r.get("architecture", "")) for r in recs}, key=str)
+    for cell in cells:
+        rs = [r for r in recs if (r["mode"], r["cn0_dbhz"], r["filter"], r["filter_rate_hz"],
+                                  r.get("architecture", "")) == cell and "series" in r]
+        n = len(rs)
+        rec = {"mode": cell[0], "cn0_dbhz": cell[1], "filter": cell[2],
+               "filter_rate_hz": cell[3], "architecture": cell[4], "n": n,
+               "failed": sum(1 for r in recs if (r["mode"], r["cn0_dbhz"], r["filter"],
+                                                 r["filter_rate_hz"],
+                                                 r.get("architecture", "")) == cell
+                             and "series" not in r)}
+        if n < 2:
+            out.append(rec)
+            continue
+        times = sorted(set.intersection(*(set(r["series"]["rows"]) for r in rs)))
+        if times:
+            nees = np.array([[r["series"]["rows"][t][0] for t in times] for r in rs])
+            lo, hi = ensemble_band(n, 3)
+            for j, q in enumerate(("pos", "vel", "att")):
+                a = np.nanmean(nees[:, :, j], axis=0)        # ANEES at each time
+                rec[f"anees_{q}"] = float(np.nanmean(a))
+                rec[f"anees_{q}_band"] = (lo, hi)
+                rec[f"anees_{q}_inside"] = float(np.mean((a >= lo) & (a <= hi)))
+                sq = np.array([[r["series"]["rows"][t][1 + j] for t in times] for r in rs])
+                rec[f"{q}_rmse"] = float(np.sqrt(np.nanmean(sq)))
+        t_up = sorted(set.intersection(*(set(r["series"]["updates"]) for r in rs)))
+        if t_up:
+            for b, name in enumerate(NIS_BLOCKS[cell[0]]):
+                vals = np.array([[r["series"]["updates"][t][0][b] for t in t_up]
+                                 for r in rs])
+                dof = int(np.median([rs[0]["series"]["updates"][t][1] for t in t_up]))
+                lo, hi = ensemble_band(n, dof)
+                a = np.nanmean(vals, axis=0)
+                rec[f"anis_{name}"] = float(np.nanmean(a))
+                rec[f"anis_{name}_band"] = (lo, hi)
+                rec[f"anis_{name}_inside"] = float(np.mean((a >= lo) & (a <= hi)))
+        out.append(rec)
+    return out
+
+
+def ensemble_table(rows: list[dict], args: argparse.Namespace) -> str:
+    """Markdown table of :func:`ensemble_rows`."""
+    def f(rec, key):
+        if key not in rec:
+            return "-"
+        lo, hi = rec[key + "_band"]
+        return f"{rec[key]:.2f} [{lo:.2f}, {hi:.2f}] {100 * rec[key + '_inside']:.0f}%"
+
+    lines = [f"Ensemble over seeds ({args.duration:g} s at {args.fs / 1e6:g} MHz, window "
+             f"{args.t0:g} s to the end): time mean of ANEES / ANIS per degree of freedom "
+             "[95 % band for N runs] share of times inside; RMSE over runs and times.", "",
+             "| mode | C/N0 | filter | rate | architecture | N | failed | pos RMSE [m] | "
+             "vel RMSE [m/s] | att RMSE [deg] | ANEES pos | ANEES vel | ANEES att | "
+             "ANIS block 1 | ANIS block 2 |", "|" + "---|" * 15]
+    for r in rows:
+        b1, b2 = NIS_BLOCKS[r["mode"]]
+        lines.append(
+            f"| {r['mode']} | {r['cn0_dbhz']:g} | {r['filter']} | {r['filter_rate_hz']:g} | "
+            f"{r['architecture'] or '-'} | {r['n']} | {r['failed']} | "
+            f"{r.get('pos_rmse', math.nan):.3f} | {r.get('vel_rmse', math.nan):.4f} | "
+            f"{r.get('att_rmse', math.nan):.3f} | {f(r, 'anees_pos')} | {f(r, 'anees_vel')} | "
+            f"{f(r, 'anees_att')} | {b1} {f(r, 'anis_' + b1)} | {b2} {f(r, 'anis_' + b2)} |")
+    return "\n".join(lines) + "\n"
 
 
 def table(recs: list[dict], args: argparse.Namespace) -> str:
@@ -96,15 +212,20 @@ def table(recs: list[dict], args: argparse.Namespace) -> str:
     lines = [f"{args.duration:g} s at {args.fs / 1e6:g} MHz, default scenario, 40 dB-Hz "
              f"then the level from {args.t_step:g} s; window {args.t0:g} s to the end; mean "
              "over the seeds that ran (n); expected value 1.", "",
-             "| mode | C/N0 [dB-Hz] | filter | rate [Hz] | n | failed | NIS block 1 | "
-             "NIS block 2 | NEES pos | NEES vel | NEES att |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| mode | C/N0 [dB-Hz] | filter | rate [Hz] | architecture | n | failed | "
+             "NIS block 1 | NIS block 2 | NEES pos | NEES vel | NEES att |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for mode in args.modes:
         b1, b2 = NIS_BLOCKS[mode]
         for cn0 in args.cn0:
-            for f, rate in itertools.product(args.filters, args.filter_rates):
+            for f, rate, arch in itertools.product(args.filters, args.filter_rates,
+                                                   args.architectures):
+                arch = arch if mode == "deep" else ""
                 rs = [r for r in recs if (r["mode"], r["cn0_dbhz"], r["filter"],
-                                          r["filter_rate_hz"]) == (mode, cn0, f, rate)]
+                                          r["filter_rate_hz"], r["architecture"]) == (
+                    mode, cn0, f, rate, arch)]
+                if not rs:
+                    continue
                 ok = [r for r in rs if not r["error"]]
 
                 def m(key):
@@ -112,7 +233,8 @@ def table(recs: list[dict], args: argparse.Namespace) -> str:
                     v = v[np.isfinite(v)]
                     return f"{v.mean():.3g}" if v.size else "-"
 
-                lines.append(f"| {mode} | {cn0:g} | {f} | {rate:g} | {len(ok)} | {len(rs) - len(ok)} | "
+                lines.append(f"| {mode} | {cn0:g} | {f} | {rate:g} | {arch or '-'} | {len(ok)} | "
+                             f"{len(rs) - len(ok)} | "
                              f"{b1} {m('nis_' + b1)} | {b2} {m('nis_' + b2)} | "
                              f"{m('nees_pos')} | {m('nees_vel')} | {m('nees_att')} |")
     return "\n".join(lines) + "\n"
@@ -134,19 +256,40 @@ def main(argv=None) -> int:
                    help="time of the C/N0 step [s of file] (after the hand-over, ~12.2 s)")
     p.add_argument("--t0", type=float, default=None,
                    help="start of the window [s of file] (default: the step + 2 s)")
+    p.add_argument("--architectures", nargs="+", default=[""],
+                   choices=["", "prefilter", "reset", "discriminator"],
+                   help="deep measurement architectures (default: the receiver's)")
+    p.add_argument("--ensemble", action="store_true",
+                   help="also the ensemble averages over the seeds (module notes)")
     p.add_argument("--csv", default=None, help="also write one row per run here")
+    p.add_argument("--save", default=None, metavar="FILE.pkl",
+                   help="also keep every run's record (with its series) in this file")
+    p.add_argument("--load", nargs="+", default=None, metavar="FILE.pkl",
+                   help="run nothing: the tables of the records saved in these files (runs "
+                   "split over processes; the other options must match theirs)")
     args = p.parse_args(argv)
     if any(c > 40.0 for c in args.cn0):
         p.error("--cn0: every level must be <= 40 dB-Hz (the start-up level)")
     if args.t0 is None:
         args.t0 = args.t_step + 2.0
-    recs = run_grid(args)
+    if args.load:
+        recs = []
+        for path in args.load:
+            with open(path, "rb") as fh:
+                recs += pickle.load(fh)
+    else:
+        recs = run_grid(args)
+    if args.save:
+        with open(args.save, "wb") as fh:
+            pickle.dump(recs, fh)
     print(table(recs, args))
+    if args.ensemble:
+        print(ensemble_table(ensemble_rows(recs, args), args))
     if args.csv:
-        keys = ["mode", "cn0_dbhz", "filter", "filter_rate_hz", "seed", *FIGURES, "pos_m_rmse",
-                "vel_mps_rmse", "wall_s", "error"]
+        keys = ["mode", "cn0_dbhz", "filter", "filter_rate_hz", "architecture", "seed",
+                *FIGURES, "pos_m_rmse", "vel_mps_rmse", "att_deg_rmse", "wall_s", "error"]
         with open(args.csv, "w", newline="") as fh:
-            w = csv.DictWriter(fh, keys, restval="")
+            w = csv.DictWriter(fh, keys, restval="", extrasaction="ignore")
             w.writeheader()
             w.writerows(recs)
     return 0

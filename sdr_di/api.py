@@ -218,7 +218,8 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         align: Literal["truth", "gnss"] | None = None, duration_s: float | None = None,
         gnss_rate_hz: float | None = None, iono_wait_s: float | None = None,
         assume: PathLike | None = None, nco_latency: int | None = None,
-        sampling_rate_hz: float | None = None, if_hz: float | None = None,
+        deep_measurements: Literal["prefilter", "reset", "discriminator"] | None = None,
+        fusion_rate_hz: float | None = None, sampling_rate_hz: float | None = None, if_hz: float | None = None,
         sample_format: str | None = None, rfch: int | None = None, inverted: bool = False,
         start_week: int | None = None, start_sow: float | None = None,
         ignore_sidecar: bool = False, check_format: bool = True,
@@ -287,6 +288,15 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         Deep only: filter intervals between an update and the NCO commands that first use
         it, beyond the next (``--nco-latency``; default 0; docs/deep.md, *NCOs one interval
         ahead*).
+    deep_measurements : {"prefilter", "reset", "discriminator"}, optional
+        Deep only: what each channel hands the integration filter: paper 004's cascaded
+        pre-filters (default), pre-filters restarted from an uninformative prior at each
+        fusion, or the interval's discriminator outputs (``--deep-measurements``;
+        docs/deep.md).
+    fusion_rate_hz : float, optional
+        Deep with ``deep_measurements="reset"``: rate of the filter's updates with the
+        pre-filters' outputs [Hz], the filter rate divided by a whole number
+        (``--fusion-rate``; default 5).
     sampling_rate_hz, if_hz : float, optional
         A file sdr-di did not write: sampling rate and intermediate frequency [Hz] (``--fs``,
         ``--if``).
@@ -330,7 +340,8 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         truth=_path(truth), ephemeris=_path(ephemeris), assist=assist,
         filter_rate_hz=filter_rate_hz, align=align, duration_s=duration_s,
         gnss_rate_hz=gnss_rate_hz, iono_wait_s=iono_wait_s, assume=_path(assume),
-        nco_latency=nco_latency, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
+        nco_latency=nco_latency, deep_measurements=deep_measurements,
+        fusion_rate_hz=fusion_rate_hz, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
         sample_format=sample_format, rfch=rfch, inverted=inverted, start_week=start_week,
         start_sow=start_sow, ignore_sidecar=ignore_sidecar, check_format=check_format,
         progress=progress))

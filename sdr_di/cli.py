@@ -14,6 +14,10 @@ from typing import NoReturn
 
 from .errors import OptionsError, SdrDiError
 
+#: ``coupling.config.DEEP_MEASUREMENTS`` without importing the coupling package at
+#: start-up (a scalar run does not need it); tests/test_deep_measurements.py keeps them equal
+_DEEP_MEASUREMENTS = ("prefilter", "reset", "discriminator")
+
 
 class UsageError(OptionsError):
     """Command-line arguments argparse refuses (one-line message, exit 2); options that do not
@@ -318,6 +322,15 @@ def _add_run(sub) -> None:
                    help="deep: filter intervals between an update and the NCO commands that "
                    "first use it, beyond the next (default 0; 1: the next interval is "
                    "correlated while the filter updates, on a second core: docs/deep.md)")
+    g.add_argument("--deep-measurements", choices=_DEEP_MEASUREMENTS, default=None,
+                   help="deep: what each channel hands the integration filter: 'prefilter' "
+                   "(default, paper 004's cascaded pre-filters), 'reset' (pre-filters "
+                   "restarted from an uninformative prior every interval) or "
+                   "'discriminator' (the interval's discriminator outputs; docs/deep.md)")
+    g.add_argument("--fusion-rate", type=float, default=None, metavar="HZ",
+                   help="deep, --deep-measurements reset: rate of the filter's updates with "
+                   "the pre-filters' outputs, each followed by their information reset; the "
+                   "filter rate divided by a whole number (default 5; docs/deep.md)")
     g.add_argument("--assume", type=Path, default=None, metavar="FILE.toml",
                    help="what the integration filter believes: IMU spec, oscillator, R, P0, "
                    "initial errors (docs/assumptions.md)")
@@ -336,7 +349,9 @@ RUN_FLAGS = {"mode": "--mode", "out": "--out", "prns": "--prn", "rate_hz": "--ra
              "ephemeris": "--ephemeris", "assist": "--no-assist",
              "filter_rate_hz": "--filter-rate", "align": "--align", "duration_s": "--duration",
              "gnss_rate_hz": "--gnss-rate", "iono_wait_s": "--iono-wait",
-             "assume": "--assume", "nco_latency": "--nco-latency", **FILE_FLAGS}
+             "assume": "--assume", "nco_latency": "--nco-latency",
+             "deep_measurements": "--deep-measurements", "fusion_rate_hz": "--fusion-rate",
+             **FILE_FLAGS}
 
 
 def run_options(args: argparse.Namespace):
@@ -349,7 +364,8 @@ def run_options(args: argparse.Namespace):
         truth=args.truth, ephemeris=args.ephemeris, assist=not args.no_assist,
         filter_rate_hz=args.filter_rate, align=args.align, duration_s=args.duration,
         gnss_rate_hz=args.gnss_rate, iono_wait_s=args.iono_wait, assume=args.assume,
-        nco_latency=args.nco_latency, progress=not args.no_progress, **_file_options(args),
+        nco_latency=args.nco_latency, deep_measurements=args.deep_measurements,
+        fusion_rate_hz=args.fusion_rate, progress=not args.no_progress, **_file_options(args),
         names=RUN_FLAGS)
 
 

@@ -9,7 +9,8 @@ flags (``--pll-bw``) where the API says its arguments (``pll_bw_hz``): the ``nam
 =============================  ==============================================================
 rule                           where
 =============================  ==============================================================
-options of another mode        :meth:`RunOptions.__post_init__` (:data:`INTEGRATED_ONLY`)
+options of another mode        :meth:`RunOptions.__post_init__` (:data:`INTEGRATED_ONLY`; deep
+                               only: ``nco_latency``, ``deep_measurements``, ``fusion_rate_hz``)
 numbers in range               :meth:`RunOptions.__post_init__`
 PLL stability limit            :meth:`RunOptions.tracking_config`
                                (:func:`~sdr_di.receiver.tracking.pll_stability_problem`)
@@ -199,6 +200,8 @@ class RunOptions:
     iono_wait_s: float | None = None
     assume: Path | None = None
     nco_latency: int | None = None
+    deep_measurements: str | None = None
+    fusion_rate_hz: float | None = None
     # a file sdr-di did not write
     sampling_rate_hz: float | None = None
     if_hz: float | None = None
@@ -243,6 +246,9 @@ class RunOptions:
             self._fail(f"{', '.join(given)}: only with {n('mode')} deep, loose or tight")
         if self.gnss_rate_hz is not None and self.mode not in ("loose", "tight"):
             self._fail(f"{n('gnss_rate_hz')}: only with {n('mode')} loose or tight")
+        for key in ("deep_measurements", "fusion_rate_hz"):
+            if getattr(self, key) is not None and self.mode != "deep":
+                self._fail(f"{n(key)}: only with {n('mode')} deep")
         if self.nco_latency is not None:
             if self.mode != "deep":
                 self._fail(f"{n('nco_latency')}: only with {n('mode')} deep")
@@ -365,7 +371,8 @@ class RunOptions:
 
         fields = {"gnss_rate_hz": self.gnss_rate_hz, "filter_rate_hz": self.filter_rate_hz,
                   "align": self.align, "iono_wait_s": self.iono_wait_s,
-                  "nco_latency": self.nco_latency}
+                  "nco_latency": self.nco_latency, "deep_measurements": self.deep_measurements,
+                  "fusion_rate_hz": self.fusion_rate_hz}
         return build_integration_config(
             self.filter or "ekf", assume=self.assume, mode=self.mode,
             output_rate_hz=self.rate_hz, **{k: v for k, v in fields.items() if v is not None})

@@ -84,7 +84,7 @@ def test_apply_to_lc_overrides_lc_keys():
 
 
 @pytest.mark.parametrize(("raw", "match"), [
-    ({"imu": {"grade": "consumer"}}, r"a\.toml \[imu\]\.grade: unknown IMU grade 'consumer'"),
+    ({"imu": {"grade": "gimbal"}}, r"a\.toml \[imu\]\.grade: unknown IMU grade 'gimbal'"),
     ({"imu": {"accel_scale_factor_ppm": 50}}, (r"\[imu\]\.accel_scale_factor_ppm: not an "
                                               r"assumption \(the 17-state filter has no "
                                               r"scale-factor states")),

@@ -247,6 +247,12 @@ CASES: list[tuple] = [
     ("generate-oscillator-preset", [*GD, "--scenario", "{d}/osc_preset.toml", "--out",
                                    "{d}/o"]),
     # -- interference and the jamming experiment (issue 15) ----------------------------------
+    ("generate-imu-unknown-grade", [*GD, "--scenario", "{d}/imu_grade.toml", "--out", "{d}/o"]),
+    ("generate-imu-negative-sigma", [*GD, "--scenario", "{d}/imu_neg.toml", "--out", "{d}/o"]),
+    ("generate-atmosphere-unknown-truth", [*GD, "--scenario", "{d}/atm_truth.toml", "--out",
+                                           "{d}/o"]),
+    ("generate-atmosphere-negative-sigma", [*GD, "--scenario", "{d}/atm_neg.toml", "--out",
+                                            "{d}/o"]),
     ("generate-jammer-unknown-type", [*GD, "--scenario", "{d}/jam_type.toml", "--out", "{d}/o"]),
     ("generate-jammer-negative-bandwidth", [*GD, "--scenario", "{d}/jam_bw.toml", "--out",
                                            "{d}/o"]),
@@ -413,7 +419,7 @@ def make_workdir(d: Path, generated: Path) -> None:
         'name = "baseline"\n[[cells]]\nname = "imu-typo"\n'
         'truth = { "imu.accel_random_walk_mps_sqrthz" = 0.5 }\n')
     _sigmf_pairs(d / "sigmf")
-    for name, text in (("assume_grade", '[imu]\ngrade = "consumer"\n'),
+    for name, text in (("assume_grade", '[imu]\ngrade = "gimbal"\n'),
                        ("assume_neg_h", '[oscillator]\npreset = "tcxo"\nh0 = -2e-19\n'),
                        ("assume_key", "[initial_errors]\nheading_deg = 20\n"),
                        ("assume_osc", '[oscillator]\npreset = "ocxo"\n')):
@@ -422,6 +428,18 @@ def make_workdir(d: Path, generated: Path) -> None:
         DEFAULT_SCENARIO.read_text().replace(
             '"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/')
         + '\n[oscillator]\npreset = "rubidium"\n')
+    default_abs = DEFAULT_SCENARIO.read_text().replace(
+        '"../ephemeris/', f'"{DEFAULT_SCENARIO.parent.parent}/ephemeris/')
+    for name, old, new in (("imu_grade", 'grade = "mems"', 'grade = "gimbal"'),
+                           ("imu_neg", "accel_bias_mg = 4.0", "accel_bias_mg = 4.0\n"
+                                                              "gyro_misalignment_mrad = -1.0"),
+                           ("atm_truth", "[receiver_clock]",
+                            '[atmosphere]\ntruth = "nequick"\n\n[receiver_clock]'),
+                           ("atm_neg", "[receiver_clock]",
+                            '[atmosphere]\ntruth = "residuals"\nzwd_sigma_m = -0.05\n\n'
+                            "[receiver_clock]")):
+        assert old in default_abs
+        (d / f"{name}.toml").write_text(default_abs.replace(old, new, 1))
     for name, table in (("jam_type", 'type = "pulse"\njs_db = 30.0\n'),
                         ("jam_bw", 'type = "noise"\njs_db = 30.0\nbandwidth_hz = -1.0e6\n'),
                         ("jam_js", 'type = "cw"\njs_db = 120.0\n'),

@@ -180,3 +180,31 @@ def test_check_consistency_script_table_means_over_seeds():
     assert rows[0].split("|")[4:9] == [" 50 ", " 2 ", " 1 ", " code 1 ", " rate 2 "]
     assert rows[1].split("|")[4:9] == [" 10 ", " 1 ", " 0 ", " code 3 ", " rate 3 "]
     assert "| loose | 30 | ekf | 50 | 0 | 0 | vel - | pos - |" in text
+
+
+@pytest.mark.parametrize(("n_runs", "dim"), [(1, 1), (8, 3), (24, 3), (50, 2), (200, 2)])
+def test_ensemble_band_is_the_chi_square_quantiles(n_runs, dim):
+    """ANEES band over N runs of dimension n (Bar-Shalom et al. 2001, 5.4.2):
+    chi2.ppf([0.025, 0.975], N n) / N, and per degree of freedom / (N n)."""
+    from scipy.stats import chi2
+
+    from sdr_di.integration.consistency import ensemble_band
+
+    ref = chi2.ppf([0.025, 0.975], n_runs * dim) / n_runs
+    assert ensemble_band(n_runs, dim, per_dof=False) == pytest.approx(ref, rel=1e-10)
+    assert ensemble_band(n_runs, dim) == pytest.approx(ref / dim, rel=1e-10)
+    ref99 = chi2.ppf([0.005, 0.995], n_runs * dim) / (n_runs * dim)
+    assert ensemble_band(n_runs, dim, 0.99) == pytest.approx(ref99, rel=1e-10)
+
+
+def test_ensemble_band_book_example_and_bad_input():
+    from sdr_di.integration.consistency import ensemble_band
+
+    # the book's example: 50 runs of a 2-state NEES give the 95 % region [1.5, 2.6]
+    lo, hi = ensemble_band(50, 2, per_dof=False)
+    assert (round(lo, 1), round(hi, 1)) == (1.5, 2.6)
+    for bad in ((0, 3), (5, 0), (2.5, 3), (True, 3)):
+        with pytest.raises(ValueError, match="positive integer"):
+            ensemble_band(*bad)
+    with pytest.raises(ValueError, match="level"):
+        ensemble_band(5, 3, 1.0)

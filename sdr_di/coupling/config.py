@@ -16,13 +16,20 @@ from ..errors import OptionsError
 from ..ins.imu import ImuErrorModel
 from ..oscillator import CLOCK_PRESETS, OscillatorSpec
 
-__all__ = ["MODES", "NCO_LATENCIES", "SCALAR_EPOCH_S", "IntegrationConfig",
-           "imu_samples_per_interval", "is_nco_latency"]
+__all__ = ["DEEP_MEASUREMENTS", "MODES", "NCO_LATENCIES", "RESET_FUSION_HZ", "SCALAR_EPOCH_S",
+           "IntegrationConfig", "imu_samples_per_interval", "is_nco_latency"]
 
 #: Coupling modes of :class:`IntegratedReceiver` (receiver notes).
 MODES = ("deep", "loose", "tight")
 #: Deep mode's NCO latencies [filter intervals] (:attr:`IntegrationConfig.nco_latency`).
 NCO_LATENCIES = (0, 1)
+#: Deep mode's measurement architectures (:attr:`IntegrationConfig.deep_measurements`,
+#: docs/deep.md, *Measurement architectures*): paper 004's cascaded pre-filters, pre-filters
+#: with an information reset every interval, and the discriminator outputs themselves.
+DEEP_MEASUREMENTS = ("prefilter", "reset", "discriminator")
+#: Default fusion rate of the ``reset`` architecture [Hz] (:attr:`IntegrationConfig.
+#: fusion_rate_hz`).
+RESET_FUSION_HZ = 5.0
 
 
 def is_nco_latency(v) -> bool:
@@ -114,6 +121,23 @@ class IntegrationConfig:
         update at the end of interval ``k`` steers interval ``k + 1``. 1: it steers
         ``k + 2``, as in a receiver whose correlators run on while the filter updates; the
         correlation of ``k + 1`` then overlaps the update of ``k`` on a second core.
+    deep_measurements : str
+        Deep mode: what each channel hands the integration filter (:data:`DEEP_MEASUREMENTS`;
+        docs/deep.md, *Measurement architectures*). ``"prefilter"`` (default): paper 004's
+        cascaded pre-filters (:class:`~sdr_di.deep.prefilter.PreFilterBank`);
+        ``"reset"``: the same pre-filters restarted from an uninformative prior every
+        interval, so each output holds only that interval's information
+        (:class:`~sdr_di.deep.prefilter.ResetPreFilterBank`); ``"discriminator"``: the
+        interval's code and frequency discriminator outputs, no pre-filter state
+        (:class:`~sdr_di.deep.discriminators.DiscriminatorBank`).
+    fusion_rate_hz : float or None
+        Deep mode, ``deep_measurements = "reset"``: rate [Hz] of the integration filter's
+        updates with the pre-filters' outputs, each followed by their information reset;
+        the filter rate divided by a whole number (the NCOs and the INS keep the filter
+        rate). None (default): 5 Hz for ``reset`` (:data:`RESET_FUSION_HZ`: Carlson's local
+        filters run faster than the fusion, and 200 ms of carrier phase per output make its
+        frequency 10 times more precise than 20 ms; docs/deep.md), every interval for the
+        other architectures (the only value they accept).
     """
 
     filter: str = "ekf"
@@ -149,6 +173,8 @@ class IntegrationConfig:
     mode: str = "deep"
     gnss_rate_hz: float = 5.0
     nco_latency: int = 0
+    deep_measurements: str = "prefilter"
+    fusion_rate_hz: float | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -180,9 +206,51 @@ class IntegrationConfig:
         if self.mode != "deep" and self.nco_latency:
             raise ValueError(f"nco_latency applies to deep mode only (the {self.mode} loop "
                              "commands no NCOs)")
+        if self.deep_measurements not in DEEP_MEASUREMENTS:
+            raise ValueError(f"deep_measurements must be one of {', '.join(DEEP_MEASUREMENTS)}, "
+                             f"got {self.deep_measurements!r}")
+        if self.mode != "deep" and self.deep_measurements != "prefilter":
+            raise ValueError(f"deep_measurements applies to deep mode only (the {self.mode} "
+                             "loop takes the scalar receiver's measurements)")
+        self._check_fusion_rate()
         if self.mode != "deep" and self.gnss_rate_hz > self.filter_rate_hz + 1e-9:
             raise ValueError(f"gnss_rate_hz {self.gnss_rate_hz:g} must not exceed the filter "
                              f"rate {self.filter_rate_hz:g} Hz")
+
+    def _check_fusion_rate(self) -> None:
+        v = self.fusion_rate_hz
+        if v is None:
+            if self.mode == "deep" and self.deep_measurements == "reset" and self.nco_latency:
+                raise ValueError("deep_measurements 'reset' with nco_latency 1: give "
+                                 "fusion_rate_hz equal to the filter rate (fusions less often "
+                                 "than every interval need nco_latency 0)")
+            return
+        if self.mode != "deep":
+            raise ValueError(f"fusion_rate_hz applies to deep mode only, not {self.mode}")
+        m = self.filter_rate_hz / v if isinstance(v, (int, float)) and not isinstance(
+            v, bool) and math.isfinite(v) and v > 0 else math.nan
+        if not (math.isfinite(m) and m >= 1.0 - 1e-9 and abs(m - round(m)) < 1e-9):
+            raise ValueError(f"fusion_rate_hz must be the filter rate "
+                             f"{self.filter_rate_hz:g} Hz divided by a whole number, got {v!r}")
+        if round(m) > 1 and self.deep_measurements != "reset":
+            raise ValueError(f"fusion_rate_hz below the filter rate needs deep_measurements "
+                             f"'reset' (the {self.deep_measurements} outputs are fused every "
+                             "interval)")
+        if round(m) > 1 and self.nco_latency:
+            raise ValueError("fusion_rate_hz below the filter rate needs nco_latency 0")
+
+    @property
+    def fusion_intervals(self) -> int:
+        """Filter intervals per fusion of the channels' measurements (deep mode;
+        :attr:`fusion_rate_hz`)."""
+        if self.mode != "deep":
+            return 1
+        v = self.fusion_rate_hz
+        if v is None:
+            if self.deep_measurements != "reset":
+                return 1
+            v = RESET_FUSION_HZ
+        return max(1, round(self.filter_rate_hz / v))
 
     @property
     def gnss_every(self) -> int:

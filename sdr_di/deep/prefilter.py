@@ -75,9 +75,17 @@ Interaction with the vector loop (:mod:`sdr_di.integration.receiver`):
   default-scenario file (2.5 MHz, ``ekf``, 13.8 s of vector loop): velocity RMSE
   0.0092 m/s with the carrier states kept, 0.036 m/s with the frequency reset too
   (attitude 0.036 vs 0.043 deg, position 0.45 m both); keeping the code covariance as well
-  made the filter overconfident (velocity 0.061 m/s, attitude 0.17 deg). The feedback shift
-  keeps the carried state the residual error, so the integration filter does not see an old
-  error twice.
+  made the filter overconfident (velocity 0.061 m/s, attitude 0.17 deg).
+
+What the cascade costs. The feedback shift moves the carried state and the truth together,
+so the carried state's *estimation error* stays in it, and :meth:`PreFilterBank.decorrelate`
+resets a variance, not the state: every output re-uses the pre-filter's prior, which the
+integration filter already absorbed from the previous output. The integration filter counts
+old information again, and consecutive outputs have correlated errors (rate lag-1
+autocorrelation +0.13 at 40 dB-Hz, +0.44 at 30; sums of 25 consecutive normalized rate errors
+0.27 and 0.51 per term where white errors give 1: ``scripts/check_prefilter.py``), which no
+white ``R`` describes. :class:`ResetPreFilterBank` (``deep_measurements = "reset"``) hands
+over only a window's information; docs/deep.md, *Measurement architectures*.
 """
 
 from __future__ import annotations
@@ -91,7 +99,8 @@ from ..constants import C_LIGHT, CHIP_RATE_B3I, F_B3I
 from ..ins.imu import ImuErrorModel
 from ._numba_prefilter import prefilter_epochs
 
-__all__ = ["PreFilterBank", "discriminator_variances", "model_process_noise"]
+__all__ = ["PreFilterBank", "ResetPreFilterBank", "coherent_blocks", "discriminator_variances",
+           "model_process_noise"]
 
 
 def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I
@@ -112,6 +121,25 @@ def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I
 
 #: Blocks up to which :func:`discriminator_variances` works on Python floats.
 _FEW_BLOCKS = 4
+
+
+def coherent_blocks(early, prompt, late, t_epoch: np.ndarray, block_start=None):
+    """Correlator sums and durations of the coherent blocks of one channel's epochs.
+
+    ``block_start`` (bool per epoch, or None: every epoch its own block) marks the epochs
+    that start a block; the first epoch always does. Returns ``(early, prompt, late, t)``
+    summed over each block (the inputs themselves when every epoch starts one).
+    """
+    t = t_epoch
+    if block_start is not None:
+        b = np.asarray(block_start, bool).copy()
+        b[0] = True
+        idx = b.nonzero()[0]
+        if idx.size < t.size:
+            early, prompt, late = (np.add.reduceat(np.asarray(a), idx)
+                                   for a in (early, prompt, late))
+            t = np.add.reduceat(t, idx)
+    return early, prompt, late, t
 
 
 def discriminator_variances(cn0_hz: float, t_epoch: np.ndarray, spacing: float
@@ -215,9 +243,14 @@ class PreFilterBank:
         self.x[i, 0] -= d_tau_chips
         self.x[i, 2] -= d_f_hz
 
-    def decorrelate(self, i: int, frequency: bool | None = None) -> None:
+    #: Whether :meth:`decorrelate` uses the integration filter's sigmas (``prior``).
+    takes_prior = False
+
+    def decorrelate(self, i: int, frequency: bool | None = None,
+                    prior: tuple[float, float] | None = None) -> None:
         """Reset the code (and, if ``frequency``, default ``reset_frequency``, the frequency)
-        variances and their cross terms to the priors."""
+        variances and their cross terms to the priors (``prior``, the integration filter's
+        sigmas, is not used: :class:`ResetPreFilterBank` takes it)."""
         P = self.P[i]
         freq = self.reset_frequency if frequency is None else bool(frequency)
         for k, on, sig in ((0, self.reset_code, self.sigma_tau0),
@@ -238,14 +271,7 @@ class PreFilterBank:
         t = np.ascontiguousarray(t_epoch, dtype=np.float64)
         if t.size == 0:
             return
-        if block_start is not None:
-            b = np.asarray(block_start, bool).copy()
-            b[0] = True
-            idx = b.nonzero()[0]
-            if idx.size < t.size:
-                early, prompt, late = (np.add.reduceat(np.asarray(a), idx)
-                                       for a in (early, prompt, late))
-                t = np.add.reduceat(t, idx)
+        early, prompt, late, t = coherent_blocks(early, prompt, late, t, block_start)
         r_tau, r_phi = discriminator_variances(cn0_hz, t, self.spacing)
         # the channel's rows of x, P, C are contiguous views: updated in place
         nis = prefilter_epochs(self.x[i], self.P[i], np.ascontiguousarray(early, np.complex128),
@@ -253,11 +279,183 @@ class PreFilterBank:
                                np.ascontiguousarray(late, np.complex128), t, self.spacing,
                                self.beta, r_tau, r_phi, self.q_tau, self.q_phi, self.s_f,
                                self.C[i], 0.0, self.q_phi_model, self.s_f_model)
-        self.nis[i] = nis / (2.0 * t.size)
-        self.nis_p[i] = float(gammaincc(t.size, 0.5 * nis))  # chi-square sf, 2 per block
+        self._set_nis(i, nis, t.size)
+
+    def _set_nis(self, i: int, nis: float, blocks: int) -> None:
+        """NIS per measurement and its chi-square tail probability (2 per block)."""
+        self.nis[i] = nis / (2.0 * blocks)
+        self.nis_p[i] = float(gammaincc(blocks, 0.5 * nis))  # chi-square sf, 2 per block
+
+    def set_frequency(self, i: int, df_hz: float) -> None:
+        """Channel ``i``'s frequency error estimate [Hz] (the loop's first interval: the
+        scalar loop's Doppler minus the INS prediction)."""
+        self.x[i, 2] = df_hz
 
     def outputs(self, i: int) -> tuple[float, float, float, float]:
         """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])`` of channel ``i``: the
         estimates and their error variances under the noise model (``C``, module notes)."""
         return (float(self.x[i, 0]), float(self.x[i, 2]), float(self.C[i, 0, 0]),
                 float(self.C[i, 2, 2]))
+
+
+class ResetPreFilterBank(PreFilterBank):
+    """Pre-filters with an information reset after every fusion (``deep_measurements =
+    "reset"``; docs/deep.md, *Measurement architectures*; Carlson 1990's federated filter,
+    whose local filters' information is zeroed after each fusion).
+
+    The same 3-state filter and measurement model as :class:`PreFilterBank`. After every
+    fusion (an update of the integration filter with these outputs, every
+    ``fusion_intervals`` filter intervals: ``IntegrationConfig.fusion_rate_hz``, default
+    5 Hz for this architecture, as Carlson's local filters run faster than the master's
+    fusion) each filter restarts from a prior ``(x0, P0)``: its state moved by the feedback
+    (the NCOs steered by the integration filter), with the integration filter's own
+    uncertainty of the channel's range and rate as code and frequency sigmas (the ``prior``
+    of :meth:`decorrelate`; without one, the wide ``sigma_*_reset``) and an uninformative
+    phase. The prior keeps the window's first phase innovations inside the arctangent's
+    +-pi/2 (a 200 ms window at 30 dB-Hz slipped half cycles from a wide prior), and is then
+    taken out again: the output is the window's **equivalent measurement** (its information
+    increment), with the prior propagated over the window by the same model
+    (``x_bar = F x0``, ``P_bar = F P0 F^T + Q``)::
+
+        Y = C^-1 - P_bar^-1,   R_eq = Y^-1,   z_eq = R_eq (C^-1 x - P_bar^-1 x_bar)
+
+    of which the code and frequency entries and variances are handed on. For a linear
+    model ``z_eq`` is the weighted least-squares estimate from the window's blocks alone, so
+    the errors of consecutive outputs are independent: the integration filter, which
+    absorbed the previous output, does not count it again, and the prior's information
+    (which came from the integration filter) is not returned to it. The phase is never
+    carried from one window to the next: a carried phase would make consecutive frequency
+    outputs share the phase noise of the blocks between them (a lag-1 correlation of about
+    -0.5).
+
+    Between fusions the bank keeps filtering the intervals' blocks, so a 200 ms window's
+    frequency comes from 200 ms of carrier phase. With a fusion every interval the
+    frequency comes from the phases of at least two blocks of it (the vector loop then cuts
+    blocks of at most half an interval, :func:`~sdr_di.deep.architectures.block_ms`). The
+    design noise is the noise model's (``s_f = s_f_model``, ``q_tau = q_phi = 0``; the
+    model's phase noise, zero by default, enters ``C`` and ``P_bar`` only), so ``P`` and
+    ``C`` agree.
+
+    Parameters
+    ----------
+    n, spacing, carrier_hz
+        As :class:`PreFilterBank`.
+    sigma_tau_reset, sigma_phi_reset, sigma_f_reset : float
+        Prior standard deviations when no prior is given: code [chips] (default 1),
+        frequency [Hz] (default 100); the phase's [rad] always (default 100).
+    s_f_model, q_phi_model : float or None
+        The noise model (:class:`PreFilterBank`).
+
+    Attributes
+    ----------
+    x_bar, P_bar : ndarray (n, 3), (n, 3, 3)
+        The window's prior propagated to the last block's end.
+    takes_prior : bool
+        True: :meth:`decorrelate` uses the integration filter's sigmas (``prior``).
+    """
+
+    takes_prior = True
+
+    def __init__(self, n: int, spacing: float = 0.5, carrier_hz: float = F_B3I, *,
+                 sigma_tau_reset: float = 1.0, sigma_phi_reset: float = 100.0,
+                 sigma_f_reset: float = 100.0, s_f_model: float | None = None,
+                 q_phi_model: float | None = None):
+        self.sigma_reset = (float(sigma_tau_reset), float(sigma_phi_reset),
+                            float(sigma_f_reset))
+        self.unfitted = np.full(int(n), 3, np.int64)   # prior-free states not yet fitted
+        self.x_bar = np.zeros((int(n), 3))
+        self.P_bar = np.zeros((int(n), 3, 3))
+        super().__init__(n, spacing, carrier_hz, s_f_model=s_f_model, q_phi_model=q_phi_model,
+                         sigma_tau0=self.sigma_reset[0], sigma_f0=self.sigma_reset[2],
+                         q_tau=0.0)
+        self.s_f = self.s_f_model
+        self.q_phi = 0.0
+
+    def reset(self, i: int, dtau: float = 0.0, dphi: float = 0.0, df: float = 0.0,
+              sigma_tau: float | None = None, sigma_phi: float = 1.0,
+              sigma_f: float | None = None) -> None:
+        """Restart channel ``i`` at ``(dtau, dphi, df)`` with code and frequency sigmas
+        ``sigma_tau``, ``sigma_f`` (default the wide ``sigma_*_reset``) and an
+        uninformative phase (``sigma_phi`` is not used); the output is again only what the
+        blocks from here on add (class notes)."""
+        self.x[i] = (dtau, dphi, df)
+        self._restart(i, sigma_tau, sigma_f)
+
+    def decorrelate(self, i: int, frequency: bool | None = None,
+                    prior: tuple[float, float] | None = None) -> None:
+        """Information reset after a fusion: the state kept (it is the error relative to
+        the NCOs the integration filter steers), the prior ``(sigma_tau [chips], sigma_f
+        [Hz])`` (the integration filter's uncertainty of the channel's range and rate;
+        None: the wide ``sigma_*_reset``) and an uninformative phase."""
+        self._restart(i, *(prior if prior is not None else (None, None)))
+
+    def _restart(self, i: int, sigma_tau: float | None, sigma_f: float | None) -> None:
+        st = self.sigma_reset[0] if sigma_tau is None else float(sigma_tau)
+        sf = self.sigma_reset[2] if sigma_f is None else float(sigma_f)
+        sp = self.sigma_reset[1]
+        self.P[i] = np.diag([st * st, sp * sp, sf * sf])
+        self.C[i] = self.P[i]
+        self.x_bar[i] = self.x[i]
+        self.P_bar[i] = self.P[i]
+        # the states that have no prior information (fitted from the first blocks): the
+        # phase, and code and frequency when no prior was given
+        self.unfitted[i] = 1 + (sigma_tau is None) + (sigma_f is None)
+
+    def shift(self, i: int, d_tau_chips: float, d_f_hz: float) -> None:
+        """The NCOs moved: the state and the window's prior move with them."""
+        super().shift(i, d_tau_chips, d_f_hz)
+        self.x_bar[i, 0] -= d_tau_chips
+        self.x_bar[i, 2] -= d_f_hz
+
+    def process(self, i: int, early, prompt, late, t_epoch, cn0_hz: float,
+                block_start=None) -> None:
+        """:meth:`PreFilterBank.process`, and the window's prior propagated over the same
+        blocks with the noise model (``P_bar <- F P_bar F^T + diag(0, q_phi_m T,
+        s_f_m T)``, as ``C``)."""
+        t = np.ascontiguousarray(t_epoch, dtype=np.float64)
+        if t.size == 0:
+            return
+        super().process(i, early, prompt, late, t, cn0_hz, block_start)
+        if block_start is not None:
+            b = np.asarray(block_start, bool).copy()
+            b[0] = True
+            t = np.add.reduceat(t, b.nonzero()[0])
+        xb, Pb = self.x_bar[i], self.P_bar[i]
+        for T in t.tolist():
+            F = np.array([[1.0, 0.0, self.beta * T], [0.0, 1.0, 2.0 * math.pi * T],
+                          [0.0, 0.0, 1.0]])
+            xb[:] = F @ xb
+            Pb[:] = F @ Pb @ F.T
+            Pb[1, 1] += self.q_phi_model * T
+            Pb[2, 2] += self.s_f_model * T
+
+    def outputs(self, i: int) -> tuple[float, float, float, float]:
+        """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])``: the window's
+        equivalent measurement (class notes); the wide prior's variances when the window
+        holds no information."""
+        try:
+            Y_post = np.linalg.inv(self.C[i])
+            Y_prior = np.linalg.inv(self.P_bar[i])
+            Y = Y_post - Y_prior
+            R_eq = np.linalg.inv(Y)
+        except np.linalg.LinAlgError:
+            R_eq = None
+        if R_eq is None or not (R_eq[0, 0] > 0.0 and R_eq[2, 2] > 0.0):
+            return (float(self.x[i, 0]), float(self.x[i, 2]), self.sigma_reset[0] ** 2,
+                    self.sigma_reset[2] ** 2)
+        z = R_eq @ (Y_post @ self.x[i] - Y_prior @ self.x_bar[i])
+        return float(z[0]), float(z[2]), float(R_eq[0, 0]), float(R_eq[2, 2])
+
+    def _set_nis(self, i: int, nis: float, blocks: int) -> None:
+        """NIS per degree of freedom: ``2 m`` for ``m`` blocks less the states fitted
+        without prior information on the first blocks after a restart; no test without a
+        degree of freedom."""
+        fitted = min(int(self.unfitted[i]), 2 * blocks)
+        self.unfitted[i] -= fitted
+        dof = 2 * blocks - fitted
+        if dof <= 0:
+            self.nis[i] = math.nan
+            self.nis_p[i] = 1.0
+            return
+        self.nis[i] = nis / dof
+        self.nis_p[i] = float(gammaincc(0.5 * dof, 0.5 * nis))

@@ -50,7 +50,7 @@ from ._numba_epoch_rows import epoch_rows
 from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
-from .prefilter import PreFilterBank, model_process_noise
+from .architectures import block_ms, make_measurement_bank
 
 __all__ = ["SampleClock", "VectorChannel", "VectorTracking"]
 
@@ -58,6 +58,7 @@ _FAST_MS = 60        # bit sums of the fast test (interval left out) [ms]
 _LOSS_MS = 120       # bit sums of the loss test [ms]
 _CN0_MIN_MS = 40     # bit sums before the loop's own C/N0 replaces the scalar loop's [ms]
 _SIGMA_F_MIN = 0.5   # floor of a restarted pre-filter's frequency sigma [Hz]
+_SIGMA_TAU_MIN = 0.01  # floor of a reset pre-filter's code prior sigma [chips] (0.3 m)
 
 
 @dataclasses.dataclass
@@ -175,10 +176,16 @@ class VectorTracking:
         self.iono = navdata.klobuchar
         self.ephs = [c.eph for c in chans]
         self.nav_log = _NavLog(navdata, chans, self.iono, *handover)
-        s_f_model, q_phi_model = model_process_noise(cfg.imu, source.carrier_hz)
-        self.pre = PreFilterBank(self.n_channels, spacing_chips, source.carrier_hz,
-                                 **{"s_f_model": s_f_model, "q_phi_model": q_phi_model,
-                                    **cfg.prefilter})
+        self.pre = make_measurement_bank(cfg.deep_measurements, self.n_channels,
+                                         spacing_chips, source.carrier_hz, cfg.imu,
+                                         cfg.prefilter)
+        # fusions: every fusion_every-th interval's outputs go to the filter (then the
+        # pre-filters are decorrelated or, "reset", restarted); fusing: this interval's
+        self.fusion_every = cfg.fusion_intervals
+        self.block_ms = block_ms(cfg.deep_measurements, cfg.coherent_ms, cfg.filter_rate_hz,
+                                 self.fusion_every)
+        self.n_measured = 0
+        self.fusing = True
         self.bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
                                           for c in chans]))
         self.chan_idx = np.arange(self.n_channels, dtype=np.int64)
@@ -235,6 +242,8 @@ class VectorTracking:
         rows = self.command_ncos(iv)
         if not self.load_samples(rows):
             return None
+        self.n_measured += 1
+        self.fusing = self.n_measured % self.fusion_every == 0
         pf = _ChannelPass(self, iv, rows, self._pred)
 
         def before(epochs_done: int, epl: np.ndarray) -> None:
@@ -301,7 +310,7 @@ class VectorTracking:
         if self._first:
             for c in self.chans:
                 # initial frequency error: scalar loop Doppler minus the INS prediction
-                self.pre.x[c.idx, 2] = c.f_scalar - float(cmd.doppler_hz[c.idx])
+                self.pre.set_frequency(c.idx, c.f_scalar - float(cmd.doppler_hz[c.idx]))
             self._first = False
         dp1 = (self.source.if_hz + cmd.doppler_hz) / fs
         if self.dp_prev is None:
@@ -415,7 +424,7 @@ class VectorTracking:
             self._test_channel(c, P, nsamp, epochs, iv.k1 / fs)
             cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
             self.pre.process(c.idx, E, P, L, nsamp / fs, cn0_lin,
-                             block_start=epochs % min(c.bit_ms, self.cfg.coherent_ms) == 0)
+                             block_start=epochs % min(c.bit_ms, self.block_ms) == 0)
         if self._shift_end is not None:
             # NCOs one interval ahead: the step of the feedback made during the interval
             self._shift_prefilters(*self._shift_end, (c.idx,))
@@ -501,14 +510,22 @@ class VectorTracking:
         n_ch, pre, cfg = self.n_channels, self.pre, self.cfg
         Hr = self.meas_all.matrix[n_ch:]
         sig_f = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hr, loop.kf.P, Hr), 0.0)) / LAMBDA_B3I
+        sig_tau = None
+        if pre.takes_prior and self.fusing:
+            # information reset: the filter's range and rate sigmas as the window's prior
+            Hc = self.meas_all.matrix[:n_ch]
+            sig_tau = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", Hc, loop.kf.P, Hc),
+                                         0.0)) * CHIP_RATE_B3I / C_LIGHT
         for c in self.chans:
             i = c.idx
             if c.fast_fail >= 2 or pre.nis_p[i] < cfg.nis_p_min:
                 # lost, or inconsistent: restart from the NCO (INS) with the integration
                 # filter's rate uncertainty as the frequency prior
                 pre.reset(i, sigma_phi=1.0, sigma_f=max(float(sig_f[i]), _SIGMA_F_MIN))
-            else:
-                pre.decorrelate(i)
+            elif self.fusing:
+                pre.decorrelate(i) if sig_tau is None else pre.decorrelate(
+                    i, prior=(max(float(sig_tau[i]), _SIGMA_TAU_MIN),
+                              max(float(sig_f[i]), _SIGMA_F_MIN)))
 
     def geometry_of(self, iv: Interval) -> None:
         """Lines of sight of launched interval ``iv`` for :meth:`restart_prefilters`."""
@@ -606,7 +623,7 @@ class _ChannelPass:
                                     rows.epoch[a0 + s:a0 + s + cnt],
                                     noise[sl] if every else noise[sl][ok[sl]])
                 self.use.append(good)
-                if good:
+                if good and vt.fusing:
                     dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)
                     self.z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
                     self.z_rate.append(LAMBDA_B3I * df)
@@ -620,7 +637,7 @@ class _ChannelPass:
         """``z``, ``R`` and the geometry of the channels in the vector (all channels run)."""
         use = np.asarray(self.use, bool)
         z = R = None
-        if use.any():
+        if self.z_rho:
             z = np.array(self.z_rho + self.z_rate)      # (lists: cheaper than np.r_)
             R = np.diag(np.array(self.r_rho + self.r_rate))
         return Measurements(z=z, R=R, geometry=(self.iv.nav1.llh, self.pred.U[use, 0]),

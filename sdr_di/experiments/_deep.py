@@ -419,6 +419,11 @@ class DeepRun:
     acq_after_handover: int
 
 
+#: The experiments' parameters that only deep variants take (:func:`run_deep_variant`
+#: leaves them out of loose and tight ones).
+DEEP_ONLY = ("nco_latency", "deep_measurements", "fusion_rate_hz")
+
+
 def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
                      assume: dict | None = None, **config: Any) -> DeepRun:
     """Run :class:`~sdr_di.integration.receiver.IntegratedReceiver` with ``filter_name`` in
@@ -429,9 +434,10 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     the call also works with a receiver that predates the modes. ``assume`` is the filter's
     assumptions (an experiment's ``assume`` dict, :func:`parse_assume`), applied to the
     configuration as ``--assume`` is. ``config`` are further
-    :class:`~sdr_di.integration.receiver.IntegrationConfig` fields; ``nco_latency`` goes to
-    deep variants only (loose and tight have no NCOs to command), so one experiment can
-    set it for its deep variants beside loose or tight ones.
+    :class:`~sdr_di.integration.receiver.IntegrationConfig` fields; ``nco_latency``,
+    ``deep_measurements`` and ``fusion_rate_hz`` (:data:`DEEP_ONLY`) go to deep
+    variants only (loose and tight have no NCOs to command), so one experiment can set them
+    for its deep variants beside loose or tight ones.
 
     Deep mode runs the scalar start-up once per ``inputs`` and hand-over rule: the first
     run keeps its state at the hand-over (``inputs.starts``) and the next ones continue
@@ -453,7 +459,8 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
 
     if mode != "deep":
         config["mode"] = mode
-        config.pop("nco_latency", None)
+        for key in DEEP_ONLY:
+            config.pop(key, None)
     scalar = CountingScalarReceiver(log=False)
     try:
         cfg = build_integration_config(filter_name, assume=parse_assume(assume), **config)

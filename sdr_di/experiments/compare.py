@@ -34,7 +34,7 @@ from ._deep import (
 )
 from .plotting import rmse_bar_plot
 from .variants import (
-    check_nco_latency,
+    check_deep_options,
     loop_config,
     plot_error_norms,
     run_variants,
@@ -58,6 +58,8 @@ default_params: dict = {
     "cn0_dbhz": None,
     "filter_rate_hz": 50.0,
     "nco_latency": None,
+    "deep_measurements": None,
+    "fusion_rate_hz": None,
     "output_rate_hz": 10.0,
     "gnss_rate_hz": None,
     "handover_wait_s": None,
@@ -69,7 +71,7 @@ default_params: dict = {
 
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
-    check_nco_latency(NAME, params)
+    check_deep_options(NAME, params)
     variant_list(NAME, params["filters"], params["modes"])
     for key in ("duration_s", "filter_rate_hz", "output_rate_hz"):
         check_number(NAME, params, key)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from ..coupling.config import DEEP_MEASUREMENTS
 from ..errors import ExperimentError, SdrDiError
 from ..filters.registry import FILTER_NAMES
 from ..filters.spec import canonical_entry, parse_filter_spec
@@ -68,9 +69,13 @@ def mode_list(exp: str, text: str, allowed: Sequence[str] = MODES) -> list[str]:
 
 
 def split_entry(exp: str, entry: str, mode: str = "deep") -> tuple[str, str]:
-    """``"ekf@tight"`` -> ``("ekf", "tight")``; an entry without ``@`` takes ``mode``."""
+    """``"ekf@tight"`` -> ``("ekf", "tight")``; an entry without ``@`` takes ``mode``. After
+    the ``@`` may also stand a deep measurement architecture (``"ekf@reset"``: deep mode with
+    ``deep_measurements = "reset"``, :attr:`~sdr_di.experiments.variants.Variant.
+    architecture`), so that a study pairs architectures on the same files as it pairs
+    couplings."""
     spec, at, m = canonical_entry(entry).partition("@")
     if at:
-        mode_list(exp, m)
+        mode_list(exp, m, MODES + DEEP_MEASUREMENTS)
         return spec, m
     return spec, mode

@@ -67,7 +67,7 @@ from ._deep import (
     run_deep_variant,
 )
 from .entries import check_filter_entry, filter_list
-from .variants import check_nco_latency, loop_config, mode_list
+from .variants import check_deep_options, loop_config, mode_list
 from .weak_signal import MODES, scalar_run
 
 __all__ = ["DESCRIPTION", "MODES", "NAME", "check_params", "default_params", "js_at",
@@ -97,6 +97,8 @@ default_params: dict = {
     "deep_cn0_min_dbhz": None,
     "filter_rate_hz": 50.0,
     "nco_latency": None,
+    "deep_measurements": None,
+    "fusion_rate_hz": None,
     "plots": True,
 }
 
@@ -112,7 +114,7 @@ def _modes(text: str) -> list[str]:
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError` (one line
     naming the parameter)."""
-    check_nco_latency(NAME, params)
+    check_deep_options(NAME, params)
     _modes(params["modes"])
     filter_list(NAME, params["filter"])
     if isinstance(params["bits"], bool) or params["bits"] not in _FORMATS:

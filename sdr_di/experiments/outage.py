@@ -73,7 +73,7 @@ from ._deep import (
 from .filter_figures import QUANTITIES, STATS
 from .plotting import rmse_bar_plot
 from .variants import (
-    check_nco_latency,
+    check_deep_options,
     loop_config,
     plot_error_norms,
     run_variants,
@@ -101,6 +101,8 @@ default_params: dict = {
     "cn0_dbhz": None,
     "filter_rate_hz": 50.0,
     "nco_latency": None,
+    "deep_measurements": None,
+    "fusion_rate_hz": None,
     "output_rate_hz": 50.0,
     "plots": True,
 }
@@ -108,7 +110,7 @@ default_params: dict = {
 
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
-    check_nco_latency(NAME, params)
+    check_deep_options(NAME, params)
     variant_list(NAME, params["filters"], params["modes"])
     d = parse_list(f"{NAME}: outages", params["outages"], float)
     if min(d) <= 0:

@@ -14,7 +14,8 @@ A variant's label prefixes its figures (``"<label>.pos_m_rmse"``) and names its 
 (``errors_<label>.csv``): the filter entry as given (``ff-aukf``,
 ``ff-aukf:q_states=nominal``), followed by ``@loose`` or ``@tight`` for those couplings.
 Deep, the system's own coupling, has no suffix, so the figures of the deep-only experiments
-keep their names. ``loose`` here is the receiver's own WLS fixes fed to the filter
+keep their names; a deep variant with its own measurement architecture has it as the suffix
+(``ekf@reset``, ``ekf@discriminator``). ``loose`` here is the receiver's own WLS fixes fed to the filter
 (``sdr-di run --mode loose``), never ``sdr-di lc`` (simulated position/velocity, the
 ``noise-mismatch`` experiment).
 """
@@ -30,9 +31,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import ExperimentError
+from ..coupling.config import DEEP_MEASUREMENTS
 from ..filters.spec import canonical_entry
 from . import plotting
-from ._deep import Inputs, record_run, run_deep_variant, segment_metrics
+from ._deep import DEEP_ONLY, Inputs, record_run, run_deep_variant, segment_metrics
 from .entries import MODES, check_filter_entry, filter_list, mode_list, split_entry
 from .filter_figures import QUANTITIES, STATS, filter_names_in
 
@@ -58,7 +60,8 @@ class Variant:
     options : dict
         Filter options (:func:`~sdr_di.filters.make_filter` keyword arguments).
     mode : str
-        ``"loose"``, ``"tight"`` or ``"deep"``.
+        ``"loose"``, ``"tight"`` or ``"deep"``, or a deep measurement architecture
+        (``"prefilter"``, ``"reset"``, ``"discriminator"``: deep mode with it).
     """
 
     spec: str
@@ -70,6 +73,16 @@ class Variant:
     def label(self) -> str:
         """Figure prefix and file-name stem (module notes)."""
         return variant_label(self.spec, self.mode)
+
+    @property
+    def coupling(self) -> str:
+        """The coupling mode (``IntegrationConfig.mode``)."""
+        return "deep" if self.mode in DEEP_MEASUREMENTS else self.mode
+
+    @property
+    def architecture(self) -> str | None:
+        """The deep measurement architecture the entry names (None: the cell's)."""
+        return self.mode if self.mode in DEEP_MEASUREMENTS else None
 
 
 def entry_label(entry: str, mode: str = "deep") -> str:
@@ -107,9 +120,9 @@ def loop_config(params: dict, **fixed: Any) -> dict:
     ``filter_rate_hz``, ``output_rate_hz``, ``gnss_rate_hz`` (loose/tight fix or observable
     rate), ``handover_wait_s`` (the hand-over rule's wait after the first fix, before 4
     channels with time and ephemeris suffice), ``deep_cn0_min_dbhz`` (the loop's channel
-    gate, as ``cn0_min_dbhz``) and ``nco_latency`` (deep variants only:
-    :func:`~._deep.run_deep_variant`) are taken when present and not ``None``; ``fixed``
-    wins over them.
+    gate, as ``cn0_min_dbhz``), ``nco_latency``, ``deep_measurements`` and
+    ``fusion_rate_hz`` (deep variants only: :func:`~._deep.run_deep_variant`) are taken
+    when present and not ``None``; ``fixed`` wins over them.
     """
     cfg: dict = {}
     for key in ("filter_rate_hz", "output_rate_hz", "gnss_rate_hz", "handover_wait_s"):
@@ -119,18 +132,35 @@ def loop_config(params: dict, **fixed: Any) -> dict:
         cfg["cn0_min_dbhz"] = float(params["deep_cn0_min_dbhz"])
     if params.get("nco_latency") is not None:
         cfg["nco_latency"] = int(params["nco_latency"])
+    if params.get("deep_measurements") is not None:
+        cfg["deep_measurements"] = str(params["deep_measurements"])
+    if params.get("fusion_rate_hz") is not None:
+        cfg["fusion_rate_hz"] = float(params["fusion_rate_hz"])
     cfg.update(fixed)
     return cfg
 
 
-def check_nco_latency(exp: str, params: dict) -> None:
-    """Reject an ``nco_latency`` other than ``None`` (the receiver's default), 0 or 1."""
-    from ..coupling.config import is_nco_latency
+def check_deep_options(exp: str, params: dict) -> None:
+    """Reject deep-mode settings the receiver would refuse: an ``nco_latency`` other than
+    ``None`` (the receiver's default), 0 or 1; a ``deep_measurements`` that is not an
+    architecture (:data:`~sdr_di.coupling.config.DEEP_MEASUREMENTS`); a
+    ``fusion_rate_hz`` that does not fit them (:class:`~sdr_di.coupling.config.
+    IntegrationConfig`)."""
+    from ..coupling.config import DEEP_MEASUREMENTS, IntegrationConfig, is_nco_latency
 
     v = params.get("nco_latency")
     if v is not None and not is_nco_latency(v):
         raise ExperimentError(f"{exp}: nco_latency={v!r}: expected 0 or 1 (filter intervals "
                               "between an update and the NCO commands it first steers)")
+    a = params.get("deep_measurements")
+    if a is not None and a not in DEEP_MEASUREMENTS:
+        raise ExperimentError(f"{exp}: deep_measurements={a!r}: expected one of "
+                              f"{', '.join(DEEP_MEASUREMENTS)}")
+    try:
+        IntegrationConfig(**{k: params[k] for k in DEEP_ONLY + ("filter_rate_hz",)
+                             if params.get(k) is not None})
+    except (ValueError, TypeError) as exc:
+        raise ExperimentError(f"{exp}: {exc}") from None
 
 
 def nan_figures(label: str, infix: str = "") -> dict:
@@ -205,8 +235,9 @@ def run_variants(inputs: Inputs, variants: Sequence[Variant], cfg: dict, fig: di
     """
     series: dict = {}
     for v in variants:
-        dr = run_deep_variant(inputs, v.filter, mode=v.mode, filter_options=dict(v.options),
-                              **cfg)
+        arch = {} if v.architecture is None else {"deep_measurements": v.architecture}
+        dr = run_deep_variant(inputs, v.filter, mode=v.coupling,
+                              filter_options=dict(v.options), **{**cfg, **arch})
         res = record_run(fig, v.label, dr)
         if res is None:
             fig.update(nan_figures(v.label))

@@ -63,7 +63,7 @@ from ._deep import (
 )
 from .entries import check_filter_entry, filter_list
 from .variants import MODES as LOOP_MODES
-from .variants import check_nco_latency, loop_config, mode_list
+from .variants import check_deep_options, loop_config, mode_list
 
 __all__ = [
     "DESCRIPTION",
@@ -104,6 +104,8 @@ default_params: dict = {
     "deep_cn0_min_dbhz": None,
     "filter_rate_hz": 50.0,
     "nco_latency": None,
+    "deep_measurements": None,
+    "fusion_rate_hz": None,
     "plots": True,
 }
 
@@ -124,7 +126,7 @@ def _modes(text: str) -> list[str]:
 
 def check_params(params: dict) -> None:
     """Reject bad parameter values with :class:`~sdr_di.errors.ExperimentError`."""
-    check_nco_latency(NAME, params)
+    check_deep_options(NAME, params)
     _modes(params["modes"])
     filter_list(NAME, params["filter"])
     for key in ("cn0_start", "cn0_stop", "step_db", "t_step_s", "hold_s", "pos_limit_m",

@@ -5,7 +5,8 @@ An assumptions file has up to five tables, each optional; what is absent keeps t
 consumer's own default (``IntegrationConfig`` for ``run``, ``[lc]``/``LcSettings`` for ``lc``)::
 
     [imu]                  # filter Q and P0 of the IMU states
-    grade = "mems"         # preset of the scenario's IMU_GRADES; the terms below override
+    grade = "mems"         # a grade of sdr_di.ins.grades (its 1-sigma values); the terms
+                           # below override
     accel_bias_mg, gyro_bias_deg_h, accel_random_walk_mps_sqrth, gyro_random_walk_deg_sqrth
     bias_time_s = 3600     # time for the bias random walk to reach the spec
 
@@ -60,7 +61,7 @@ import numpy as np
 from ..errors import AssumptionsError
 from ..ins.imu import ImuErrorModel
 from ..oscillator import OscillatorSpec, oscillator_from_table
-from ..scenario.schema import IMU_GRADES
+from ..ins.grades import IMU_GRADES
 
 __all__ = [
     "ASSUME_TABLES",
@@ -93,6 +94,11 @@ _WHY_REFUSED = {
                              "factor assumption changes nothing",
     "g_sensitivity_per_g": "the filter has no g-sensitivity state (truth only: the scenario's "
                            "[oscillator])",
+    **{key: "the 17-state filter has no state for it (truth only: the scenario's [imu]; "
+            "the filter takes the grade's turn-on biases and random walks)"
+       for key in ("accel_bias_instability_mg", "gyro_bias_instability_deg_h",
+                   "accel_bias_tau_s", "gyro_bias_tau_s", "accel_misalignment_mrad",
+                   "gyro_misalignment_mrad", "gyro_g_sensitivity_deg_h_per_g")},
 }
 
 
@@ -197,15 +203,12 @@ def parse_assumptions(raw: Mapping[str, Any], source: str = "assumptions") -> As
         if grade not in IMU_GRADES:
             raise AssumptionsError(f"{w}.grade: unknown IMU grade {grade!r}; valid: "
                                    f"{', '.join(IMU_GRADES)}")
-        g = IMU_GRADES[grade]
-        vals = {"accel_bias_mg": g[2], "gyro_bias_deg_h": g[3],
-                "accel_random_walk_mps_sqrth": g[4], "gyro_random_walk_deg_sqrth": g[5]}
-        for key in vals:
-            if key in t:
-                vals[key] = _num(t[key], f"{w}.{key}")
-        kw["imu"] = ImuErrorModel(g[0], g[1], vals["accel_bias_mg"], vals["gyro_bias_deg_h"],
-                                  vals["accel_random_walk_mps_sqrth"],
-                                  vals["gyro_random_walk_deg_sqrth"])
+        # the grade's 1-sigma values (ImuErrorModel fields) with the file's terms over them
+        fields = {"accel_bias_mg": "accel_bias_mg", "gyro_bias_deg_h": "gyro_bias_deg_h",
+                  "accel_random_walk_mps_sqrth": "accel_random_walk",
+                  "gyro_random_walk_deg_sqrth": "gyro_random_walk"}
+        vals = {field: _num(t[key], f"{w}.{key}") for key, field in fields.items() if key in t}
+        kw["imu"] = dataclasses.replace(IMU_GRADES[grade], **vals)
         if "bias_time_s" in t:
             kw["bias_time_s"] = _num(t["bias_time_s"], f"{w}.bias_time_s", open_=True)
     if "oscillator" in raw:
@@ -435,7 +438,7 @@ def truth_record(scenario) -> dict:
     IMU spec, receiver clock and oscillator (never the ``[assume]`` table)."""
     osc = scenario.oscillator
     return {"scenario": scenario.name, "hash": scenario.hash, "seed": scenario.seed,
-            "imu": dataclasses.asdict(scenario.imu),
+            "imu": scenario.imu.as_dict(),
             "receiver_clock": dataclasses.asdict(scenario.clock),
             "oscillator": None if osc is None else osc.as_dict()}
 
@@ -450,7 +453,7 @@ def deep_beliefs(cfg) -> dict:
     osc = CLOCK_PRESETS[cfg.clock] if isinstance(cfg.clock, str) else cfg.clock
     cm = ClockModel.from_oscillator(osc)
     return {
-        "imu": dataclasses.asdict(cfg.imu), "bias_time_s": cfg.bias_time_s,
+        "imu": cfg.imu.as_dict(), "bias_time_s": cfg.bias_time_s,
         "oscillator": {**osc.as_dict(), "filter_h0": cm.h0, "filter_h_2": cm.h_2},
         "measurement_noise": {"policy": cfg.noise_policy, "sigma_range_m": cfg.sigma_range_m,
                               "sigma_rate_mps": cfg.sigma_rate_mps},

@@ -42,7 +42,8 @@ from ..frames import radii_of_curvature
 from .metrics import time_window
 
 __all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "block_nis",
-           "chi2_band", "consistency_summary", "effective_count", "enu_blocks", "flat",
+           "chi2_band", "consistency_summary", "effective_count", "ensemble_band",
+           "enu_blocks", "flat",
            "formal_sd", "nees_per_dof"]
 
 #: NIS block names of each mode, in the order of ``z`` (two equal halves).
@@ -156,6 +157,51 @@ def chi2_band(n_eff: float, dof: int, level: float = 0.95) -> list[float]:
     # chdtri(k, p): the chi-square quantile of upper tail p (scipy.special, so that the run
     # modules do not import scipy.stats at start-up: test_coupling)
     return [float(chdtri(k, 1.0 - a) / k), float(chdtri(k, a) / k)]
+
+
+def ensemble_band(n_runs: int, dim: int, level: float = 0.95, *,
+                  per_dof: bool = True) -> list[float]:
+    """Two-sided chi-square band of an ensemble average over ``n_runs`` Monte Carlo runs
+    (ANEES, ANIS; Bar-Shalom, Li and Kirubarajan 2001, section 5.4.2).
+
+    For a consistent filter each run's NEES of dimension ``n`` is chi-square with ``n``
+    degrees of freedom, so ``N * ANEES`` is chi-square with ``N n``: the band of ANEES is
+    ``chi2.ppf([a, 1 - a], N n) / N`` with ``a = (1 - level) / 2``. This project's NEES and
+    NIS are per degree of freedom (:func:`nees_per_dof`, :func:`block_nis`; expected 1), so
+    by default the band is also divided by ``n``: :func:`chi2_band` with ``N`` samples.
+    Each run's value is taken as one sample (a run's time average varies less than one
+    sample, so the band is conservative for it).
+
+    Parameters
+    ----------
+    n_runs : int
+        Number of runs ``N`` (>= 1).
+    dim : int
+        Dimension ``n`` of the statistic (3 for NEES of position, velocity or attitude; the
+        block size for NIS).
+    level : float
+        Two-sided probability of the band (default 0.95).
+    per_dof : bool
+        True (default): the band of the average per degree of freedom (around 1); False: of
+        the average NEES itself (around ``n``), as in the book.
+
+    Returns
+    -------
+    list of float
+        ``[low, high]``.
+
+    Raises
+    ------
+    ValueError
+        ``n_runs`` or ``dim`` not a positive integer, or ``level`` not in (0, 1).
+    """
+    for name, v in (("n_runs", n_runs), ("dim", dim)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"ensemble_band: {name} must be a positive integer, got {v!r}")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"ensemble_band: level must be in (0, 1), got {level!r}")
+    lo, hi = chi2_band(int(n_runs), int(dim), level)
+    return [lo, hi] if per_dof else [lo * dim, hi * dim]
 
 
 def _entry(x: np.ndarray, dof: int) -> dict:

@@ -443,7 +443,7 @@ def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, as
                            "windows": [dataclasses.astuple(w) for w in noise.windows]}
     r = settings.assumed_r_sigmas
     beliefs = {
-        "imu": dataclasses.asdict(filter_imu), "bias_time_s": settings.bias_time_s,
+        "imu": filter_imu.as_dict(), "bias_time_s": settings.bias_time_s,
         "bias_noise": settings.bias_noise, "q_scale": settings.q_scale,
         "r_scale": settings.r_scale,
         "measurement_noise": {"policy": "nominal" if r is None else "fixed",

@@ -294,6 +294,8 @@ class IntegrationResult:
         a reference)
     updates : dict, per filter update ``t`` [s], ``nis`` (k, 2) per block, ``dof`` (k,)
         (:attr:`~sdr_di.integration.loop.IntegrationLoop.updates`)
+    deep_measurements : str or None, deep mode's measurement architecture
+        (``IntegrationConfig.deep_measurements``); None in loose and tight
     """
 
     t: np.ndarray
@@ -323,6 +325,7 @@ class IntegrationResult:
     sd: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 9)))
     nees: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
     updates: dict = dataclasses.field(default_factory=dict)
+    deep_measurements: str | None = None
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of the attitude [deg], velocity [m/s], position [m] error norms."""
@@ -623,7 +626,9 @@ class IntegratedReceiver:
             adaptation_s=kf.adaptation_time_s - adapt0, profile=prof,
             nav_change=col["nav"], navigation=navigation, mode=self.config.mode,
             filter_used=getattr(self, "filter_used", None),
-            sd=col["sd"], nees=col["nees"], updates=col["updates"])
+            sd=col["sd"], nees=col["nees"], updates=col["updates"],
+            deep_measurements=(self.config.deep_measurements if self.config.mode == "deep"
+                               else None))
 
     # ------------------------------------------------------------------------------------
     def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, hand: Handover,

@@ -120,7 +120,11 @@ def write_solution_csv(path: Path, res: IntegrationResult) -> Path:
         (0, len(SOLUTION_COLUMNS)))
     label = (res.filter_used or {}).get("spec", res.filter_name)  # name:options as run
     with atomic_open(path, "w") as fh:
-        fh.write(f"# sdr-di {res.mode} solution, filter {label}, hand-over at "
+        # the measurement architecture is named when it is not paper 004's cascade (whose
+        # files keep their earlier header)
+        arch = res.deep_measurements
+        arch = "" if arch in (None, "prefilter") else f", measurements {arch}"
+        fh.write(f"# sdr-di {res.mode} solution, filter {label}{arch}, hand-over at "
                  f"{res.handover_s:.3f} s, channels {' '.join(f'C{p:02d}' for p in res.prns)}\n")
         fh.write(",".join(SOLUTION_COLUMNS) + "\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.12g")
@@ -244,6 +248,9 @@ def run_integrated(source: IfSource, out_dir: str | Path, *,
     summary = {
         "mode": res.mode, "filter": res.filter_name, "handover_s": res.handover_s,
         "nco_latency": cfg.nco_latency if res.mode == "deep" else None,
+        "deep_measurements": cfg.deep_measurements if res.mode == "deep" else None,
+        "fusion_rate_hz": (cfg.filter_rate_hz / cfg.fusion_intervals if res.mode == "deep"
+                           else None),
         "prns": list(res.prns), "rows": int(res.t.size),
         "channels_always_used": bool(res.used.all()) if res.used.size else False,
         "used_fraction": res.used.mean(axis=0) if res.used.size else [],

@@ -148,9 +148,14 @@ def write_imu(path: str | Path, imu: ImuData, week: int | None = None,
 
 
 def write_truth(path: str | Path, truth: Truth, week: int | None = None,
-                sow: float | None = None, *, output_set: OutputSet | None = None) -> Path:
+                sow: float | None = None, *, output_set: OutputSet | None = None,
+                records: dict[str, str] | None = None) -> Path:
     """Write a trajectory truth record (atomically, or as a member of ``output_set``);
     columns in the module docstring.
+
+    ``records``: extra header lines ``# key: value`` after the epoch and rate (the generator's
+    drawn truth: ``imu_unit``, ``atmosphere_truth``, one-line JSON); readers skip keys they do
+    not know.
 
     Raises
     ------
@@ -162,8 +167,8 @@ def write_truth(path: str | Path, truth: Truth, week: int | None = None,
     path = Path(path)
     _check_shapes("truth", truth.t, llh=truth.llh, v_n=truth.v_n, att=truth.att, f_b=truth.f_b,
                   w_ib_b=truth.w_ib_b, r_e=truth.r_e, v_e=truth.v_e, a_e=truth.a_e)
-    header = _epoch_lines(week, sow) + [
-        f"rate_hz: {float(truth.rate_hz)!r}",
+    header = _epoch_lines(week, sow) + [f"rate_hz: {float(truth.rate_hz)!r}"] + [
+        f"{k}: {v}" for k, v in (records or {}).items()] + [
         "frames: ENU navigation, body Right-Front-Up, ECEF CGCS2000; yaw clockwise from North",
         "sample: PVA and ECEF instantaneous at t; f_b, w_ib_b average over (t[k-1], t[k]]",
         "columns: t [s since scenario start], lat lon [deg], h [m], v_e v_n v_u [m/s], "

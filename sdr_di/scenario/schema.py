@@ -22,6 +22,7 @@ from typing import Any
 
 from ..constants import parse_prn
 from ..errors import ScenarioError, SdrDiError
+from ..ins.grades import IMU_GRADES
 from ..oscillator import OscillatorSpec, oscillator_from_table
 from ..timebase import datetime_to_bdt, utc_to_bdt
 
@@ -38,13 +39,22 @@ SEGMENT_KEYS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "hold": (("duration_s",), ()),
 }
 
-#: IMU grade presets: (accel scale ppm, gyro scale ppm, accel bias mg, gyro bias deg/h,
-#: accel random walk m/s/sqrt(h), gyro random walk deg/sqrt(h)).
-IMU_GRADES: dict[str, tuple[float, float, float, float, float, float]] = {
-    "mems": (100.0, 100.0, 4.0, 8.0, 0.05, 0.04),  # paper 004 Table 4
-    "tactical": (50.0, 50.0, 1.0, 1.0, 0.03, 0.05),
-    "navigation": (10.0, 10.0, 0.025, 0.01, 0.002, 0.002),
-    "perfect": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+#: ``[imu]`` keys of the scenario -> the :class:`~sdr_di.ins.imu.ImuErrorModel` field its
+#: grade default comes from (grades: :data:`~sdr_di.ins.grades.IMU_GRADES`).
+IMU_KEYS: dict[str, str] = {
+    "accel_scale_factor_ppm": "accel_scale_factor_ppm",
+    "gyro_scale_factor_ppm": "gyro_scale_factor_ppm",
+    "accel_bias_mg": "accel_bias_mg",
+    "gyro_bias_deg_h": "gyro_bias_deg_h",
+    "accel_random_walk_mps_sqrth": "accel_random_walk",
+    "gyro_random_walk_deg_sqrth": "gyro_random_walk",
+    "accel_bias_instability_mg": "accel_bias_instability_mg",
+    "gyro_bias_instability_deg_h": "gyro_bias_instability_deg_h",
+    "accel_bias_tau_s": "accel_bias_tau_s",
+    "gyro_bias_tau_s": "gyro_bias_tau_s",
+    "accel_misalignment_mrad": "accel_misalignment_mrad",
+    "gyro_misalignment_mrad": "gyro_misalignment_mrad",
+    "gyro_g_sensitivity_deg_h_per_g": "gyro_g_sensitivity_deg_h_per_g",
 }
 
 #: Shortest scenario duration [s]: ten B3I code periods, and two IMU intervals at 200 Hz so
@@ -58,7 +68,8 @@ SAMPLE_FORMATS = ("iq_int8", "real_int8", "iq_int16", "real_int16", "iq_int4")
 
 @dataclasses.dataclass(frozen=True)
 class ImuSpec:
-    """IMU grade and error parameters (user units; see :mod:`sdr_di.sim.imu`)."""
+    """IMU grade and error parameters (user units; 1-sigma; :mod:`sdr_di.ins.imu`, grades
+    :mod:`sdr_di.ins.grades`)."""
 
     grade: str
     rate_hz: float
@@ -68,6 +79,31 @@ class ImuSpec:
     gyro_bias_deg_h: float
     accel_random_walk_mps_sqrth: float
     gyro_random_walk_deg_sqrth: float
+    accel_bias_instability_mg: float = 0.0
+    gyro_bias_instability_deg_h: float = 0.0
+    accel_bias_tau_s: float = 3600.0
+    gyro_bias_tau_s: float = 3600.0
+    accel_misalignment_mrad: float = 0.0
+    gyro_misalignment_mrad: float = 0.0
+    gyro_g_sensitivity_deg_h_per_g: float = 0.0
+
+    #: The fields of paper 004's six terms (and grade, rate): all a legacy spec records.
+    LEGACY = ("grade", "rate_hz", "accel_scale_factor_ppm", "gyro_scale_factor_ppm",
+              "accel_bias_mg", "gyro_bias_deg_h", "accel_random_walk_mps_sqrth",
+              "gyro_random_walk_deg_sqrth")
+
+    @property
+    def is_extended(self) -> bool:
+        """Whether any term beyond paper 004's six is set (in-run bias, misalignment,
+        g-sensitivity)."""
+        return any(getattr(self, f.name) != 0 for f in dataclasses.fields(self)
+                   if f.name not in self.LEGACY and not f.name.endswith("_tau_s"))
+
+    def as_dict(self) -> dict[str, Any]:
+        """The spec for the sidecar and summaries: every field of an extended spec, the
+        legacy fields alone otherwise (so a legacy scenario's sidecar is unchanged)."""
+        d = dataclasses.asdict(self)
+        return d if self.is_extended else {k: d[k] for k in self.LEGACY}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,6 +143,31 @@ class SignalSpec:
     ionosphere: str
     troposphere: str
     chunk_ms: int
+
+
+@dataclasses.dataclass(frozen=True)
+class AtmosphereSpec:
+    """Truth atmosphere (``[atmosphere]``; model and defaults: docs/scenario.md and
+    :mod:`sdr_di.sim.atmosphere`). ``truth = "model"``: the delays are the receiver's models
+    (broadcast Klobuchar, Saastamoinen standard atmosphere); ``"residuals"``: the truth
+    differs from them by the drawn amounts below (1-sigma values)."""
+
+    truth: str = "model"
+    #: 1-sigma of the per-satellite-pass scale of the Klobuchar delay, truth = (1 + k) K [-]
+    iono_scale_sigma: float = 0.5
+    #: stationary 1-sigma [-] and correlation time [s] of the slow variation of that scale
+    iono_variation_sigma: float = 0.1
+    iono_variation_tau_s: float = 1800.0
+    #: 1-sigma of the zenith wet delay's offset from the standard atmosphere's [m]
+    zwd_sigma_m: float = 0.05
+    #: stationary 1-sigma [m] and correlation time [s] of its slow variation
+    zwd_variation_sigma_m: float = 0.01
+    zwd_variation_tau_s: float = 3600.0
+
+    @property
+    def residuals(self) -> bool:
+        """Whether the truth differs from the receiver's models."""
+        return self.truth == "residuals"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -150,6 +211,8 @@ class Scenario:
     interference: tuple = ()
     multipath: tuple = ()
     agc: Any = None
+    #: Truth atmosphere (``[atmosphere]``); None: the table is absent (truth = model).
+    atmosphere: AtmosphereSpec | None = None
 
     @property
     def hash(self) -> str:
@@ -387,7 +450,8 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     if not isinstance(raw, dict):
         raise ScenarioError(f"{where}: expected TOML tables at the top level")
     known = {"scenario", "time", "start", "motion", "imu", "satellites", "signal", "outage",
-             "receiver_clock", "oscillator", "assume", "interference", "multipath", "agc"}
+             "receiver_clock", "oscillator", "assume", "interference", "multipath", "agc",
+             "atmosphere"}
     extra = sorted(set(raw) - known)
     if extra:
         raise ScenarioError(f"{where}: unknown table(s) {', '.join(map(repr, extra))}")
@@ -426,16 +490,9 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     im = _Reader(raw.get("imu", {}), f"{where}: [imu]")
     grade = im.str_("grade", "mems", tuple(IMU_GRADES))
     g = IMU_GRADES[grade]
-    imu = ImuSpec(
-        grade=grade,
-        rate_hz=im.num("rate_hz", 200.0, lo=1.0, hi=10000.0),
-        accel_scale_factor_ppm=im.num("accel_scale_factor_ppm", g[0], lo=0.0),
-        gyro_scale_factor_ppm=im.num("gyro_scale_factor_ppm", g[1], lo=0.0),
-        accel_bias_mg=im.num("accel_bias_mg", g[2], lo=0.0),
-        gyro_bias_deg_h=im.num("gyro_bias_deg_h", g[3], lo=0.0),
-        accel_random_walk_mps_sqrth=im.num("accel_random_walk_mps_sqrth", g[4], lo=0.0),
-        gyro_random_walk_deg_sqrth=im.num("gyro_random_walk_deg_sqrth", g[5], lo=0.0),
-    )
+    terms = {key: im.num(key, getattr(g, field), lo=0.0, lo_open=key.endswith("_tau_s"))
+             for key, field in IMU_KEYS.items()}
+    imu = ImuSpec(grade=grade, rate_hz=im.num("rate_hz", 200.0, lo=1.0, hi=10000.0), **terms)
     im.check_unknown()
     shortest = max(MIN_DURATION_S, 2.0 / imu.rate_hz)
     if duration < shortest:
@@ -532,6 +589,7 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
     check_bands(jammers, fs, f_if, is_complex, where)
     multipath = parse_multipath(raw.get("multipath", []), where)
     agc = parse_agc(raw.get("agc", {}), where)
+    atmosphere = _parse_atmosphere(raw["atmosphere"], where) if "atmosphere" in raw else None
     assume = raw.get("assume")
     if assume is not None and not isinstance(assume, dict):
         raise ScenarioError(f"{where}: [assume] must be a table")
@@ -546,4 +604,18 @@ def parse_scenario(raw: dict[str, Any], *, source: Path | None = None,
         motion=motion, imu=imu, satellites=satellites, signal=signal,
         outages=tuple(outages), clock=clock, raw=raw_canon, oscillator=oscillator,
         assume=assume, interference=jammers, multipath=multipath, agc=agc,
+        atmosphere=atmosphere,
     )
+
+
+def _parse_atmosphere(table: Any, where: str) -> AtmosphereSpec:
+    """``[atmosphere]`` (:class:`AtmosphereSpec`; every key optional)."""
+    r = _Reader(table, f"{where}: [atmosphere]")
+    d = AtmosphereSpec()
+    kw: dict[str, Any] = {"truth": r.str_("truth", d.truth, ("model", "residuals"))}
+    for f in dataclasses.fields(AtmosphereSpec):
+        if f.name != "truth":
+            kw[f.name] = r.num(f.name, getattr(d, f.name), lo=0.0,
+                               lo_open=f.name.endswith("_tau_s"))
+    r.check_unknown()
+    return AtmosphereSpec(**kw)

@@ -1,1 +1,2 @@
-"""Simulation: trajectory truth, IMU model, signal geometry and the IF generator."""
+"""Simulation: trajectory truth, IMU model, signal geometry, the truth atmosphere
+(:mod:`~sdr_di.sim.atmosphere`) and the IF generator."""

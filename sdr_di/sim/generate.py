@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as _dt
+import json
 import math
 from concurrent.futures import ThreadPoolExecutor, wait
 from pathlib import Path
@@ -41,6 +42,7 @@ from ..orbits.rinex_nav import load_nav
 from ..scenario.schema import Scenario
 from ..signal.navmsg import assistance_klobuchar
 from ..timebase import bdt_minus_utc, bdt_to_datetime
+from .atmosphere import AtmosphereTruth
 from .geometry import ReceiverPath
 from .ifgen import SYNTHESIS_VERSION, IfGenerator, build_satellites
 from .motion import segment_from_spec
@@ -85,6 +87,9 @@ def make_generator(sc: Scenario, truth=None) -> IfGenerator:
     clock = scenario_clock(sc, truth)  # [receiver_clock] line + [oscillator] (truth)
     gen.clock_truth = clock if clock.spec is not None else None
     gen.iono_source = source
+    if sc.atmosphere is not None and sc.atmosphere.residuals:
+        gen.atmosphere = AtmosphereTruth(sc.atmosphere, [s.prn for s in sats], sc.duration_s,
+                                         sc.seed, sc.height)
     return gen
 
 
@@ -144,9 +149,11 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
         bdt = bdt_to_datetime(week, sow)
         write_imu(paths["imu"], imu, week=week, sow=sow, output_set=files)
         clock = gen.clock_truth or scenario_clock(sc, truth)
+        draws = truth_draws(imu, gen)
         write_truth(paths["truth"], dataclasses.replace(
             truth, clock_bias_s=clock.bias_s, clock_drift_s_s=clock.drift_s_s),
-            week=week, sow=sow, output_set=files)
+            week=week, sow=sow, output_set=files,
+            records={k: json.dumps(v, separators=(",", ":")) for k, v in draws.items()})
         utc = bdt - _dt.timedelta(seconds=bdt_minus_utc(bdt))
         jams, cn0_eff = gen.jammers.records({s.prn: s.cn0_dbhz for s in gen.sats},
                                             sc.satellites.cn0_dbhz)
@@ -166,7 +173,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "start": {"week": week, "sow": sow, "bdt": bdt.isoformat(), "utc": utc.isoformat()},
             "receiver_clock": {"bias_s": sc.clock.bias_s, "drift_s_s": sc.clock.drift_s_s},
             "oscillator": None if sc.oscillator is None else sc.oscillator.as_dict(),
-            "imu": dataclasses.asdict(sc.imu),
+            "imu": sc.imu.as_dict(),
             "agc": {"sigma_in": gen.sigma_in, "gain_lsb": gen.gain,
                     **gen.jammers.agc.as_dict()},
             "interference": jams,
@@ -187,6 +194,7 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
             "generator": {"name": "sdr-di", "version": __version__,
                           "synthesis_version": SYNTHESIS_VERSION},
         }
+        meta.update(draws)  # only with a grade's unit errors or atmosphere residuals
         meta["files"] = {paths[k].name: _fingerprint(paths[k], files)
                          for k in ("if", "imu", "truth")}
         if sigmf:
@@ -194,6 +202,20 @@ def generate_files(sc: Scenario, out_dir: str | Path, *, name: str | None = None
         write_sidecar(paths["metadata"], meta, output_set=files)  # opened last: renamed last
         files.commit()
     return paths
+
+
+def truth_draws(imu, gen: IfGenerator) -> dict:
+    """The drawn truth beyond the legacy record, for the sidecar and the truth file's
+    header: ``imu_unit`` (:meth:`~sdr_di.ins.imu.ImuUnit.record`, an extended IMU model)
+    and ``atmosphere_truth`` (:meth:`~sdr_di.sim.atmosphere.AtmosphereTruth.record`,
+    ``[atmosphere] truth = "residuals"``); empty for a legacy scenario (its files keep
+    their bytes)."""
+    out = {}
+    if getattr(imu, "unit", None) is not None:
+        out["imu_unit"] = imu.unit.record()
+    if gen.atmosphere is not None:
+        out["atmosphere_truth"] = gen.atmosphere.record()
+    return out
 
 
 def _write_sigmf_pair(base: Path, if_path: Path, meta: dict, sc: Scenario,

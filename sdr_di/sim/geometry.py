@@ -91,6 +91,7 @@ def satellite_delays(
     iono: Klobuchar | None,
     troposphere: bool,
     rx: tuple[np.ndarray, np.ndarray] | None = None,
+    atmosphere=None,
 ) -> Delays:
     """Solve the light-time equation and atmosphere for one satellite.
 
@@ -113,6 +114,10 @@ def satellite_delays(
     rx : (r_rx, llh), optional
         Receiver ECEF position (m, 3) [m] and geodetic (lat, lon, h) (m, 3) at ``t_rx_true``,
         when the caller already has them (one evaluation for all satellites of an epoch).
+    atmosphere : AtmosphereTruth, optional
+        Truth residuals from the models (:mod:`sdr_di.sim.atmosphere`): the Klobuchar delay
+        scaled by its drawn factor, the wet residual added to the Saastamoinen delay (when
+        the respective model is on). None: truth = model.
     """
     t_rx_true = np.asarray(t_rx_true, float)
     if rx is None:
@@ -140,6 +145,10 @@ def satellite_delays(
         iono_m = iono_delay_b3i_m(iono, llh[:, 0], llh[:, 1], el_pos, az, sow_start + t_rx_true)
     else:
         iono_m = np.zeros_like(rho)
+    if atmosphere is not None:
+        iono_m = iono_m * atmosphere.iono_factor(eph.prn, t_rx_true)
+        if troposphere:
+            tropo = tropo + atmosphere.tropo_residual_m(t_rx_true, el_pos)
     d_code = clock_bias_s + (rho + tropo + iono_m) / C_LIGHT - dt_sv
     d_carr = clock_bias_s + (rho + tropo - iono_m) / C_LIGHT - dt_sv
     return Delays(d_code, d_carr, rho, iono_m, tropo, el, az, dt_sv)

@@ -6,7 +6,8 @@ Data flow per chunk of ``chunk_ms`` milliseconds (bounded memory whatever the fi
    ``s_j = j N / fs`` after the start; true time ``t_j = (s_j - b0) / (1 + drift)``;
 2. :func:`~sdr_di.sim.geometry.satellite_delays` gives each satellite's code and carrier delay
    at the nodes (light time, Sagnac, satellite clock with relativity, Klobuchar ionosphere,
-   Saastamoinen troposphere);
+   Saastamoinen troposphere; with ``[atmosphere] truth = "residuals"`` the truth's drawn
+   departures from those two models, :mod:`~sdr_di.sim.atmosphere`);
 3. code phase ``(t_sv - t0_nav) * 10.23e6 mod 10230`` and code-epoch index, carrier phase
    ``f_IF s - f_B3I D_carr`` and per-sample increments are handed to the numba kernel
    (:mod:`~sdr_di.sim._numba_ifgen`) with the data x NH symbols of the epochs in the chunk;
@@ -204,6 +205,9 @@ class IfGenerator:
         #: Truth oscillator path (:class:`~sdr_di.sim.oscillator.ClockTruth`, set by the
         #: builder when the scenario has ``[oscillator]``); None: the ``[receiver_clock]`` line.
         self.clock_truth = None
+        #: Truth atmosphere residuals (:class:`~sdr_di.sim.atmosphere.AtmosphereTruth`, set
+        #: by the builder for ``[atmosphere] truth = "residuals"``); None: truth = model.
+        self.atmosphere = None
 
     # -- geometry on the node grid ------------------------------------------------------
     def node_times(self, j: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -239,7 +243,7 @@ class IfGenerator:
             if row.k not in delays:
                 delays[row.k] = satellite_delays(sat.eph, self.path, t, self.sc.sow, b,
                                                  self.iono, sig.troposphere == "saastamoinen",
-                                                 rx=rx)
+                                                 rx=rx, atmosphere=self.atmosphere)
             d = delays[row.k]
             x = _week_seconds_between(self.sc.week, self.sc.sow, sat.nav.week, sat.nav.t0)
             d_code, d_carr = d.d_code, d.d_carr
