@@ -15,6 +15,7 @@ module notes (*Hand-over*). This module makes what the loop takes over:
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 from ..coupling.config import IntegrationConfig
 from ..deep.bit_power import BitPower
@@ -71,7 +72,7 @@ class Handover:
 
     first_fix: int | None = None
     sample: int | None = None
-    sol: object = None
+    sol: Any = None           # PvtSolution once reached
     prns: list[int] = dataclasses.field(default_factory=list)
     next_start: int | None = None
     channels: list[int] = dataclasses.field(default_factory=list)

@@ -247,7 +247,7 @@ class ScalarRecord:
     hand: Handover
     epochs: list
     rx_time: object
-    scalar: object
+    scalar: ScalarReceiver
     scalar_s: float
 
     def recorder(self) -> GnssEpochRecorder:
@@ -469,6 +469,7 @@ class IntegratedReceiver:
         if keep_start:
             self._keep_start(up, key, nav, t_scalar)
         if self.config.mode != "deep":
+            assert up.coupled is not None        # started at the hand-over
             return self._finish_scalar_coupled_loop(up.coupled, up.hand.prns,
                                                     up.recorder.epochs, t_scalar, t_all)
         return self._vector_loop(source, imu, off, n_per, stop, self.scalar, up.engine,
@@ -562,6 +563,7 @@ class IntegratedReceiver:
         cfg = self.config
         fs = source.sampling_rate_hz
         sol = hand.sol
+        assert hand.sample is not None           # a reached hand-over
         k_h = int(hand.sample)
         clock = SampleClock.of(engine.builder.rx_time, fs)
         chans = handover_channels(cfg, rx, navdata, hand, clock)
@@ -647,6 +649,7 @@ class IntegratedReceiver:
         cfg = self.config
         fs = source.sampling_rate_hz
         sol = hand.sol
+        assert hand.sample is not None and hand.next_start is not None   # reached, coupled
         k_h = int(hand.sample)
         clock = SampleClock.of(rx_time, fs)
         t_if = imu.t + off
@@ -728,9 +731,9 @@ class _CoupledRun:
     scalar receiver (:meth:`IntegratedReceiver._start_scalar_coupled_loop`), with what its
     result needs."""
 
-    thread: object           # LoopProcess, or a BackgroundLoop thread
+    thread: LoopProcess | BackgroundLoop
     loop: IntegrationLoop
-    src: object              # LooseFixSource or TightRangeSource
+    src: LooseFixSource | TightRangeSource
     clock: SampleClock
     kf: object
     adapt0: float            # the filter's adaptation time at the start [s]
@@ -762,7 +765,7 @@ class _StartUp:
         self.progress, self.start_loop = progress, start_loop
         self.n_epoch = 0                 # epochs after the hand-over (loose and tight)
         self.next_progress = 0.0         # file time of the next progress call [s]
-        self.child = None                # loose and tight: the loop's process, once started
+        self.child: LoopChild | None = None    # loose and tight: the loop's process
         self.child_started = False
         self.coupled: _CoupledRun | None = None
 
@@ -829,6 +832,7 @@ class _StartUp:
         trk = [o for o in obs if o.state == ChannelState.TRACK.name]
         ok = [o for o in trk if o.time_valid and o.code_lock
               and navdata.has(o.prn, sol.week, sol.sow)]
+        assert hand.first_fix is not None        # on_epoch sets it before
         since_fix = (sample - hand.first_fix) / fs
         waited = since_fix >= cfg.handover_wait_s
         if navdata.klobuchar is None and since_fix < cfg.iono_wait_s:
