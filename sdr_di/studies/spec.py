@@ -160,7 +160,7 @@ def _scenario_digests(cells) -> dict:
     """SHA-256 of each scenario file the cells read (an edited scenario is another study)."""
     from ..scenario import DEFAULT_SCENARIO
 
-    out = {}
+    out: dict[str, str | None] = {}
     for c in cells:
         path = Path(str(c.params.get("scenario") or DEFAULT_SCENARIO))
         if str(path) not in out:
@@ -189,7 +189,7 @@ def load_study(path: str | Path) -> StudySpec:
     return parse_study(raw, source=path)
 
 
-def _need(cond: bool, where: str, msg: str) -> None:
+def _need(cond: object, where: str, msg: str) -> None:
     if not cond:
         raise StudyError(f"{where}: {msg}")
 

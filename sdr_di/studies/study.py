@@ -150,7 +150,7 @@ def _keep_unchanged_runs(spec: StudySpec, runs_dir: Path) -> None:
             continue
         if not isinstance(rec, dict) or rec.get("lost"):
             continue
-        c, i = wanted.get(rec.get("run_key")), rec.get("seed_index")
+        c, i = wanted.get(str(rec.get("run_key"))), rec.get("seed_index")
         if c is None or not isinstance(i, int):
             continue
         files = old_dir / path.stem
@@ -396,17 +396,17 @@ def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> Stu
                 best = min((means[(g, q)] for g in spec.filters
                             if math.isfinite(means[(g, q)])), default=math.nan)
                 row[f"{q}_best"] = int(math.isfinite(means[(f, q)]) and means[(f, q)] == best)
-                c = by.get((cell.name, f, spec.baseline, q))
-                row[f"d_{q}_{u}"] = c.d_mean if c else math.nan
-                row[f"d_{q}_ci_low"] = c.d_ci_low if c else math.nan
-                row[f"d_{q}_ci_high"] = c.d_ci_high if c else math.nan
-                row[f"{q}_ratio"] = c.ratio if c else math.nan
-                row[f"{q}_ratio_ci_low"] = ratio_of_log(c.log_ci_low) if c else math.nan
-                row[f"{q}_ratio_ci_high"] = ratio_of_log(c.log_ci_high) if c else math.nan
-                row[f"{q}_wins"] = c.wins if c else ""
-                row[f"{q}_sign_p"] = c.sign_p if c else math.nan
-                row[f"{q}_sign_p_holm"] = c.sign_p_holm if c else math.nan
-                row[f"{q}_t_p_holm"] = c.t_p_holm if c else math.nan
+                pair = by.get((cell.name, f, spec.baseline, q))
+                row[f"d_{q}_{u}"] = pair.d_mean if pair else math.nan
+                row[f"d_{q}_ci_low"] = pair.d_ci_low if pair else math.nan
+                row[f"d_{q}_ci_high"] = pair.d_ci_high if pair else math.nan
+                row[f"{q}_ratio"] = pair.ratio if pair else math.nan
+                row[f"{q}_ratio_ci_low"] = ratio_of_log(pair.log_ci_low) if pair else math.nan
+                row[f"{q}_ratio_ci_high"] = ratio_of_log(pair.log_ci_high) if pair else math.nan
+                row[f"{q}_wins"] = pair.wins if pair else ""
+                row[f"{q}_sign_p"] = pair.sign_p if pair else math.nan
+                row[f"{q}_sign_p_holm"] = pair.sign_p_holm if pair else math.nan
+                row[f"{q}_t_p_holm"] = pair.t_p_holm if pair else math.nan
             for j, cl in enumerate(spec.claims, 1):
                 verdict = ""
                 if f == cl.filter and (cl.cells is None or cell.name in cl.cells):
