@@ -43,7 +43,7 @@ interleaved pair and their mean (issue 29: at most 1; run one after the other, t
 speed changed between the two sets and moved the ratio by 0.1-0.2).
 
 ``run --mode deep|loose|tight|all`` (issue 13): the same file(s) through ``sdr-di run --mode
-MODE`` (``run_deep``: scalar start-up, hand-over, integration loop, solution files; the
+MODE`` (``run_integrated``: scalar start-up, hand-over, integration loop, solution files; the
 sidecar's IMU, truth and ephemeris) in a fresh process per run, with ``--filter`` (default
 ekf); prints per mode the process wall and CPU time, the real-time factor (file seconds per
 wall second, and per CPU second), the scalar receiver's and the loop's share of the run
@@ -211,12 +211,12 @@ def _run_receiver(path: Path, out: Path, search: str) -> dict:
 _MODE_CHILD = """
 import json, resource, sys, time
 from sdr_di.integration.receiver import IntegrationConfig
-from sdr_di.integration.run_integrated import run_deep
+from sdr_di.integration.run_integrated import run_integrated
 from sdr_di.receiver.run_scalar import open_source
 from sdr_di.receiver.threads import split_stats
 path, out, mode, filt = sys.argv[1:5]
 c0 = time.thread_time()
-res = run_deep(open_source(path), out, config=IntegrationConfig(mode=mode, filter=filt),
+res = run_integrated(open_source(path), out, config=IntegrationConfig(mode=mode, filter=filt),
                progress=False)
 prof = {k: v for k, v in res.result.profile.items() if isinstance(v, (int, float))}
 print("RESULT", json.dumps({"profile": prof, "handover_s": res.result.handover_s,
@@ -228,7 +228,7 @@ exit_program(0)
 
 
 def _run_mode(path: Path, out: Path, mode: str, filt: str) -> dict:
-    """``sdr-di run --mode MODE`` (``run_deep``) in a fresh process: process wall and CPU
+    """``sdr-di run --mode MODE`` (``run_integrated``) in a fresh process: process wall and CPU
     time, the CPU the host took from the VM meanwhile (``stolen_s``), the receiver's
     profile, hand-over time, peak RSS."""
     r, wall, stolen, cpu = run_result_child(

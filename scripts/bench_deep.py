@@ -50,7 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 _CHILD = """
 import json, resource, sys, threading, time
 from pathlib import Path
-from sdr_di.integration.run_integrated import run_deep
+from sdr_di.integration.run_integrated import run_integrated
 from sdr_di.integration.receiver import IntegrationConfig
 from sdr_di.receiver.run_scalar import open_source
 
@@ -68,7 +68,7 @@ meta = json.loads(Path(path).with_suffix('.json').read_text())
 prns = [s['prn'] for s in meta['satellites']]
 s0 = sched()
 t0 = time.perf_counter()
-res = run_deep(open_source(path), out, config=IntegrationConfig(
+res = run_integrated(open_source(path), out, config=IntegrationConfig(
     filter=filt, filter_rate_hz=rate, nco_latency=latency), prns=prns, progress=False)
 wall, cpu_main = time.perf_counter() - t0, time.thread_time()   # main thread, from start
 s1 = sched()
@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> list[dict]:
                 # where the main thread's wall time went (Linux schedstat): on a quiet
                 # machine 'waiting for a core' is ~0 and 'sleeping' is the chain's waits
                 sleep = ms["wall"] - ms["cpu"] - ms["runnable"]
-                print(f"    main thread over run_deep: {ms['wall']:.2f} s wall = {ms['cpu']:.2f} s "
+                print(f"    main thread over run_integrated: {ms['wall']:.2f} s wall = {ms['cpu']:.2f} s "
                       f"on a core + {ms['runnable']:.2f} s waiting for a core (load) + "
                       f"{sleep:.2f} s sleeping (GIL hand-overs, kernel worker, reads); other "
                       "threads' CPU: " + ", ".join(f"{k} {v:.2f} s" for k, v in sorted(

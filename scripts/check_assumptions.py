@@ -41,7 +41,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from sdr_di.integration.run_integrated import run_deep
+from sdr_di.integration.run_integrated import run_integrated
 from sdr_di.integration.receiver import IntegrationConfig
 from sdr_di.errors import SdrDiError
 from sdr_di.integration.assumptions import apply_to_deep, parse_assumptions
@@ -66,7 +66,7 @@ def _scenario(truth_osc: str, seed: int, fs: float, duration: float):
 def _run(paths: dict, out: Path, cfg: IntegrationConfig) -> dict:
     src = open_source(str(paths["if"]))
     t0 = time.process_time()
-    res = run_deep(src, out, config=cfg, progress=False).result
+    res = run_integrated(src, out, config=cfg, progress=False).result
     cpu = time.process_time() - t0
     truth, _, _ = read_truth(paths["truth"])
     m_all = res.metrics(res.handover_s, None)

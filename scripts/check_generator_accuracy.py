@@ -10,7 +10,7 @@ Usage::
 
 For each seed: ``sdr-di generate`` (default scenario, the given duration and rate), then the
 scalar receiver (``sdr-di run``, PVT at 5 Hz: position and velocity RMSE against the truth
-file after the first fix) and the deep receiver (``run_deep`` with the EKF: attitude,
+file after the first fix) and the deep receiver (``run_integrated`` with the EKF: attitude,
 velocity, position RMSE). Prints one row per seed and run, then the mean and standard
 deviation over the seeds. Run it on the tree before and after a generator change (e.g.
 ``git worktree add /tmp/before <commit>`` and ``PYTHONPATH=/tmp/before``) and compare the
@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> None:
 
     import sdr_di
     from sdr_di.cli import main as cli
-    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.run_integrated import run_integrated
     from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.receiver.accuracy import solution_vs_truth
     from sdr_di.receiver.run_scalar import open_source
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> None:
                       f"vel {acc['vel_rmse_mps']:.4f} m/s, {acc['n_fixes']} fixes", flush=True)
             if "deep" in args.modes:
                 prns = [s["prn"] for s in meta["satellites"]]
-                res = run_deep(open_source(d / "default.bin"), d / f"deep{sfx}",
+                res = run_integrated(open_source(d / "default.bin"), d / f"deep{sfx}",
                                config=IntegrationConfig(filter="ekf"), prns=prns, progress=False)
                 m = res.metrics
                 rows["deep"].append((m["pos_m_rmse"], m["vel_mps_rmse"], m["att_deg_rmse"]))

@@ -11,7 +11,7 @@ SignalSim (globsky/SignalSim, src/SatelliteParam.cpp, read for this fact only) c
 L1 delay with its GPS Klobuchar function for every system and scales it to B3I by
 (154/124)^2; the GPS algorithm here is IS-GPS-200 20.3.3.5.2.5, written from the ICD."""
 import numpy as np
-from sdr_di.orbits.rinex_nav import load_nav, read_klobuchar
+from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.orbits.broadcast import sat_states
 from sdr_di.orbits.atmosphere import iono_delay_b3i_m
 from sdr_di.frames import llh_to_ecef, C_e_n

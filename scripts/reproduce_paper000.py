@@ -45,7 +45,8 @@ if __name__ == "__main__":   # before numpy is imported: single-threaded BLAS fo
 
 import numpy as np
 
-from sdr_di.integration.loose import load_lc_scenario, make_inputs, run_loose
+from sdr_di.integration.loose import load_lc_scenario, run_loose
+from sdr_di.sim.lc_inputs import make_inputs
 from sdr_di.io.atomic import atomic_open
 from sdr_di.scenario import REPO_ROOT
 

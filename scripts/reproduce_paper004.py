@@ -52,7 +52,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from sdr_di.integration.receiver import IntegrationConfig, IntegratedReceiver
-from sdr_di.experiments.filter_figures import parse_filter_spec
+from sdr_di.experiments.entries import check_filter_entry
 from sdr_di.filters import FILTER_NAMES
 from sdr_di.io.imu_files import read_imu, read_truth
 from sdr_di.orbits.rinex_nav import load_nav
@@ -148,7 +148,7 @@ def main(argv=None) -> int:
     results = {}
     for f in filters:
         src = open_source(bin_)
-        name, options = parse_filter_spec("reproduce_paper004", f)
+        name, options = check_filter_entry("reproduce_paper004", f)
         rx = IntegratedReceiver(IntegrationConfig(filter=name, filter_rate_hz=args.filter_rate,
                                      filter_options=options))
         t0 = time.perf_counter()

@@ -2,9 +2,13 @@
 
 Each function mirrors one ``sdr-di`` command, option for option (the CLI's ``--duration``
 is ``duration_s=``, ``--fs`` is ``sampling_rate_hz=``, and so on; the parameter lists say
-which), and calls the internal functions that command calls, so a run from Python writes
-the same files as the same run from the shell. Everything else in the package is internal
-and may move between releases.
+which). Its arguments become that command's options object (:mod:`sdr_di.options`:
+:class:`RunOptions`, :class:`GenerateOptions`, :class:`StudyOptions`), which owns every rule
+between them; :func:`run_with`, :func:`generate_with` and :func:`study_with` take such an
+object, and the CLI calls them. So a run from Python writes the same files, and a bad input
+raises the same error (an :class:`~sdr_di.errors.SdrDiError`), as the same run from the
+shell; only the messages name the argument (``pll_bw_hz``) where the CLI names its flag
+(``--pll-bw``). Everything else in the package is internal and may move between releases.
 
 Importing this module (and so ``import sdr_di``) loads nothing but the standard library;
 the receiver, the generator and the study machinery are imported on first call.
@@ -27,11 +31,15 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
+from .options import RUN_MODES, GenerateOptions, RunOptions, StudyOptions
+
 if TYPE_CHECKING:
     from .studies.spec import StudySpec
     from .studies.study import StudyResult
 
-__all__ = ["GeneratedFiles", "RunResult", "generate", "run", "study"]
+__all__ = ["RUN_MODES", "GenerateOptions", "GeneratedFiles", "RunOptions", "RunResult",
+           "StudyOptions", "generate", "generate_with", "run", "run_with", "study",
+           "study_with"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -50,11 +58,13 @@ def _guarded(func: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-#: Receiver modes of :func:`run` (``sdr-di run --mode``).
-RUN_MODES = ("scalar", "deep", "loose", "tight")
 
 Mode = Literal["scalar", "deep", "loose", "tight"]
 PathLike = str | Path
+
+
+def _path(p: PathLike | None) -> Path | None:
+    return None if p is None else Path(p)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,7 +117,10 @@ class RunResult:
         ``channels``, ``summary``, ``rinex_obs``, ``rinex_nav``; integrated modes:
         ``solution``, ``summary``, ``channels``, ``nis``).
     metrics : dict
-        Scalar: ``n_epochs``, ``n_fixes``, ``processed_s``. Integrated modes: the error
+        Scalar: ``n_epochs``, ``n_fixes``, ``processed_s``, ``first_fix_s`` [s since file
+        start; NaN without a fix] and, with a reference file and a fix, the errors of the
+        ``n`` fixes it covers (``vel_mps_rmse``, ``vel_mps_max`` [m/s], ``pos_m_rmse``, ``pos_m_max`` [m]).
+        Integrated modes: the error
         figures vs the reference after the hand-over (``att_deg_rmse``, ``att_deg_max``
         [deg], ``vel_mps_rmse``, ``vel_mps_max`` [m/s], ``pos_m_rmse``, ``pos_m_max`` [m],
         ``n`` rows; NaN without a reference) plus ``handover_s`` [s since file start].
@@ -118,8 +131,13 @@ class RunResult:
     details : object
         The internal record the run returned
         (:class:`~sdr_di.receiver.run_scalar.RunSummary` or
-        :class:`~sdr_di.integration.run_integrated.DeepRunSummary`, whose ``result`` holds
+        :class:`~sdr_di.integration.run_integrated.IntegratedRunSummary`, whose ``result`` holds
         the solution arrays); internal, may change between releases.
+    inputs : dict of str to Path
+        Input files by label: ``if``; in scalar mode the ``ephemeris`` (assistance) and
+        ``truth`` (reference) files it used, given or the sidecar's; in the integrated modes
+        the ``imu``, ``truth`` and ``ephemeris`` given (the others are the sidecar's, named
+        in the run's summary).
     """
 
     mode: str
@@ -129,15 +147,7 @@ class RunResult:
     processed_s: float
     wall_s: float
     details: Any = dataclasses.field(repr=False, default=None)
-
-
-#: Scenario override key -> the argument of :func:`generate` that sets it; an override's bad
-#: value is reported under this name (the CLI passes its flags instead, ``_names``).
-_GENERATE_ARGUMENTS = {"duration_s": "duration_s", "seed": "seed",
-                       "sampling_rate_hz": "sampling_rate_hz", "if_hz": "if_hz",
-                       "sample_format": "sample_format", "kind": "sample_format",
-                       "quantization_bits": "bits", "cn0_dbhz": "cn0_dbhz",
-                       "ephemeris": "ephemeris", "prns": "prns"}
+    inputs: dict[str, Path] = dataclasses.field(default_factory=dict)
 
 
 @_guarded
@@ -147,8 +157,7 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
              if_hz: float | None = None, sample_format: str | None = None,
              bits: int | None = None, cn0_dbhz: float | None = None,
              ephemeris: PathLike | None = None, prns: Sequence[str | int] | None = None,
-             progress: bool = False, sigmf: bool = False,
-             _names: dict[str, str] | None = None) -> GeneratedFiles:
+             progress: bool = False, sigmf: bool = False) -> GeneratedFiles:
     """Generate B3I IF samples, 200 Hz IMU data, truth and a sidecar (``sdr-di generate``).
 
     Parameters
@@ -180,6 +189,9 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
         Satellites instead of the automatic selection, ``"C21"`` or ``21`` (``--prn``).
     progress : bool
         Show a progress bar (the CLI's default; here off).
+    sigmf : bool
+        Also write the SigMF pair ``NAME.sigmf-meta`` and ``NAME.sigmf-data`` (the IF
+        samples, hard-linked to ``NAME.bin``) (``--sigmf``).
 
     Returns
     -------
@@ -194,41 +206,31 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
     OutputError
         The files cannot be written (nothing is left under the final names).
     """
-    from .errors import ScenarioError, UnknownPrnError
-    from .scenario import DEFAULT_SCENARIO, REPO_ROOT, load_scenario
-    from .scenario.schema import with_flag_names
+    return generate_with(GenerateOptions(
+        out=_path(out), scenario=_path(scenario), name=name, duration_s=duration_s, seed=seed,
+        sampling_rate_hz=sampling_rate_hz, if_hz=if_hz, sample_format=sample_format,
+        bits=bits, cn0_dbhz=cn0_dbhz, ephemeris=_path(ephemeris),
+        prns=None if prns is None else tuple(prns), progress=progress, sigmf=sigmf))
+
+
+@_guarded
+def generate_with(options: GenerateOptions) -> GeneratedFiles:
+    """:func:`generate` with its options as one object (what ``sdr-di generate`` calls).
+
+    Parameters
+    ----------
+    options : GenerateOptions
+        :class:`~sdr_di.options.GenerateOptions`.
+
+    Returns
+    -------
+    GeneratedFiles
+    """
     from .sim.generate import generate_files
 
-    sc = load_scenario(scenario or DEFAULT_SCENARIO)
-    kind = None
-    if sample_format is not None:
-        from .io.sample_formats import get_format
-
-        fmt = get_format(sample_format)
-        kind = "complex" if fmt.is_complex else "real"
-        sample_format = fmt.name
-    names = _GENERATE_ARGUMENTS if _names is None else _names
-    if prns is not None:   # a repeated PRN: one warning naming the flag (the bad ones: below)
-        from .constants import parse_prn, parse_prns
-
-        try:
-            for p in prns:
-                parse_prn(p)
-        except UnknownPrnError:
-            pass
-        else:
-            prns = [f"C{p:02d}" for p in parse_prns(prns, names["prns"])]
-    over = dict(
-        duration_s=duration_s, seed=seed, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
-        sample_format=sample_format, kind=kind, quantization_bits=bits, cn0_dbhz=cn0_dbhz,
-        ephemeris=ephemeris, prns=None if prns is None else [str(p) for p in prns])
-    try:
-        sc = sc.with_overrides(**over)
-    except (ScenarioError, UnknownPrnError) as exc:  # name the argument given, not the key
-        raise with_flag_names(exc, sc, {k: names[k] for k, v in over.items()
-                                        if v is not None}) from None
-    files = generate_files(sc, REPO_ROOT / "signals" / "out" if out is None else Path(out),
-                           name=name, progress=progress, sigmf=sigmf)
+    sc = options.scenario_config()
+    files = generate_files(sc, options.out_dir, name=options.name, progress=options.progress,
+                           sigmf=options.sigmf)
     return GeneratedFiles(if_file=files["if"], imu=files["imu"], truth=files["truth"],
                           metadata=files["metadata"], sigmf_data=files.get("sigmf-data"),
                           sigmf_meta=files.get("sigmf-meta"))
@@ -245,16 +247,22 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         align: Literal["truth", "gnss"] | None = None, duration_s: float | None = None,
         gnss_rate_hz: float | None = None, iono_wait_s: float | None = None,
         assume: PathLike | None = None, nco_latency: int | None = None,
-        sampling_rate_hz: float | None = None, if_hz: float | None = None,
+        deep_measurements: Literal["prefilter", "reset", "discriminator"] | None = None,
+        fusion_rate_hz: float | None = None, sampling_rate_hz: float | None = None, if_hz: float | None = None,
         sample_format: str | None = None, rfch: int | None = None, inverted: bool = False,
         start_week: int | None = None, start_sow: float | None = None,
+        ignore_sidecar: bool = False, check_format: bool = True,
         progress: bool = False) -> RunResult:
     """Run the receiver on an IF file in any mode (``sdr-di run``).
+
+    The arguments become a :class:`~sdr_di.options.RunOptions`, which applies every rule
+    between them, then :func:`run_with` runs it: ``sdr-di run`` does the same, so both give
+    the same files and the same errors.
 
     Parameters
     ----------
     if_file : path
-        IF samples (or their ``.json`` sidecar).
+        IF samples (or their ``.json`` sidecar, or a SigMF ``X.sigmf-meta``/``-data``).
     mode : {"scalar", "deep", "loose", "tight"}
         Scalar tracking loops; deep (INS-aided vector tracking); loose or tight (the scalar
         receiver's WLS fixes, or its pseudoranges and rates, into the integration filter)
@@ -268,27 +276,36 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
     cold : bool
         Cold start: ignore the sidecar's satellites and Dopplers (``--cold``).
     pll_bw_hz : float, optional
-        Tracking PLL noise bandwidth once locked [Hz] (``--pll-bw``; default 15).
+        Tracking PLL noise bandwidth once locked [Hz] (``--pll-bw``; default 15; at most
+        25 Hz with the 10 ms D1 coherent time). Any mode (deep's start-up).
     approx_pos : (lat_deg, lon_deg, h_m), optional
         Scalar mode with ``ephemeris``: search the satellites visible from this position
-        around their predicted Doppler (``--approx-pos``).
+        [deg, deg, m] around their predicted Doppler (``--approx-pos``).
+    truth : path, optional
+        Reference file (``--truth``; default the sidecar's): the errors in ``metrics``.
+    ephemeris : path, optional
+        RINEX navigation file used as assistance data (``--ephemeris``; default the
+        sidecar's), any mode.
+    assist : bool
+        False: decoded ephemerides and ionosphere only (``--no-assist``), any mode.
+    duration_s : float, optional
+        Process only the first seconds of the file [s] (``--duration``), any mode.
 
     Other Parameters
     ----------------
     filter : str, optional
-        Integration filter (``--filter``; default ``ekf``). Integrated modes only, as
-        are the parameters down to ``assume``.
-    imu, truth, ephemeris : path, optional
-        IMU file, reference file, RINEX assistance file (``--imu``, ``--truth``,
-        ``--ephemeris``; default the sidecar's).
-    assist : bool
-        False: decoded ephemerides and ionosphere only (``--no-assist``).
+        Integration filter entry ``NAME[:OPT=VALUE...]`` (``--filter``; default ``ekf``):
+        a built-in, registered or entry-point name, or an import path
+        ``package.module:Name``; e.g. ``"ekf:q_scale=4"``, ``"ff-aukf:q_states=nominal"``.
+        Integrated modes only, as are ``imu``, ``filter_rate_hz``, ``align``,
+        ``iono_wait_s`` and ``assume``.
+    imu : path, optional
+        IMU file (``--imu``; default the sidecar's).
     filter_rate_hz : float, optional
-        Integration filter and NCO rate [Hz] (``--filter-rate``; default 50).
+        Integration filter and NCO rate [Hz] (``--filter-rate``; default 50); must divide
+        the IMU rate.
     align : {"truth", "gnss"}, optional
         INS initial alignment (``--align``; default ``truth``).
-    duration_s : float, optional
-        Process only the first seconds of the file (``--duration``).
     gnss_rate_hz : float, optional
         Loose and tight: GNSS measurement rate [Hz], 10 divided by a whole number
         (``--gnss-rate``; default 5).
@@ -300,9 +317,33 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
         Deep only: filter intervals between an update and the NCO commands that first use
         it, beyond the next (``--nco-latency``; default 0; docs/deep.md, *NCOs one interval
         ahead*).
-    sampling_rate_hz, if_hz, sample_format, rfch, inverted, start_week, start_sow
-        A file sdr-di did not write (``--fs``, ``--if``, ``--format``, ``--rfch``,
-        ``--inverted``, ``--start-week``, ``--start-sow``).
+    deep_measurements : {"prefilter", "reset", "discriminator"}, optional
+        Deep only: what each channel hands the integration filter: paper 004's cascaded
+        pre-filters (default), pre-filters restarted from an uninformative prior at each
+        fusion, or the interval's discriminator outputs (``--deep-measurements``;
+        docs/deep.md).
+    fusion_rate_hz : float, optional
+        Deep with ``deep_measurements="reset"``: rate of the filter's updates with the
+        pre-filters' outputs [Hz], the filter rate divided by a whole number
+        (``--fusion-rate``; default 5).
+    sampling_rate_hz, if_hz : float, optional
+        A file sdr-di did not write: sampling rate and intermediate frequency [Hz] (``--fs``,
+        ``--if``).
+    sample_format : str, optional
+        Its sample format (``--format``; docs/formats.md).
+    rfch : int, optional
+        RF channel (1-based) of a multi-channel PocketSDR file (``--rfch``).
+    inverted : bool
+        Spectrum inverted (``--inverted``).
+    start_week, start_sow : optional
+        Start-time hint: BDT week and seconds of week [s] of sample 0 (``--start-week``,
+        ``--start-sow``).
+    ignore_sidecar : bool
+        Read the file with the options above alone, even where a sidecar says otherwise
+        (``--ignore-sidecar``).
+    check_format : bool
+        False: read the file even where its bytes do not look like the declared format
+        (``--no-format-check``).
     progress : bool
         Show a progress bar (the CLI's default; here off).
 
@@ -312,138 +353,108 @@ def run(if_file: PathLike, *, mode: Mode = "scalar", out: PathLike | None = None
 
     Raises
     ------
-    ValueError
-        Options that do not fit together or out of range (the CLI's one-line usage errors).
+    OptionsError
+        A bad mode, options that do not fit together or out of range (a ``ValueError``).
     SampleFormatError
         Missing or inconsistent sidecar, bad file options.
-    ImuDataError, FilterError, HandoverError
-        Integrated modes: bad IMU/reference files, unknown filter, no hand-over.
-    NoSatelliteError
-        Scalar mode: no satellite acquired.
+    FilterError
+        Unknown filter, bad filter option, a plugin that does not import.
+    ImuDataError, HandoverError
+        Integrated modes: bad IMU/reference files, no hand-over.
     """
-    from .constants import parse_prns
+    return run_with(RunOptions(
+        if_file=Path(if_file), mode=mode, out=_path(out),
+        prns=None if prns is None else tuple(prns), rate_hz=rate_hz, cold=cold,
+        pll_bw_hz=pll_bw_hz, approx_pos=approx_pos, filter=filter, imu=_path(imu),
+        truth=_path(truth), ephemeris=_path(ephemeris), assist=assist,
+        filter_rate_hz=filter_rate_hz, align=align, duration_s=duration_s,
+        gnss_rate_hz=gnss_rate_hz, iono_wait_s=iono_wait_s, assume=_path(assume),
+        nco_latency=nco_latency, deep_measurements=deep_measurements,
+        fusion_rate_hz=fusion_rate_hz, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
+        sample_format=sample_format, rfch=rfch, inverted=inverted, start_week=start_week,
+        start_sow=start_sow, ignore_sidecar=ignore_sidecar, check_format=check_format,
+        progress=progress))
+
+
+@_guarded
+def run_with(options: RunOptions) -> RunResult:
+    """:func:`run` with its options as one object (what ``sdr-di run`` calls).
+
+    Everything that can be checked before the run is checked first: the options
+    (construction), the IF file, the output folder, the assistance and, in the integrated
+    modes, the filter and its rate against the IMU rate. The output folder is created only
+    then, and removed again if the run fails before writing into it.
+
+    Parameters
+    ----------
+    options : RunOptions
+        :class:`~sdr_di.options.RunOptions`.
+
+    Returns
+    -------
+    RunResult
+    """
     from .io.atomic import check_output_dir, output_dir_removed_on_failure
-    from .receiver.run_scalar import open_source
 
-    if mode not in RUN_MODES:
-        raise ValueError(f"mode must be one of {', '.join(RUN_MODES)}, got {mode!r}")
-    if_file = Path(if_file)
-    integrated = {"filter": filter, "imu": imu, "truth": truth, "filter_rate_hz":
-                  filter_rate_hz, "align": align, "duration_s": duration_s,
-                  "iono_wait_s": iono_wait_s, "assume": assume, "nco_latency": nco_latency}
-    given = [k for k, v in integrated.items() if v is not None]
-    if ephemeris is not None and not (mode == "scalar" and approx_pos is not None):
-        given.append("ephemeris")
-    if not assist:
-        given.append("assist")
-    if mode == "scalar" and given:
-        raise ValueError(f"{', '.join(given)}: only with mode deep, loose or tight")
-    if gnss_rate_hz is not None and mode not in ("loose", "tight"):
-        raise ValueError("gnss_rate_hz: only with mode loose or tight")
-    if nco_latency is not None and mode != "deep":
-        raise ValueError("nco_latency: only with mode deep")
-    from .integration.config import is_nco_latency
-
-    if nco_latency is not None and not is_nco_latency(nco_latency):
-        raise ValueError(f"nco_latency must be 0 or 1 (filter intervals), got {nco_latency!r}")
-    if approx_pos is not None and (mode != "scalar" or ephemeris is None):
-        raise ValueError("approx_pos: only in scalar mode, with ephemeris")
-    for key, v in (("rate_hz", rate_hz), ("filter_rate_hz", filter_rate_hz),
-                   ("duration_s", duration_s), ("gnss_rate_hz", gnss_rate_hz),
-                   ("pll_bw_hz", pll_bw_hz)):
-        if v is not None and not (math.isfinite(v) and v > 0):
-            raise ValueError(f"{key} must be a finite number > 0, got {v!r}")
-    if iono_wait_s is not None and not (math.isfinite(iono_wait_s) and iono_wait_s >= 0):
-        raise ValueError(f"iono_wait_s must be a finite number >= 0, got {iono_wait_s!r}")
-    tracking = _tracking_config(pll_bw_hz)
-    prn_list = None if prns is None else parse_prns(prns, "prns")
-    source = open_source(if_file, sampling_rate_hz=sampling_rate_hz, if_hz=if_hz,
-                         sample_format=sample_format, spectrum_inverted=inverted,
-                         start_week=start_week, start_sow=start_sow, rfch=rfch)
-    out_dir = check_output_dir(Path(out) if out is not None
-                               else if_file.with_name(if_file.stem + "_run"))
-    with output_dir_removed_on_failure(out_dir):   # a failed run leaves no empty folder
-        if mode == "scalar":
-            return _run_scalar(source, out_dir, prn_list, rate_hz, cold, approx_pos,
-                               ephemeris, tracking, progress)
-        return _run_integrated(source, out_dir, prn_list, mode, rate_hz, cold, tracking,
-                               progress, integrated, ephemeris, assist, gnss_rate_hz)
+    opts = options
+    source = opts.open_source()
+    out_dir = check_output_dir(opts.out_dir)
+    if opts.mode == "scalar":
+        assist = opts.search_assistance(source)
+        nav_path, truth_path = opts.scalar_companions(source)
+        with output_dir_removed_on_failure(out_dir):
+            return _run_scalar(opts, source, out_dir, assist, nav_path, truth_path)
+    cfg = opts.integration_config()
+    opts.check_integrated_inputs(source, cfg)
+    with output_dir_removed_on_failure(out_dir):
+        return _run_integrated(opts, source, out_dir, cfg)
 
 
-def _tracking_config(pll_bw_hz: float | None):
-    """The scalar loops' settings for ``pll_bw_hz`` (None: the defaults)."""
-    if pll_bw_hz is None:
-        return None
-    from .receiver.tracking import TrackingConfig
-
-    d = TrackingConfig()
-    t_max = d.max_coherent_s
-    if pll_bw_hz * t_max > 0.25:       # TrackingConfig's stability limit
-        raise ValueError(f"pll_bw_hz {pll_bw_hz:g} Hz x {t_max * 1e3:g} ms coherent time = "
-                         f"{pll_bw_hz * t_max:g} > 0.25 (unstable loop): at most "
-                         f"{0.25 / t_max:g} Hz")
-    return dataclasses.replace(d, track_pll_bw_hz=pll_bw_hz)
-
-
-def _run_scalar(source, out_dir: Path, prns, rate_hz: float, cold: bool, approx_pos,
-                ephemeris, tracking, progress: bool) -> RunResult:
-    """Scalar mode: :func:`~sdr_di.receiver.run_scalar.run_scalar`, as ``sdr-di run``."""
+def _run_scalar(opts: RunOptions, source, out_dir: Path, assist, nav_path: Path | None,
+                truth_path: Path | None) -> RunResult:
+    """Scalar mode: :func:`~sdr_di.receiver.run_scalar.run_scalar`, with the errors against
+    the reference when there is one."""
+    from .orbits.rinex_nav import load_nav
     from .receiver.run_scalar import run_scalar
     from .receiver.scalar import ScalarReceiver
 
-    assist: bool | dict = not cold
-    if approx_pos is not None:
-        from .frames import llh_to_ecef
-        from .orbits.rinex_nav import load_nav
-        from .receiver.prediction import visible_satellites
+    tracking = opts.tracking_config()
+    res = run_scalar(source, out_dir, prns=opts.prns, rate_hz=opts.rate_hz,
+                     progress=opts.progress, assist=assist,
+                     receiver=None if tracking is None
+                     else ScalarReceiver(config=tracking, log=False),
+                     nav=None if nav_path is None else load_nav(nav_path),
+                     duration_s=opts.duration_s)
+    metrics: dict[str, Any] = {"n_epochs": res.n_epochs, "n_fixes": res.n_fixes,
+                               "processed_s": res.processed_s, "first_fix_s": res.first_fix_s}
+    if truth_path is not None and res.n_fixes:
+        from .receiver.accuracy import solution_vs_truth
 
-        if source.start_week is None or source.start_sow is None:
-            raise ValueError("ephemeris/approx_pos need the file's start time: a sidecar, or "
-                             "start_week and start_sow")
-        lat, lon, h = approx_pos
-        assist = visible_satellites(load_nav(ephemeris), source.start_week, source.start_sow,
-                                    llh_to_ecef(math.radians(lat), math.radians(lon), h))
-        if not assist:
-            raise ValueError(f"{ephemeris}: no satellite above 5 deg at the file's start "
-                             f"from {lat:g}, {lon:g}, {h:g} m")
-    res = run_scalar(source, out_dir, prns=prns, rate_hz=rate_hz, progress=progress,
-                     assist=assist, receiver=None if tracking is None
-                     else ScalarReceiver(config=tracking, log=False))
-    return RunResult(mode="scalar", out_dir=out_dir, files=dict(res.files),
-                     metrics={"n_epochs": res.n_epochs, "n_fixes": res.n_fixes,
-                              "processed_s": res.processed_s},
-                     processed_s=res.processed_s, wall_s=res.wall_s, details=res)
+        m = solution_vs_truth(res.files["pvt"], truth_path)
+        metrics.update(n=m["n_fixes"], vel_mps_rmse=m["vel_rmse_mps"], vel_mps_max=m["vel_max_mps"],
+                       pos_m_rmse=m["pos_rmse_m"], pos_m_max=m["pos_max_m"])
+    inputs = {"if": source.path, "ephemeris": nav_path, "truth": truth_path}
+    return RunResult(mode="scalar", out_dir=out_dir, files=dict(res.files), metrics=metrics,
+                     processed_s=res.processed_s, wall_s=res.wall_s, details=res,
+                     inputs={k: Path(v) for k, v in inputs.items() if v is not None})
 
 
-def _run_integrated(source, out_dir: Path, prns, mode: str, rate_hz: float, cold: bool,
-                    tracking, progress: bool, opt: dict, ephemeris, assist: bool,
-                    gnss_rate_hz: float | None) -> RunResult:
-    """Deep, loose or tight: :func:`~sdr_di.integration.run_integrated.run_deep`, as
-    ``sdr-di run --mode``."""
-    from .integration.receiver import IntegrationConfig
-    from .integration.run_integrated import run_deep
+def _run_integrated(opts: RunOptions, source, out_dir: Path, cfg) -> RunResult:
+    """Deep, loose or tight: :func:`~sdr_di.integration.run_integrated.run_integrated`."""
+    from .integration.run_integrated import run_integrated
 
-    kw: dict[str, Any] = {"filter": (opt["filter"] or "ekf").strip().lower(),
-                          "output_rate_hz": rate_hz, "mode": mode}
-    for key, name in (("gnss_rate_hz", None), ("filter_rate_hz", "filter_rate_hz"),
-                      ("align", "align"), ("iono_wait_s", "iono_wait_s"),
-                      ("nco_latency", "nco_latency")):
-        v = gnss_rate_hz if name is None else opt[name]
-        if v is not None:
-            kw[key] = v
-    cfg = IntegrationConfig(**kw)
-    if opt["assume"] is not None:        # over IntegrationConfig's defaults
-        from .integration.assumptions import apply_to_deep, load_assumptions
-
-        cfg = apply_to_deep(cfg, load_assumptions(opt["assume"]))
-    res = run_deep(source, out_dir, config=cfg, imu_path=opt["imu"], truth_path=opt["truth"],
-                   nav_path=ephemeris, assist=assist, prns=prns, progress=progress,
-                   duration_s=opt["duration_s"], search=not cold, tracking=tracking)
+    res = run_integrated(source, out_dir, config=cfg, imu_path=opts.imu, truth_path=opts.truth,
+                   nav_path=opts.ephemeris, assist=opts.assist, prns=opts.prns,
+                   progress=opts.progress, duration_s=opts.duration_s, search=not opts.cold,
+                   tracking=opts.tracking_config())
     r = res.result
-    return RunResult(mode=mode, out_dir=out_dir, files=dict(res.files),
+    given = {"if": source.path, "imu": opts.imu, "truth": opts.truth,
+             "ephemeris": opts.ephemeris}
+    return RunResult(mode=opts.mode, out_dir=out_dir, files=dict(res.files),
                      metrics={**res.metrics, "handover_s": r.handover_s},
                      processed_s=float(r.profile.get("processed_s", math.nan)),
-                     wall_s=res.wall_s, details=res)
+                     wall_s=res.wall_s, details=res,
+                     inputs={k: Path(v) for k, v in given.items() if v is not None})
 
 
 @_guarded
@@ -490,16 +501,32 @@ def study(spec: PathLike | Mapping[str, Any] | StudySpec, out: PathLike, *,
     CampaignError
         Scheduler unreachable.
     """
+    return study_with(StudyOptions(spec=spec, out=Path(out), runs=runs, scheduler=scheduler,
+                                   workers=workers, force=force, report=report),
+                      on_record=on_record)
+
+
+@_guarded
+def study_with(options: StudyOptions,
+               on_record: Callable[[dict], None] | None = None) -> StudyResult:
+    """:func:`study` with its options as one object (what ``sdr-di study`` calls).
+
+    Parameters
+    ----------
+    options : StudyOptions
+        :class:`~sdr_di.options.StudyOptions`.
+    on_record : callable, optional
+        Called with each run record as it arrives.
+
+    Returns
+    -------
+    StudyResult
+    """
     from .io.atomic import check_output_dir
-    from .studies.spec import StudySpec, load_study, parse_study
     from .studies.study import run_study
 
-    if isinstance(spec, StudySpec):
-        parsed = spec
-    elif isinstance(spec, Mapping):
-        parsed = parse_study(dict(spec), force=force)
-    else:
-        parsed = load_study(spec, force=force)
-    out_dir = check_output_dir(Path(out))
-    return run_study(parsed, out_dir, runs=runs, scheduler=scheduler, workers=workers,
-                     force=force, on_record=on_record, render=report)
+    parsed = options.load_spec()
+    out_dir = check_output_dir(options.out)
+    return run_study(parsed, out_dir, runs=options.runs, scheduler=options.scheduler,
+                     workers=options.workers, force=options.force, on_record=on_record,
+                     render=options.report)

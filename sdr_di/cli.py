@@ -12,15 +12,16 @@ import sys
 from pathlib import Path
 from typing import NoReturn
 
-from .errors import SdrDiError
+from .errors import OptionsError, SdrDiError
 
-#: ``integration.config.DEEP_MEASUREMENTS`` without importing the integration package at
+#: ``coupling.config.DEEP_MEASUREMENTS`` without importing the coupling package at
 #: start-up (a scalar run does not need it); tests/test_deep_measurements.py keeps them equal
 _DEEP_MEASUREMENTS = ("prefilter", "reset", "discriminator")
 
 
-class UsageError(SdrDiError):
-    """Command-line options that do not fit together (one-line message, exit 2)."""
+class UsageError(OptionsError):
+    """Command-line arguments argparse refuses (one-line message, exit 2); options that do not
+    fit together are the options objects' :class:`~sdr_di.errors.OptionsError`."""
 
 
 class _ArgumentParser(argparse.ArgumentParser):
@@ -35,11 +36,6 @@ class _ArgumentParser(argparse.ArgumentParser):
         sub = self.prog.split(" ", 1)[1] if " " in self.prog else ""
         where = f"{sub}: " if sub else ""
         raise UsageError(f"{where}{message} (see {self.prog} --help)")
-
-
-#: Largest BDT week accepted for ``--start-week`` (BDT week 0 began 2006-01-01; week 9999 is
-#: in 2197).
-MAX_BDT_WEEK = 9999
 
 
 def _prn_list(text: str) -> list[str]:
@@ -83,22 +79,22 @@ def _add_generate(sub) -> None:
     p.set_defaults(func=_cmd_generate)
 
 
-#: ``generate``'s flags by the scenario override they set (messages name the flag).
-_GENERATE_FLAGS = {"duration_s": "--duration", "seed": "--seed", "sampling_rate_hz": "--fs",
-                   "if_hz": "--if", "sample_format": "--format", "kind": "--format",
-                   "quantization_bits": "--bits", "cn0_dbhz": "--cn0",
-                   "ephemeris": "--ephemeris", "prns": "--prn"}
+#: ``generate``'s flags by the option they set (messages name the flag).
+GENERATE_FLAGS = {"duration_s": "--duration", "seed": "--seed", "sampling_rate_hz": "--fs",
+                  "if_hz": "--if", "sample_format": "--format", "bits": "--bits",
+                  "cn0_dbhz": "--cn0", "ephemeris": "--ephemeris", "prns": "--prn"}
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
-    from .api import generate
+    from .api import generate_with
+    from .options import GenerateOptions
 
-    files = generate(args.out, scenario=args.scenario, name=args.name,
-                     duration_s=args.duration, seed=args.seed, sampling_rate_hz=args.fs,
-                     if_hz=args.if_hz, sample_format=args.sample_format, bits=args.bits,
-                     cn0_dbhz=args.cn0, ephemeris=args.ephemeris, prns=args.prn,
-                     progress=not args.no_progress, sigmf=args.sigmf,
-                     _names=_GENERATE_FLAGS)
+    files = generate_with(GenerateOptions(
+        out=args.out, scenario=args.scenario, name=args.name, duration_s=args.duration,
+        seed=args.seed, sampling_rate_hz=args.fs, if_hz=args.if_hz,
+        sample_format=args.sample_format, bits=args.bits, cn0_dbhz=args.cn0,
+        ephemeris=args.ephemeris, prns=args.prn, progress=not args.no_progress,
+        sigmf=args.sigmf, names=GENERATE_FLAGS))
     for label, path in files.files.items():
         print(f"{label:9s} {path}")
     return 0
@@ -132,19 +128,20 @@ def _add_file_options(p) -> None:
                    "sample format")
 
 
-def _open_source(args: argparse.Namespace):
-    """The IF source of ``args.if_file`` from its sidecar, tag or the file options."""
-    from .receiver.ifreader import FormatCheckError
-    from .receiver.run_scalar import open_source
+#: The flags of the options that describe an IF file (``run`` and ``acquire``), by the
+#: option they set (:class:`~sdr_di.options.IfFileOptions`).
+FILE_FLAGS = {"sampling_rate_hz": "--fs", "if_hz": "--if", "sample_format": "--format",
+              "rfch": "--rfch", "inverted": "--inverted", "start_week": "--start-week",
+              "start_sow": "--start-sow", "ignore_sidecar": "--ignore-sidecar",
+              "check_format": "--no-format-check"}
 
-    try:
-        return open_source(args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
-                           sample_format=args.sample_format, spectrum_inverted=args.inverted,
-                           start_week=args.start_week, start_sow=args.start_sow,
-                           rfch=args.rfch, ignore_sidecar=args.ignore_sidecar,
-                           check_format=not args.no_format_check)
-    except FormatCheckError as exc:  # the CLI's switch, not the Python argument
-        raise UsageError(f"{exc.finding} (--no-format-check reads it anyway)") from None
+
+def _file_options(args: argparse.Namespace) -> dict:
+    """The :class:`~sdr_di.options.IfFileOptions` fields of ``run`` and ``acquire``."""
+    return dict(if_file=args.if_file, sampling_rate_hz=args.fs, if_hz=args.if_hz,
+                sample_format=args.sample_format, rfch=args.rfch, inverted=args.inverted,
+                start_week=args.start_week, start_sow=args.start_sow,
+                ignore_sidecar=args.ignore_sidecar, check_format=not args.no_format_check)
 
 
 def _add_acquire(sub) -> None:
@@ -195,9 +192,10 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     check_search(args.coherent_ms, args.noncoherent, args.doppler_range, args.pfa)
     if not math.isfinite(args.doppler_center):
         raise UsageError(f"--doppler-center must be finite, got {args.doppler_center}")
+    from .options import IfFileOptions
+
     prns = None if args.prn is None else parse_prns(args.prn)
-    _check_file_options(args)
-    source = _open_source(args)
+    source = IfFileOptions(**_file_options(args), names=FILE_FLAGS).open_source()
     out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_acq"))
     with output_dir_removed_on_failure(out):
         rep = run_acquisition(source, out, prns=prns, coherent_ms=args.coherent_ms,
@@ -243,30 +241,12 @@ def _approx_pos(text: str) -> tuple[float, float, float]:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"expected LAT,LON,H (degrees, degrees, metres), got {text!r}") from None
-    if not (abs(lat) <= 90.0 and abs(lon) <= 360.0 and -1e3 <= h <= 1e5):
-        raise argparse.ArgumentTypeError(f"position out of range: {text!r}")
+    from .options import check_approx_pos
+
+    problem = check_approx_pos(lat, lon, h)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(f"{problem}: {text!r}")
     return lat, lon, h
-
-
-def _visible_assistance(args: argparse.Namespace, source) -> dict[int, float]:
-    """Search assistance of a cold start with ephemeris, a time hint and a position: the
-    visible satellites and their Dopplers (receiver.prediction.visible_satellites)."""
-    import math
-
-    from .frames import llh_to_ecef
-    from .orbits.rinex_nav import load_nav
-    from .receiver.prediction import visible_satellites
-
-    if source.start_week is None or source.start_sow is None:
-        raise UsageError("--ephemeris/--approx-pos need the file's start time: a sidecar, or "
-                         "--start-week and --start-sow")
-    lat, lon, h = args.approx_pos
-    vis = visible_satellites(load_nav(args.ephemeris), source.start_week, source.start_sow,
-                             llh_to_ecef(math.radians(lat), math.radians(lon), h))
-    if not vis:
-        raise UsageError(f"{args.ephemeris}: no satellite above 5 deg at the file's start "
-                         f"from {lat:g}, {lon:g}, {h:g} m")
-    return vis
 
 
 def _add_run(sub) -> None:
@@ -363,247 +343,78 @@ def _add_run(sub) -> None:
     p.set_defaults(func=_cmd_run)
 
 
+#: ``run``'s flags by the option they set (:class:`~sdr_di.options.RunOptions`; messages name
+#: the flag).
+RUN_FLAGS = {"mode": "--mode", "out": "--out", "prns": "--prn", "rate_hz": "--rate",
+             "cold": "--cold", "pll_bw_hz": "--pll-bw", "approx_pos": "--approx-pos",
+             "filter": "--filter", "imu": "--imu", "truth": "--truth",
+             "ephemeris": "--ephemeris", "assist": "--no-assist",
+             "filter_rate_hz": "--filter-rate", "align": "--align", "duration_s": "--duration",
+             "gnss_rate_hz": "--gnss-rate", "iono_wait_s": "--iono-wait",
+             "assume": "--assume", "nco_latency": "--nco-latency",
+             "deep_measurements": "--deep-measurements", "fusion_rate_hz": "--fusion-rate",
+             **FILE_FLAGS}
+
+
+def run_options(args: argparse.Namespace):
+    """``run``'s arguments as :class:`~sdr_di.options.RunOptions` (messages name the flags)."""
+    from .options import RunOptions
+
+    return RunOptions(
+        mode=args.mode, out=args.out, prns=args.prn, rate_hz=args.rate, cold=args.cold,
+        pll_bw_hz=args.pll_bw, approx_pos=args.approx_pos, filter=args.filter, imu=args.imu,
+        truth=args.truth, ephemeris=args.ephemeris, assist=not args.no_assist,
+        filter_rate_hz=args.filter_rate, align=args.align, duration_s=args.duration,
+        gnss_rate_hz=args.gnss_rate, iono_wait_s=args.iono_wait, assume=args.assume,
+        nco_latency=args.nco_latency, deep_measurements=args.deep_measurements,
+        fusion_rate_hz=args.fusion_rate, progress=not args.no_progress, **_file_options(args),
+        names=RUN_FLAGS)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .constants import parse_prns
-    from .errors import RunFailed
-    from .io.atomic import check_output_dir, output_dir_removed_on_failure
-    from .receiver.run_scalar import run_scalar
-    from .receiver.scalar import ScalarReceiver
+    from .api import run_with
 
-    scalar_search = args.mode == "scalar" and args.approx_pos is not None
-    # scalar mode takes --truth, --ephemeris, --no-assist and --duration as the others do
-    deep_opts = [f"--{n.replace('_', '-')}" for n in ("filter", "imu", "filter_rate", "align",
-                                                       "assume", "iono_wait")
-                 if getattr(args, n) is not None]
-    if args.mode == "scalar" and deep_opts:
-        raise UsageError(f"{', '.join(deep_opts)}: only with --mode deep, loose or tight")
-    if args.gnss_rate is not None and args.mode not in ("loose", "tight"):
-        raise UsageError("--gnss-rate: only with --mode loose or tight")
-    if args.nco_latency is not None and args.mode != "deep":
-        raise UsageError("--nco-latency: only with --mode deep")
-    for opt in ("deep_measurements", "fusion_rate"):
-        if getattr(args, opt) is not None and args.mode != "deep":
-            raise UsageError(f"--{opt.replace('_', '-')}: only with --mode deep")
-    if args.approx_pos is not None and (args.mode != "scalar" or args.ephemeris is None):
-        raise UsageError("--approx-pos: only in scalar mode, with --ephemeris")
-    _check_run_options(args)
-    prns = None if args.prn is None else parse_prns(args.prn)
-    source = _open_source(args)
-    out = check_output_dir(args.out or args.if_file.with_name(args.if_file.stem + "_run"))
-    if args.mode != "scalar":
-        with output_dir_removed_on_failure(out):
-            return _run_deep(args, source, out, prns)
-    assist = not args.cold
-    if scalar_search:
-        assist = _visible_assistance(args, source)
-    tracking = _tracking_config(args)
-    nav, truth_path = _scalar_companions(args, source)
-    with output_dir_removed_on_failure(out):
-        res = run_scalar(source, out, prns=prns, rate_hz=args.rate,
-                         progress=not args.no_progress, assist=assist,
-                         receiver=None if tracking is None
-                         else ScalarReceiver(config=tracking, log=False), nav=nav,
-                         duration_s=args.duration, truth_path=truth_path)
-    rt = res.processed_s / max(res.wall_s, 1e-9)
-    print(f"processed {res.processed_s:.1f} s in {res.wall_s:.1f} s (x{rt:.2f} real time); "
-          f"{res.n_fixes}/{res.n_epochs} epochs with a fix"
-          + (f", the first at {res.first_fix_s:.1f} s" if res.n_fixes else "")
-          + ("" if nav is None else "; assistance: the sidecar's navigation file"
-             if args.ephemeris is None else f"; assistance: {args.ephemeris}"))
-    for row in res.channels:
-        print(f"  C{row['prn']:02d} {row['state']:8s} C/N0 {row['cn0_dbhz']} dB-Hz  "
-              f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
-    if args.plots:
-        _scalar_plots(res)
-    if truth_path is not None and res.n_fixes:
-        from .receiver.accuracy import solution_vs_truth
-
-        m = solution_vs_truth(res.files["pvt"], truth_path)
-        if m["n_fixes"]:
-            print(f"errors vs reference ({m['n_fixes']} fixes from {m['first_fix_s']:.1f} s): "
-                  f"velocity {m['vel_rmse_mps']:.4f} m/s (max {m['vel_max_mps']:.4f}), "
-                  f"position {m['pos_rmse_m']:.3f} m (max {m['pos_max_m']:.3f})")
+    opts = run_options(args)
+    res = run_with(opts)
+    if res.mode == "scalar":
+        _print_scalar(res, opts, args.plots)
+    else:
+        _print_integrated(res, args.plots)
     for label, path in res.files.items():
         print(f"{label:9s} {path}")
-    if res.n_fixes == 0:
-        raise RunFailed(_no_fix_diagnosis(args, source, res))
+    if res.mode == "scalar" and res.metrics["n_fixes"] == 0:
+        from .errors import RunFailed
+
+        raise RunFailed(_no_fix_diagnosis(opts, res))
     return 0
 
 
-def _no_fix_diagnosis(args: argparse.Namespace, source, res) -> str:
-    """One line for a run that ended without a single fix: what it got, and the likely
-    causes in the order the run's evidence gives (:mod:`sdr_di.receiver.diagnosis`)."""
-    from .receiver.diagnosis import no_fix_diagnosis
-
-    return no_fix_diagnosis(source, res, given=args.fs is not None
-                            or args.sample_format is not None)
-
-
-def _scalar_plots(res) -> None:
-    """``run --plots`` in scalar mode: the report's figures of this run
-    (:func:`sdr_di.report.write_run_plots`, drawn from the files the run wrote)."""
-    from .report import write_run_plots
-
-    pvt = res.files["pvt"]
-    _print_plots(write_run_plots(pvt.parent, pvt.name.removesuffix("_pvt.csv")))
-
-
-def _print_plots(out) -> None:
-    if isinstance(out, str):
-        print(f"sdr-di: warning: {out}", file=sys.stderr)
-        return
-    for p in out:
-        print(f"plot      {p}")
+def _print_scalar(res, opts, plots: bool) -> None:
+    """A scalar run's report: speed, fixes, assistance, channels, plots, errors vs the
+    reference."""
+    d, m = res.details, res.metrics
+    rt = d.processed_s / max(d.wall_s, 1e-9)
+    nav = res.inputs.get("ephemeris")
+    print(f"processed {d.processed_s:.1f} s in {d.wall_s:.1f} s (x{rt:.2f} real time); "
+          f"{d.n_fixes}/{d.n_epochs} epochs with a fix"
+          + (f", the first at {d.first_fix_s:.1f} s" if d.n_fixes else "")
+          + ("" if nav is None else "; assistance: the sidecar's navigation file"
+             if opts.ephemeris is None else f"; assistance: {opts.ephemeris}"))
+    for row in d.channels:
+        print(f"  C{row['prn']:02d} {row['state']:8s} C/N0 {row['cn0_dbhz']} dB-Hz  "
+              f"ephemeris {'decoded' if row['ephemeris_decoded'] else 'not decoded'}")
+    if plots:
+        _print_plots(_run_plots(res))
+    if m.get("n"):
+        print(f"errors vs reference ({m['n']} fixes from {m['first_fix_s']:.1f} s): "
+              f"velocity {m['vel_mps_rmse']:.4f} m/s (max {m['vel_mps_max']:.4f}), "
+              f"position {m['pos_m_rmse']:.3f} m (max {m['pos_m_max']:.3f})")
 
 
-def _scalar_companions(args: argparse.Namespace, source):
-    """Scalar mode's assistance navigation data (``--ephemeris``, else the sidecar's
-    ``ephemeris_file``; None with ``--no-assist``) and reference file (``--truth``, else the
-    sidecar's ``truth_file``), as the integrated modes find them."""
-    from .io.sidecar import companion_files
-    from .orbits.rinex_nav import load_nav
-
-    comp = companion_files(source, skip=("imu",) + (("truth",) if args.truth else ()))
-    nav_path = None if args.no_assist else (args.ephemeris or comp["ephemeris"])
-    return (None if nav_path is None else load_nav(nav_path)), (args.truth or comp["truth"])
-
-
-def _check_run_options(args: argparse.Namespace) -> None:
-    """``run``'s numbers and input file, checked before any work (one-line errors)."""
-    import math
-
-    for opt, v in (("--rate", args.rate), ("--filter-rate", args.filter_rate),
-                   ("--duration", args.duration), ("--gnss-rate", args.gnss_rate),
-                   ("--pll-bw", args.pll_bw)):
-        if v is not None and not (math.isfinite(v) and v > 0):
-            raise UsageError(f"{opt} must be a finite number > 0, got {v:g}")
-    if args.iono_wait is not None and not (math.isfinite(args.iono_wait)
-                                           and args.iono_wait >= 0):
-        raise UsageError(f"--iono-wait must be a finite number >= 0, got {args.iono_wait:g}")
-    _tracking_config(args)
-    _check_file_options(args)
-
-
-def _tracking_config(args: argparse.Namespace):
-    """The scalar loops' settings of ``run`` (``--pll-bw``), or None for the defaults."""
-    if args.pll_bw is None:
-        return None
-    import dataclasses
-
-    from .receiver.tracking import TrackingConfig
-
-    d = TrackingConfig()
-    t_max = d.max_coherent_s
-    if args.pll_bw * t_max > 0.25:     # TrackingConfig's stability limit, in the CLI's terms
-        raise UsageError(f"--pll-bw {args.pll_bw:g} Hz x {t_max * 1e3:g} ms coherent time = "
-                         f"{args.pll_bw * t_max:g} > 0.25 (unstable loop): at most "
-                         f"{0.25 / t_max:g} Hz")
-    return dataclasses.replace(d, track_pll_bw_hz=args.pll_bw)
-
-
-def _check_file_options(args: argparse.Namespace) -> None:
-    """The IF file and the options that describe it (``_add_file_options``), before any work."""
-    import math
-
-    from .constants import SECONDS_PER_WEEK
-
-    if args.fs is not None and not (math.isfinite(args.fs) and args.fs > 0):
-        raise UsageError(f"--fs must be a finite number > 0, got {args.fs:g}")
-    if args.if_hz is not None and not math.isfinite(args.if_hz):
-        raise UsageError(f"--if must be a finite number [Hz], got {args.if_hz:g}")
-    if args.start_week is not None and not 0 <= args.start_week <= MAX_BDT_WEEK:
-        raise UsageError(f"--start-week must be a BDT week 0..{MAX_BDT_WEEK}, got "
-                         f"{args.start_week}")
-    sow = args.start_sow
-    if sow is not None and not (math.isfinite(sow) and 0 <= sow < SECONDS_PER_WEEK):
-        raise UsageError(f"--start-sow must be BDT seconds of week in [0, {SECONDS_PER_WEEK:g})"
-                         f", got {sow:g}")
-    _check_if_file(args.if_file)
-
-
-def _check_if_file(path: Path) -> None:
-    """The IF file (or its sidecar) named on the command line exists and is a file."""
-    if path.is_dir():
-        raise UsageError(f"IF file {path}: is a folder")
-    if not path.exists() and (path.suffix == ".json" or not path.with_suffix(".json").exists()):
-        from .io.sigmf_files import sigmf_meta_path
-
-        if sigmf_meta_path(path) is None:  # a SigMF base name X needs only X.sigmf-meta
-            raise UsageError(f"IF file {path}: no such file")
-
-
-def _check_deep_inputs(args: argparse.Namespace, source, cfg) -> None:
-    """Filter (built with its options: a plugin's import and interface), and a filter rate
-    that divides the IMU rate, before the start-up."""
-    _probe_filter(cfg.filter, cfg.filter_options, 1.0 / cfg.filter_rate_hz)
-    if args.filter_rate is None:
-        return
-    from .io.sidecar import companion_files
-    from .io.imu_files import read_imu
-
-    imu_path = args.imu or companion_files(source, skip=("truth",))["imu"]
-    if imu_path is not None:
-        rate = read_imu(imu_path).rate_hz
-        n_per = rate / cfg.filter_rate_hz
-        if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
-            raise UsageError(f"--filter-rate {cfg.filter_rate_hz:g} Hz must divide the IMU "
-                             f"rate {rate:g} Hz of {imu_path}")
-
-
-def _probe_filter(name: str, options: dict, dt: float) -> None:
-    """Build the integration filter once on the 17-state models (FilterError: one line)."""
-    import numpy as np
-
-    from .filters import make_filter
-    from .ins.error_model import InsErrorModel
-    from .integration.measurements import RangeRateMeasurementModel
-
-    make_filter(name, InsErrorModel(), RangeRateMeasurementModel(), np.zeros(17), np.eye(17),
-                np.eye(17), None, dt=dt, **options)
-
-
-def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
-    from .filters import parse_filter_spec
-    from .integration.receiver import IntegrationConfig
-    from .integration.run_integrated import run_deep
-
-    spec = parse_filter_spec(args.filter or "ekf")  # typed options; FilterError: exit 2
-    kw = {"filter": spec.name, "filter_options": spec.options, "output_rate_hz": args.rate,
-          "mode": args.mode}
-    if args.gnss_rate is not None:
-        kw["gnss_rate_hz"] = args.gnss_rate
-    if args.filter_rate is not None:
-        kw["filter_rate_hz"] = args.filter_rate
-    if args.align is not None:
-        kw["align"] = args.align
-    if args.iono_wait is not None:
-        kw["iono_wait_s"] = args.iono_wait
-    if args.nco_latency is not None:
-        kw["nco_latency"] = args.nco_latency
-    if args.deep_measurements is not None:
-        kw["deep_measurements"] = args.deep_measurements
-    if args.fusion_rate is not None:
-        kw["fusion_rate_hz"] = args.fusion_rate
-    try:
-        cfg = IntegrationConfig(**kw)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    if args.assume is not None:  # --assume over IntegrationConfig's defaults (docs/assumptions.md)
-        from .integration.assumptions import apply_to_deep, load_assumptions
-
-        cfg = apply_to_deep(cfg, load_assumptions(args.assume))
-    if args.duration is not None and not args.duration > 0:
-        raise UsageError(f"--duration must be > 0, got {args.duration:g}")
-    _check_deep_inputs(args, source, cfg)
-    try:
-        res = run_deep(source, out, config=cfg, imu_path=args.imu, truth_path=args.truth,
-                       nav_path=args.ephemeris, assist=not args.no_assist, prns=prns,
-                       progress=not args.no_progress, duration_s=args.duration,
-                       search=not args.cold, tracking=_tracking_config(args))
-    except ValueError as exc:  # e.g. a filter rate that does not divide the IMU rate
-        raise UsageError(str(exc)) from None
-    r = res.result
-    prof = r.profile
+def _print_integrated(res, plots: bool) -> None:
+    """A deep, loose or tight run's report: speed, hand-over, loop time, errors vs the
+    reference, plots."""
+    r, prof, m = res.details.result, res.details.result.profile, res.details.metrics
     print(f"processed {prof['processed_s']:.1f} s in {res.wall_s:.1f} s "
           f"(x{prof['processed_s'] / max(res.wall_s, 1e-9):.2f} real time); hand-over to the "
           f"{'vector' if r.mode == 'deep' else r.mode} loop at {r.handover_s:.2f} s with "
@@ -617,28 +428,67 @@ def _run_deep(args: argparse.Namespace, source, out: Path, prns) -> int:
         print(f"scalar receiver {prof['scalar']:.1f} s; {r.mode} loop {prof['loop']:.1f} s: "
               + ", ".join(f"{k} {100 * prof[k] / loop:.0f}%" for k in ("measure", "filter",
                                                                      "ins")))
-    m = res.metrics
     if m["n"] and m["pos_m_rmse"] == m["pos_m_rmse"]:
         print(f"errors vs reference ({m['n']} epochs after the hand-over): attitude RMSE "
               f"{m['att_deg_rmse']:.4f} deg (max {m['att_deg_max']:.4f}), velocity "
               f"{m['vel_mps_rmse']:.4f} m/s (max {m['vel_mps_max']:.4f}), position "
               f"{m['pos_m_rmse']:.3f} m (max {m['pos_m_max']:.3f})")
-        mi = res.metrics_after_iono
+        mi = res.details.metrics_after_iono
         if mi is not None and mi["n"]:
-            print(f"  after the ionosphere take-up at {res.iono_from_s:.1f} s ({mi['n']} "
-                  f"epochs; the rows before it have iono = 0): velocity "
+            print(f"  after the ionosphere take-up at {res.details.iono_from_s:.1f} s "
+                  f"({mi['n']} epochs; the rows before it have iono = 0): velocity "
                   f"{mi['vel_mps_rmse']:.4f} m/s, position {mi['pos_m_rmse']:.3f} m "
                   f"(max {mi['pos_m_max']:.3f})")
     else:  # null metrics say why (issue 49 item 7)
-        print(f"errors vs reference: none ({res.metrics_note})")
-    if args.plots:      # the report's figures, drawn from the files the run wrote
-        from .report import write_run_plots
+        print(f"errors vs reference: none ({res.details.metrics_note})")
+    if plots:
+        _print_plots(_run_plots(res))
 
-        _print_plots(write_run_plots(res.files["solution"].parent,
-                                     res.files["solution"].stem))
-    for label, path in res.files.items():
-        print(f"{label:9s} {path}")
-    return 0
+
+def _no_fix_diagnosis(opts, res) -> str:
+    """One line for a run that ended without a single fix: what it got, and the likely
+    causes in the order the run's evidence gives (:mod:`sdr_di.receiver.diagnosis`)."""
+    import warnings
+
+    from .receiver.diagnosis import no_fix_diagnosis
+
+    with warnings.catch_warnings():     # read again: its warnings were shown at the start
+        warnings.simplefilter("ignore")
+        source = opts.open_source()
+    return no_fix_diagnosis(source, res.details, given=opts.sampling_rate_hz is not None
+                            or opts.sample_format is not None)
+
+
+def _run_plots(res):
+    """``run --plots``: the report's figures of this run, drawn from the files it wrote
+    (:func:`sdr_di.report.write_run_plots`); the paths, or a warning's text."""
+    from .report import write_run_plots
+
+    if res.mode == "scalar":
+        pvt = res.files["pvt"]
+        return write_run_plots(pvt.parent, pvt.name.removesuffix("_pvt.csv"))
+    sol = res.files["solution"]
+    return write_run_plots(sol.parent, sol.stem)
+
+
+def _print_plots(out) -> None:
+    if isinstance(out, str):
+        print(f"sdr-di: warning: {out}", file=sys.stderr)
+        return
+    for p in out:
+        print(f"plot      {p}")
+
+
+def _probe_filter(name: str, options: dict, dt: float) -> None:
+    """Build the integration filter once on the 17-state models (FilterError: one line)."""
+    import numpy as np
+
+    from .filters import make_filter
+    from .ins.error_model import InsErrorModel
+    from .coupling.measurements import RangeRateMeasurementModel
+
+    make_filter(name, InsErrorModel(), RangeRateMeasurementModel(), np.zeros(17), np.eye(17),
+                np.eye(17), None, dt=dt, **options)
 
 
 def _add_lc(sub) -> None:
@@ -688,7 +538,6 @@ def _cmd_lc(args: argparse.Namespace) -> int:
         check_lc_duration,
         lc_summary,
         load_lc_scenario,
-        make_inputs,
         min_lc_duration_s,
         run_loose,
     )
@@ -700,6 +549,7 @@ def _cmd_lc(args: argparse.Namespace) -> int:
         output_dir_removed_on_failure,
     )
     from .scenario import DEFAULT_SCENARIO, REPO_ROOT
+    from .sim.lc_inputs import make_inputs
 
     sc, st = load_lc_scenario(args.scenario or DEFAULT_SCENARIO)
     assumed = resolve_assumptions(sc, args.assume)  # checked before any work
@@ -808,6 +658,76 @@ def _cmd_filters(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_study(sub) -> None:
+    p = sub.add_parser(
+        "study", help="cells x filters x seeds, paired on the same files, with statistics",
+        description="Run a study spec (docs/studies.md): every cell's experiment with every "
+        "filter on the same generated files per seed, on a local Dask cluster (or "
+        "--scheduler), each (cell, seed) written as it finishes; then paired differences "
+        "against the baseline filter with Holm-corrected intervals, the claims' verdicts, "
+        "cells.csv, runs.csv and report.html. Re-running the same spec into the same folder "
+        "resumes it.")
+    p.add_argument("spec", type=Path, help="study TOML file (studies/*.toml)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--runs", type=int, default=None, metavar="N",
+                   help="seeds per cell (default: the spec's runs)")
+    p.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="Dask scheduler address (tcp://host:8786); default: local processes")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="local worker processes (default: number of cores; 0: run in this "
+                   "process, no cluster)")
+    p.add_argument("--force", action="store_true",
+                   help="replace a different study's runs in --out (runs of unchanged cells are "
+                   "kept); run a study beyond 10,000 (cell, seed) runs")
+    p.add_argument("--no-report", action="store_true", help="do not write report.html")
+    p.set_defaults(func=_cmd_study)
+
+
+#: ``study``'s flags by the option they set (:class:`~sdr_di.options.StudyOptions`).
+STUDY_FLAGS = {"runs": "--runs", "workers": "--workers", "scheduler": "--scheduler",
+               "force": "--force", "report": "--no-report"}
+
+
+def _cmd_study(args: argparse.Namespace) -> int:
+    """``sdr-di study``: :func:`sdr_di.api.study_with` with the parsed options."""
+    import dataclasses
+
+    import dask
+
+    from .api import study_with
+    from .options import StudyOptions
+    from .studies.commands import WORKERS_IGNORE_SIGINT, StudyProgress
+    from .studies.study import study_outputs
+
+    opts = StudyOptions(spec=args.spec, out=args.out, runs=args.runs,
+                        scheduler=args.scheduler, workers=args.workers, force=args.force,
+                        report=not args.no_report, names=STUDY_FLAGS)
+    spec = opts.load_spec()     # refused here in one line, before the bar
+    opts = dataclasses.replace(opts, spec=spec)
+    show = StudyProgress(len(spec.cells) * (args.runs or spec.runs))
+    preload = [*dask.config.get("distributed.worker.preload", []), WORKERS_IGNORE_SIGINT]
+    with dask.config.set({"distributed.worker.preload": preload}), show:
+        res = study_with(opts, on_record=show)
+        if res.n_skipped:                       # the runs already in the folder
+            show.bar.update(res.n_skipped)
+    spec = res.spec
+    print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
+          f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
+          f"{res.elapsed_s:.1f} s")
+    for c in (res.tuning or {}).values():
+        where = f" in {c.cell}" if c.cell else ""
+        print(f"tuned: {c.filter}{where} -> {c.entry} (training score {c.score:.4g})")
+    for r in res.failed:
+        print(f"  failed: {r['cell']} seed {r['seed_index']} {r['filter']}: {r['error']}",
+              file=sys.stderr)
+    for j, cl in enumerate(spec.claims, 1):
+        verdicts = [f"{r['cell']}: {r[f'claim{j}']}" for r in res.cells if r[f"claim{j}"]]
+        print(f"claim {j} ({cl.text}): {'; '.join(verdicts)}")
+    for label, path in study_outputs(args.out).items():   # every file, named
+        print(f"{label:11s} {path}")
+    return 1 if res.failed else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``sdr-di`` argument parser."""
     from . import __version__
@@ -826,6 +746,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .studies.commands import add_parsers as add_experiment_parsers
 
     add_experiment_parsers(sub)
+    _add_study(sub)
     return parser
 
 

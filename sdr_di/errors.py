@@ -1,12 +1,25 @@
 """Exception hierarchy.
 
 Every bad input raises a subclass of :class:`SdrDiError` naming the input and what is wrong;
-the CLI prints ``error: <message>`` on one line and exits with status 2.
+the CLI prints ``error: <message>`` on one line and exits with status 2. The public API
+(``sdr_di.generate``, ``sdr_di.run``, ``sdr_di.study``) raises the same classes, exported from
+``sdr_di``. Those of a bad value of an option or argument (:class:`OptionsError`,
+:class:`FilterError`, :class:`AcquisitionError`, :class:`SolutionFileError`) are also
+``ValueError``; the errors of a file's content (scenario, sidecar, IMU data, study spec)
+are not, so that the numerical-failure handlers (``except ValueError``) never mistake one
+for a failed computation.
 """
 
 
 class SdrDiError(Exception):
     """Base class of all sdr-di input and processing errors."""
+
+
+class OptionsError(SdrDiError, ValueError):
+    """Options of a command (or arguments of the API function that mirrors it) out of range
+    or that do not fit together: a bad mode, a number that must be positive, an option of
+    another mode, a PLL bandwidth beyond the loop's stability limit. The message names the
+    option as it was given (the CLI's flag, the API's argument)."""
 
 
 class ScenarioError(SdrDiError):
@@ -47,13 +60,31 @@ class FileSetError(SidecarError):
     written with (size or digest differ: a mixed set)."""
 
 
+class FormatCheckError(SampleFormatError):
+    """The layout heuristic says the bytes are not in the declared format (:mod:`sdr_di.receiver.ifreader` notes).
+
+    ``str()`` ends with how to read the file anyway (``hint``); :attr:`finding` is the
+    message without it, for a caller that names its own switch (the CLI's
+    ``--no-format-check``).
+    """
+
+    def __init__(self, finding: str, hint: str):
+        super().__init__(f"{finding} ({hint})")
+        self.finding = finding
+
+
+class SolutionFileError(SdrDiError, ValueError):
+    """A solution file that cannot be read (wrong header, columns or values)."""
+
+
 class ImuDataError(SdrDiError):
     """IMU data with NaN, gaps or non-monotonic time."""
 
 
-class FilterError(SdrDiError):
+class FilterError(SdrDiError, ValueError):
     """Bad filter input or configuration: unknown filter name, wrong-size ``z``/``R``/``Q``,
-    non-finite values, non-positive-definite initial covariance, unknown option."""
+    non-finite values, non-positive-definite initial covariance, unknown option (a bad
+    value: also a ``ValueError``)."""
 
 
 class CovarianceError(FilterError):
@@ -126,3 +157,22 @@ class RunFailed(SdrDiError):
     is what failed."""
 
     exit_status = 1
+
+
+class NoSatelliteError(RunFailed):
+    """Acquisition found no satellite in the IF file (a run without a fix: exit status 1)."""
+
+
+class ImplausibleAcquisition(RunFailed):
+    """A run's acquisition gave detections that real signals cannot give: the samples are
+    read wrongly (the CLI's exit status 1)."""
+
+
+class HandoverError(RunFailed):
+    """The scalar start-up never reached a state the vector loop can take over (a run
+    without a fix: exit status 1)."""
+
+
+class LoopProcessError(SdrDiError):
+    """The loop failed in its child process with an exception that does not pickle (its
+    text)."""

@@ -1,4 +1,4 @@
-"""Suite-wide guards."""
+"""Suite-wide guards, and the IF-file factory the tests share (``if_files``)."""
 
 import signal
 
@@ -19,3 +19,31 @@ def _sigint_disposition_kept():
     if after is not before:
         signal.signal(signal.SIGINT, before)
         pytest.fail(f"SIGINT disposition changed by this test: {before!r} -> {after!r}")
+
+
+@pytest.fixture(scope="session")
+def if_files(tmp_path_factory):
+    """The IF-file factory of the whole test run: ``if_files(duration_s, sampling_rate_hz=2.5e6,
+    seed=None, name=None, **overrides)`` -> :class:`sdr_di.api.GeneratedFiles` of the default
+    scenario (``sdr_di.generate``: ``overrides`` are its other arguments, ``cn0_dbhz``,
+    ``sample_format``, ``prns``, ``scenario``...), generated once per set of arguments and
+    shared by every test that asks for the same file (one per xdist worker).
+
+    The files are shared: a test that changes one copies it first.
+    """
+    import sdr_di
+
+    made: dict = {}
+
+    def make(duration_s: float, sampling_rate_hz: float = 2.5e6, seed: int | None = None,
+             name: str | None = None, **overrides):
+        key = (float(duration_s), float(sampling_rate_hz), seed, name,
+               tuple(sorted((k, repr(v)) for k, v in overrides.items())))
+        if key not in made:
+            made[key] = sdr_di.generate(tmp_path_factory.mktemp("if_files"),
+                                        duration_s=duration_s,
+                                        sampling_rate_hz=sampling_rate_hz, seed=seed,
+                                        name=name, **overrides)
+        return made[key]
+
+    return make

@@ -16,13 +16,14 @@ from sdr_di.experiments import Experiment, register_experiment
 
 
 def test_import_sdr_di_loads_no_numerics():
-    """``import sdr_di`` gives the API without numpy, the receiver or the study machinery."""
+    """``import sdr_di`` gives the API, its options objects and its errors without numpy, the
+    receiver or the study machinery."""
     code = ("import sys, sdr_di; print(sorted(m for m in sys.modules if m == 'numpy' or "
             "m.startswith('sdr_di.')), callable(sdr_di.run) and callable(sdr_di.study) "
             "and callable(sdr_di.generate))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split("\n")[0]
-    assert out == "['sdr_di.api'] True"
+    assert out == "['sdr_di.api', 'sdr_di.errors', 'sdr_di.options'] True"
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ import pytest
 
 from sdr_di.cli import main
 from sdr_di.constants import F_B3I
-from sdr_di.integration.config import IntegrationConfig
+from sdr_di.coupling.config import IntegrationConfig
 from sdr_di.integration.filter_setup import clock_model
 from sdr_di.errors import AssumptionsError, ScenarioError
 from sdr_di.integration.assumptions import (
@@ -23,7 +23,8 @@ from sdr_di.integration.assumptions import (
     parse_assumptions,
     resolve_assumptions,
 )
-from sdr_di.integration.loose import LcSettings, make_inputs, run_loose
+from sdr_di.integration.loose import LcSettings, run_loose
+from sdr_di.sim.lc_inputs import make_inputs
 from sdr_di.io.imu_files import read_truth
 from sdr_di.scenario import DEFAULT_SCENARIO
 from sdr_di.scenario.schema import parse_scenario

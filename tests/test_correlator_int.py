@@ -196,11 +196,13 @@ def test_low_rate_int8_stays_on_float_kernel():
 
 
 def test_environment_switch(monkeypatch):
-    """SDR_DI_CORRELATOR=float (read at import) selects the float32 reference; a typo is an
-    error, not a silent default."""
+    """SDR_DI_CORRELATOR=float (read at import, sdr_di.settings) selects the float32
+    reference; a typo is an error, not a silent default."""
+    from sdr_di.settings import integer_correlator
+
     for value, want in (("float", False), ("int", True), ("", True), (" Float ", False)):
         monkeypatch.setenv("SDR_DI_CORRELATOR", value)
-        assert kb._integer_path_from_env() is want
+        assert integer_correlator() is want
     monkeypatch.setenv("SDR_DI_CORRELATOR", "fp32")
     with pytest.raises(ValueError, match="SDR_DI_CORRELATOR"):
-        kb._integer_path_from_env()
+        integer_correlator()

@@ -22,10 +22,10 @@ import pytest
 
 from sdr_di.cli import main
 from sdr_di.integration.consistency import SD_COLUMNS
-from sdr_di.integration.run_integrated import DEEP_COLUMNS
+from sdr_di.integration.run_integrated import SOLUTION_COLUMNS
 
 BLOCK = (16.0, 22.0)          # 4 of 7 satellites blocked [s]
-COL = {c: i for i, c in enumerate(DEEP_COLUMNS)}
+COL = {c: i for i, c in enumerate(SOLUTION_COLUMNS)}
 
 
 class _Runs(dict):
@@ -86,7 +86,7 @@ def runs(tmp_path_factory):
 def test_loose_and_tight_end_to_end(runs, mode):
     rows, summ = runs[mode]
     assert summ["mode"] == mode and summ["filter"] == "ekf"
-    assert rows.shape[1] == len(DEEP_COLUMNS)
+    assert rows.shape[1] == len(SOLUTION_COLUMNS)
     t = rows[:, COL["t_s"]]
     assert np.all(np.diff(t) == pytest.approx(0.2))                    # 5 Hz output
     assert 10.0 < summ["handover_s"] < BLOCK[0] - 2.0
@@ -153,7 +153,7 @@ def test_a_loop_over_a_kept_scalar_run_gives_the_rows_of_its_own_run(runs):
     column: errors, states, formal sigmas, channel columns, NIS)."""
     from sdr_di.integration.receiver import (IntegratedReceiver, IntegrationConfig,
                                              ScalarRecord, StartMismatchError)
-    from sdr_di.integration.run_integrated import write_deep_csv
+    from sdr_di.integration.run_integrated import write_solution_csv
     from sdr_di.io.imu_files import read_imu, read_truth
     from sdr_di.receiver.run_scalar import open_source, search_assistance
 
@@ -177,7 +177,7 @@ def test_a_loop_over_a_kept_scalar_run_gives_the_rows_of_its_own_run(runs):
     loose = IntegratedReceiver(IntegrationConfig(filter="ekf", mode="loose")).run(
         src, imu, start=rec, **kw)
     rows, _ = runs["loose"]
-    csv = write_deep_csv(paths["if"].parent / "replayed_loose.csv", loose)
+    csv = write_solution_csv(paths["if"].parent / "replayed_loose.csv", loose)
     assert np.array_equal(np.loadtxt(csv, delimiter=",", skiprows=2), rows, equal_nan=True)
     # refused: another GNSS rate, or deep mode
     for cfg in (IntegrationConfig(filter="ekf", mode="loose", gnss_rate_hz=10.0),
@@ -282,7 +282,7 @@ def _static_tight_setup(dur=8.0, d_north_m=0.0, v_east_mps=0.0, clock_bias_m=0.0
     from sdr_di.ins.mechanization import StrapdownINS
     from sdr_di.integration.gnss_epochs import GnssEpoch
     from sdr_di.integration.loop import IntegrationLoop
-    from sdr_di.integration.measurements import RangeRateMeasurementModel
+    from sdr_di.coupling.measurements import RangeRateMeasurementModel
     from sdr_di.integration.tight_ranges import TightRangeSource
     from sdr_di.receiver.observables import Observables
     from sdr_di.receiver.pvt import SatelliteStates, modelled_observables
@@ -591,7 +591,7 @@ def test_loose_gate_drops_a_fix_outside_its_innovation_covariance_and_recovers()
 
     from sdr_di.integration.loop import Measurements
     from sdr_di.integration.loose_fixes import LooseFixSource
-    from sdr_di.integration.measurements import LooseMeasurementModel
+    from sdr_di.coupling.measurements import LooseMeasurementModel
 
     llh = np.array([math.radians(40.0), math.radians(116.0), 100.0])
     model = LooseMeasurementModel(llh)

@@ -20,7 +20,7 @@ from sdr_di.deep import (
 )
 from sdr_di.deep._numba_prefilter import prefilter_epochs
 from sdr_di.deep.bit_power import BitPower
-from sdr_di.deep.vector_tracking import _Chan, _epoch_rows
+from sdr_di.deep.vector_tracking import VectorChannel, _epoch_rows
 from sdr_di.errors import FilterError, ImuDataError
 from sdr_di.frames import llh_to_ecef
 from sdr_di.integration.receiver import IntegrationConfig, IntegratedReceiver
@@ -74,7 +74,7 @@ def test_epoch_rows_are_contiguous_whole_code_periods():
     from sdr_di.signal.codes import NH20
 
     fs = 5e6
-    c = _Chan(prn=27, idx=0, is_d1=True, eph=None, next_start=1003, epoch=40,
+    c = VectorChannel(prn=27, idx=0, is_d1=True, eph=None, next_start=1003, epoch=40,
               phase=0.25, power=BitPower(4))
     dc = CHIP_RATE_B3I * (1 + 1.7e-6) / fs
     c0 = 40 * CODE_LENGTH_B3I + 0.3 - 1003 * dc      # chips(k) = c0 + k dc: 0.3 chip into 40
@@ -93,7 +93,7 @@ def test_epoch_rows_are_contiguous_whole_code_periods():
     assert np.allclose(dph, dp)
     # a Doppler ramp: frequencies interpolated between the two interval averages, and the
     # phase advance over the interval equals the new average times the interval
-    c2 = _Chan(prn=27, idx=0, is_d1=False, eph=None, next_start=0, epoch=0, phase=0.0,
+    c2 = VectorChannel(prn=27, idx=0, is_d1=False, eph=None, next_start=0, epoch=0, phase=0.0,
                power=BitPower(4))
     s2, n2, _, _, dph2, nh2, _ = _epoch_rows(c2, 0.0, dc, 1000.0 / fs, 1010.0 / fs, 0, 100_000)
     mid = (s2 + 0.5 * n2) / 100_000
@@ -485,7 +485,7 @@ def test_every_filter_runs_the_deep_measurement_model_with_a_changing_channel_co
     R from pre-filter variances) for every filter name, with N_k going 7 -> 5 -> 7."""
     from sdr_di.filters import FILTER_NAMES, make_filter
     from sdr_di.ins.error_model import InsErrorModel, NavState, process_noise
-    from sdr_di.integration.measurements import RangeRateMeasurementModel
+    from sdr_di.coupling.measurements import RangeRateMeasurementModel
 
     llh = np.array([math.radians(40.0), math.radians(116.0), 100.0])
     v = np.array([0.0, 20.0, 0.0])
@@ -536,7 +536,7 @@ def test_gnss_alignment_recovers_a_banked_turn():
 @pytest.mark.parametrize("mode", ["deep", "loose", "tight"])
 def test_iono_wait_option_reaches_the_handover_rule(gen26, tmp_path, monkeypatch, mode):
     """``run --iono-wait S`` sets ``IntegrationConfig.iono_wait_s`` of every integrated mode (the
-    default config does not wait: 0 s); the run itself is stopped at ``run_deep``'s door."""
+    default config does not wait: 0 s); the run itself is stopped at ``run_integrated``'s door."""
     import sdr_di.integration.run_integrated as rd
 
     seen = []
@@ -548,7 +548,7 @@ def test_iono_wait_option_reaches_the_handover_rule(gen26, tmp_path, monkeypatch
         seen.append(config)
         raise Stop
 
-    monkeypatch.setattr(rd, "run_deep", fake_run_deep)
+    monkeypatch.setattr(rd, "run_integrated", fake_run_deep)
     for extra, want in ((["--iono-wait", "30"], 30.0), (["--iono-wait", "12.5"], 12.5),
                         ([], 0.0)):
         with pytest.raises(Stop):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sdr_di.cli import main
-from sdr_di.integration.run_integrated import DEEP_COLUMNS, iono_in_force, iono_take_up_s
+from sdr_di.integration.run_integrated import SOLUTION_COLUMNS, iono_in_force, iono_take_up_s
 from sdr_di.integration.receiver import IntegrationConfig
 from sdr_di.scenario import REPO_ROOT
 
@@ -56,9 +56,9 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
     assert rc == 0, cap.err
     assert cap.err.count("sdr-di: warning:") == 1 and "without ionosphere" in cap.err
     rows = np.loadtxt(out / "default_deep.csv", delimiter=",", skiprows=2)
-    t, iono = rows[:, 0], rows[:, DEEP_COLUMNS.index("iono")]
+    t, iono = rows[:, 0], rows[:, SOLUTION_COLUMNS.index("iono")]
     summ = json.loads((out / "default_deep_summary.json").read_text())
-    nav_change = rows[:, DEEP_COLUMNS.index("nav_change")].astype(int)
+    nav_change = rows[:, SOLUTION_COLUMNS.index("nav_change")].astype(int)
     assert t[0] < 15.0                # before subframe 1 ends: no wait for the ionosphere
     assert iono[0] == 0 and iono[-1] == 1           # taken up when subframe 1 is decoded
     k = int(np.argmax(iono))
@@ -81,10 +81,10 @@ def test_deep_hands_over_without_waiting_and_flags_the_rows(late_file, capsys):
 
 
 def test_integrated_progress_bar_reports_the_start_up_and_ends_at_100(late_file, capsys):
-    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.run_integrated import run_integrated
     from sdr_di.receiver.run_scalar import open_source
 
-    run_deep(open_source(late_file / "default.bin"), late_file / "bar",
+    run_integrated(open_source(late_file / "default.bin"), late_file / "bar",
              config=IntegrationConfig(filter="ekf", mode="loose"), duration_s=12.0, progress=True)
     err = capsys.readouterr().err.replace("\r", "\n").splitlines()
     bars = [ln for ln in err if ln.startswith("run loose")]

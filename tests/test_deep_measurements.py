@@ -20,7 +20,7 @@ from sdr_di.deep.discriminators import DiscriminatorBank, interval_discriminator
 from sdr_di.deep.prefilter import PreFilterBank, ResetPreFilterBank
 from sdr_di.experiments.measurement_errors import (meets_criterion, simulate_open_loop,
                                                    whiteness_figures)
-from sdr_di.integration.config import DEEP_MEASUREMENTS, IntegrationConfig
+from sdr_di.coupling.config import DEEP_MEASUREMENTS, IntegrationConfig
 
 BETA = CHIP_RATE_B3I / F_B3I
 

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from sdr_di.integration.run_integrated import DEEP_COLUMNS
+from sdr_di.integration.run_integrated import SOLUTION_COLUMNS
 from sdr_di.errors import NoEphemerisError
 from sdr_di.orbits.rinex_nav import load_nav
 from sdr_di.receiver.navdata import BROADCAST, RINEX, NavDataInForce
@@ -342,7 +342,7 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     the interval being correlated, and its pre-filter step waits for that interval's
     correlations; the same bounds hold."""
     import sdr_di.orbits.rinex_nav as rinex_nav
-    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.run_integrated import run_integrated
     from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.receiver.run_scalar import open_source
 
@@ -352,7 +352,7 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav, change))
     src = open_source(late_start_file / "default.bin")
     out = late_start_file / f"run{nco_latency}"
-    summ = run_deep(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=0.0,
+    summ = run_integrated(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=0.0,
                                                        nco_latency=nco_latency),
                     progress=False)
     err = capsys.readouterr().err
@@ -377,7 +377,7 @@ def test_deep_without_iono_lines_and_a_differing_record_takes_up_the_decoded_dat
         t_eph.append(h[-1]["t_s"])
     assert t_iono < min(t_eph) and max(t_eph) < 36.0            # subframe 3 ends at +34 s
     rows = np.loadtxt(out / "default_deep.csv", delimiter=",", skiprows=2)
-    t, flag = rows[:, 0], rows[:, DEEP_COLUMNS.index("nav_change")].astype(int)
+    t, flag = rows[:, 0], rows[:, SOLUTION_COLUMNS.index("nav_change")].astype(int)
     assert np.any(flag & 2) and np.any(flag & 1)
     assert t[np.flatnonzero(flag & 2)[0]] == pytest.approx(t_iono, abs=0.21)
     pe = rows[:, 21:24]
@@ -401,14 +401,14 @@ def test_deep_hand_over_waits_for_subframe_1(late_start_file, nav, monkeypatch, 
     sets would complete only at +34 s), so there is no warning and the loop starts with the
     broadcast Klobuchar model."""
     import sdr_di.orbits.rinex_nav as rinex_nav
-    from sdr_di.integration.run_integrated import run_deep
+    from sdr_di.integration.run_integrated import run_integrated
     from sdr_di.integration.receiver import IntegrationConfig
     from sdr_di.receiver.run_scalar import open_source
 
     monkeypatch.setattr(rinex_nav, "load_nav", lambda path: _NoIono(nav))
     src = open_source(late_start_file / "default.bin")
     out = late_start_file / "run_wait"
-    run_deep(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=30.0), progress=False,
+    run_integrated(src, out, config=IntegrationConfig(filter="ekf", iono_wait_s=30.0), progress=False,
              duration_s=27.0)
     assert "warning" not in capsys.readouterr().err
     s = json.loads((out / "default_deep_summary.json").read_text())

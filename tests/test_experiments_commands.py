@@ -103,7 +103,7 @@ def test_nco_latency_goes_to_deep_variants_only(monkeypatch):
     """One experiment with ``nco_latency=1`` and modes ``deep,loose``: the deep variant's
     configuration gets it, the loose one's does not (it would be refused: no NCOs)."""
     from sdr_di.experiments._deep import run_deep_variant
-    from sdr_di.integration import receiver
+    from sdr_di.integration import settings
 
     made = []
 
@@ -111,12 +111,15 @@ def test_nco_latency_goes_to_deep_variants_only(monkeypatch):
         made.append(kw)
         raise ValueError("recorded")
 
-    monkeypatch.setattr(receiver, "IntegrationConfig", recorder)
+    # the one builder (build_integration_config) makes every configuration
+    monkeypatch.setattr(settings, "IntegrationConfig", recorder)
     for mode in ("deep", "loose"):
         dr = run_deep_variant(None, "ekf", mode=mode, nco_latency=1, filter_rate_hz=50.0)
-        assert dr.error == "ValueError: recorded"
-    assert made[0] == {"filter": "ekf", "nco_latency": 1, "filter_rate_hz": 50.0}
-    assert made[1] == {"filter": "ekf", "mode": "loose", "filter_rate_hz": 50.0}
+        assert dr.error == "OptionsError: recorded"
+    assert made[0] == {"filter": "ekf", "filter_options": {}, "nco_latency": 1,
+                       "filter_rate_hz": 50.0}
+    assert made[1] == {"filter": "ekf", "filter_options": {}, "mode": "loose",
+                       "filter_rate_hz": 50.0}
 
 
 def test_aggregate_statistics_and_nonfinite_values():

@@ -19,7 +19,8 @@ import pytest
 from sdr_di.errors import ExperimentError
 from sdr_di.experiments import count_change, outage
 from sdr_di.studies.aggregate import aggregate, single_stats
-from sdr_di.experiments.filter_figures import filter_names_in, parse_filter_spec
+from sdr_di.experiments.entries import check_filter_entry
+from sdr_di.experiments.filter_figures import filter_names_in
 from sdr_di.experiments.registry import get_experiment, parse_params
 from sdr_di.experiments.variants import (
     Variant,
@@ -48,11 +49,11 @@ def test_variant_labels_keep_deep_names_and_tag_the_other_couplings():
 ])
 def test_bad_filter_entries_are_one_line_errors(spec, match):
     with pytest.raises(ExperimentError, match=match):
-        parse_filter_spec("x", spec)
+        check_filter_entry("x", spec)
 
 
 def test_filter_options_are_read_as_numbers_where_they_are_numbers():
-    assert parse_filter_spec("x", "ff-aukf:window=25:q_states=all") == (
+    assert check_filter_entry("x", "ff-aukf:window=25:q_states=all") == (
         "ff-aukf", {"window": 25, "q_states": "all"})
 
 

@@ -106,17 +106,14 @@ def test_a_false_option_reaches_the_rule_as_false():
 
 # ---- run and lc take entries with options ------------------------------------------------------
 @pytest.fixture(scope="module")
-def short_file(tmp_path_factory):
-    out = tmp_path_factory.mktemp("short")
-    assert main(["generate", "--no-progress", "--duration", "1", "--fs", "2.5e6", "--out",
-                 str(out)]) == 0
-    return out / "default.bin"
+def short_file(if_files):
+    return if_files(1.0).if_file
 
 
 @pytest.mark.parametrize("mode", ["deep", "loose", "tight"])
 def test_run_builds_the_config_from_an_entry(short_file, tmp_path, monkeypatch, mode):
     """``run --filter ff-aukf:q_states=nominal:adapt_q=false`` and ``ekf:psd_fallback=clip``:
-    the configuration handed to ``run_deep`` carries the name and the typed options."""
+    the configuration handed to ``run_integrated`` carries the name and the typed options."""
     import sdr_di.integration.run_integrated as rd
 
     seen = []
@@ -124,11 +121,11 @@ def test_run_builds_the_config_from_an_entry(short_file, tmp_path, monkeypatch, 
     class Stop(Exception):
         pass
 
-    def fake_run_deep(source, out_dir, *, config, **kw):
+    def fake_run_integrated(source, out_dir, *, config, **kw):
         seen.append(config)
         raise Stop
 
-    monkeypatch.setattr(rd, "run_deep", fake_run_deep)
+    monkeypatch.setattr(rd, "run_integrated", fake_run_integrated)
     for entry, name, opts in (
             ("ff-aukf:q_states=nominal:adapt_q=false", "ff-aukf",
              {"q_states": "nominal", "adapt_q": False}),
@@ -369,3 +366,102 @@ def test_a_study_spec_runs_a_plugin_by_import_path(plugin, tmp_path, monkeypatch
 
     with pytest.raises(StudyError, match="scale='big': expected a number"):
         load_study(spec_path)
+
+
+# ---- tuning grids name plugins (issue 48 item 2) ----------------------------------------------
+def _plugin_toy_run(params: dict, seed: int, out_dir) -> dict:
+    """Stand-in for ``compare``: position RMSE ``base (1 + ln(scale / 2)^2)`` for an entry
+    with a ``scale`` option (optimal at 2), ``1.5 base`` for ``ekf``; each entry parsed by
+    the experiments' parser, so a grid entry must reach it with its typed options."""
+    import math
+
+    from sdr_di.experiments.entries import check_filter_entry
+
+    rng = np.random.default_rng(seed)
+    base = 1.0 + rng.random()
+    fig = {}
+    for entry in params["filters"].split(","):
+        name, opts = check_filter_entry("toy", entry)
+        k = 1.5 + 0.1 * rng.random() if name == "ekf" else \
+            1 + math.log(opts.get("scale", 1.0) / 2.0) ** 2
+        fig[f"{entry}.completed"] = 1
+        fig[f"{entry}.handover_s"] = 12.0
+        for q in ("pos_m", "vel_mps", "att_deg"):
+            fig[f"{entry}.{q}_rmse"] = base * k
+    return fig
+
+
+def _plugin_tuning_spec(study_entry: str, grid_key: str) -> dict:
+    return {"study": {"name": "plug-tune", "experiment": "test-plugin-tuning-toy", "runs": 2,
+                      "filters": ["ekf", study_entry], "baseline": "ekf"},
+            "tuning": {"base_seed": 7, "runs": 1, "criterion": "mean_log_pos_rmse",
+                       "grid": {grid_key: {"scale": [0.5, 2.0, 8.0]}}}}
+
+
+@pytest.fixture
+def toy_experiment():
+    from sdr_di.experiments import Experiment, register_experiment
+
+    register_experiment(Experiment(name="test-plugin-tuning-toy", run=_plugin_toy_run,
+                                   default_params={"filters": "", "modes": "deep"}))
+
+
+def _fake_entry_point(monkeypatch, name: str, value: str) -> None:
+    import importlib.metadata
+
+    ep = importlib.metadata.EntryPoint(name=name, value=value, group="sdr_di.filters")
+    real = importlib.metadata.entry_points
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda **kw: (
+        importlib.metadata.EntryPoints([ep]) if kw.get("group") == "sdr_di.filters"
+        else real(**kw)))
+
+
+@pytest.mark.parametrize("how", ["import path", "entry point"])
+def test_a_tuning_grid_names_a_plugin(plugin, toy_experiment, monkeypatch, tmp_path, how):
+    """``[tuning.grid."MODULE:TunedEKF"]`` (and an entry-point name, written in another
+    case) tunes the plugin's own ``scale`` option: the grid is checked against its
+    signature, and the study picks the optimum (2) and evaluates it."""
+    from sdr_di.studies.spec import parse_study
+    from sdr_di.studies.study import run_study
+
+    if how == "import path":
+        entry = key = f"{plugin}:TunedEKF"
+    else:
+        _fake_entry_point(monkeypatch, "tuned-ekf", f"{plugin}:TunedEKF")
+        entry, key = "tuned-ekf", "Tuned-EKF"
+    spec = parse_study(_plugin_tuning_spec(entry, key))
+    assert list(spec.tuning.grids) == [entry]          # keyed by the study's entry
+    assert spec.tuning.grids[entry] == ((("scale", 0.5),), (("scale", 2.0),),
+                                        (("scale", 8.0),))
+    res = run_study(spec, tmp_path / "out", workers=0, render=False)
+    assert res.tuning[(None, entry)].entry == f"{entry}:scale=2"
+    import csv
+
+    with open(tmp_path / "out" / "runs.csv", newline="") as fh:
+        used = {r["entry"] for r in csv.DictReader(fh)}
+    assert used == {"ekf", f"{entry}:scale=2"}
+
+
+@pytest.mark.parametrize("grid, match", [
+    ({"scale": ["big"]}, "must be a finite number"),           # typed from the signature
+    ({"gain": [1.0]}, "has no option 'gain'"),
+])
+def test_a_plugin_grid_is_checked_against_its_signature(plugin, grid, match):
+    from sdr_di.errors import StudyError
+    from sdr_di.studies.spec import parse_study
+
+    # SameEKF: EKF's signature, no **kwargs: an unknown option is refused
+    entry = f"{plugin}:SameEKF" if "gain" in grid else f"{plugin}:TunedEKF"
+    raw = _plugin_tuning_spec(entry, entry)
+    raw["tuning"]["grid"] = {entry: grid}
+    with pytest.raises(StudyError, match=match):
+        parse_study(raw)
+
+
+def test_a_grid_key_that_names_no_study_filter_is_refused(plugin):
+    from sdr_di.errors import StudyError
+    from sdr_di.studies.spec import parse_study
+
+    raw = _plugin_tuning_spec(f"{plugin}:TunedEKF", f"{plugin}:SameEKF")
+    with pytest.raises(StudyError, match="not one of the study's filters"):
+        parse_study(raw)

@@ -19,7 +19,7 @@ from sdr_di.ins.gravity import normal_gravity
 from sdr_di.ins.imu import ImuErrorModel
 from sdr_di.ins.mechanization import StrapdownINS
 from sdr_di.integration.loop import IntegrationLoop, Measurements
-from sdr_di.integration.measurements import LooseMeasurementModel, loose_measurement
+from sdr_di.coupling.measurements import LooseMeasurementModel, loose_measurement
 
 LLH0 = np.array([math.radians(40.0), math.radians(116.0), 100.0])
 RATE = 200.0

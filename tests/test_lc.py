@@ -16,7 +16,8 @@ from sdr_di.integration import (
     predicted_observables,
     rmse_max,
 )
-from sdr_di.integration.loose import make_inputs, run_loose
+from sdr_di.integration.loose import run_loose
+from sdr_di.sim.lc_inputs import make_inputs
 from sdr_di.scenario import DEFAULT_SCENARIO, REPO_ROOT
 
 PAPER003 = REPO_ROOT / "signals" / "lc_paper003.toml"
@@ -70,7 +71,7 @@ def test_range_rate_geometry_is_that_of_its_position_every_time():
     """set_geometry keeps the last position's C1, C2 (the deep loop sets two models at one
     position per interval): H is, bit for bit, the one made from dr_e_dllh and C_e_n at
     the position of each call, also when positions alternate between two models."""
-    from sdr_di.integration.measurements import dr_e_dllh
+    from sdr_di.coupling.measurements import dr_e_dllh
 
     rng = np.random.default_rng(5)
     a, b = RangeRateMeasurementModel(), RangeRateMeasurementModel()

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from sdr_di.cli import main
-from sdr_di.integration.loose import load_lc_scenario, make_inputs
+from sdr_di.integration.loose import load_lc_scenario
+from sdr_di.sim.lc_inputs import make_inputs
 from sdr_di.io.imu_files import write_imu, write_truth
 from sdr_di.scenario import DEFAULT_SCENARIO
 

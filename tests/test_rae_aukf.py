@@ -77,9 +77,9 @@ def test_q_adaptation_off_keeps_q_and_options_are_checked():
                                          ("rae-aukf:adapt_r=true", (True, True))])
 def test_on_off_options_from_a_filter_entry_are_read_as_written(entry, want):
     # a filter entry gives "false" as a string; bool("false") is True
-    from sdr_di.experiments.filter_figures import parse_filter_spec
+    from sdr_di.experiments.entries import check_filter_entry
 
-    name, opts = parse_filter_spec("t", entry)
+    name, opts = check_filter_entry("t", entry)
     kf = make_filter(name, LinearProcessModel(PHI), None, np.zeros(2), np.eye(2), np.eye(2),
                      **opts)
     assert (kf.rule.adapt_q, kf.rule.adapt_r) == want

@@ -16,12 +16,10 @@ from sdr_di.cli import main
 
 
 @pytest.fixture(scope="module")
-def short_set(tmp_path_factory) -> Path:
-    """A 1 s generated set at 2.5 MHz (iq_int8): ``s.bin`` with its sidecar and companions."""
-    d = tmp_path_factory.mktemp("short_set")
-    assert main(["generate", "--no-progress", "--fs", "2.5e6", "--duration", "1", "--out",
-                 str(d), "--name", "s"]) == 0
-    return d
+def short_set(if_files) -> Path:
+    """A 1 s generated set at 2.5 MHz (iq_int8): ``s.bin`` with its sidecar and companions
+    (the session's factory; the tests copy a file before they change it)."""
+    return if_files(1.0, name="s").if_file.parent
 
 
 def _run(capsys, argv: list[str]) -> tuple[int, list[str]]:

@@ -16,11 +16,8 @@ from sdr_di.receiver.run_scalar import open_source, run_scalar
 
 
 @pytest.fixture(scope="module")
-def short_file(tmp_path_factory) -> Path:
-    d = tmp_path_factory.mktemp("g9")
-    assert main(["generate", "--no-progress", "--duration", "9", "--fs", "2.5e6", "--out",
-                 str(d)]) == 0
-    return d / "default.bin"
+def short_file(if_files) -> Path:
+    return if_files(9.0).if_file
 
 
 def test_scalar_run_uses_the_sidecar_ephemeris_and_reports_accuracy(short_file, tmp_path,

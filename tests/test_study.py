@@ -352,19 +352,16 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
 
 # ---- command line ----------------------------------------------------------------------------
 def _run_cli(argv: list[str]) -> int:
-    import argparse
+    from sdr_di.cli import build_parser
 
-    from sdr_di.studies.commands import add_parsers
-
-    parser = argparse.ArgumentParser(prog="sdr-di")
-    add_parsers(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     return args.func(args)
 
 
 @pytest.mark.parametrize("argv, msg", [
     (["study", "nope.toml"], "nope.toml: cannot read"),
-    (["study", str(REPO / "studies" / "smoke.toml"), "--runs", "0"], "--runs must be >= 1"),
+    (["study", str(REPO / "studies" / "smoke.toml"), "--runs", "0"],
+     "--runs must be an integer >= 1"),
     (["study", str(REPO / "studies" / "smoke.toml"), "--workers", "-1"], "--workers"),
 ])
 def test_cli_bad_input_is_a_one_line_error_before_any_work(tmp_path, argv, msg):

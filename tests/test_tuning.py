@@ -13,7 +13,7 @@ import pytest
 from sdr_di.errors import FilterError, StudyError
 from sdr_di.experiments import Experiment, register_experiment
 from sdr_di.studies.campaign import run_seed
-from sdr_di.experiments.filter_figures import parse_filter_spec
+from sdr_di.experiments.entries import check_filter_entry
 from sdr_di.studies.study import run_study
 from sdr_di.studies.spec import parse_study
 from sdr_di.studies.tuning_spec import grid_entry
@@ -28,7 +28,7 @@ def _toy_run(params: dict, seed: int, out_dir) -> dict:
     base = 1.0 + rng.random()
     fig = {}
     for entry in params["filters"].split(","):
-        name, opts = parse_filter_spec("toy", entry)
+        name, opts = check_filter_entry("toy", entry)
         k = (1.2 if name == "ukf" else 1.0) * (
             1 + math.log(opts.get("q_scale", 1) / params["opt"]) ** 2)
         fig[f"{entry}.completed"] = int(opts.get("r_scale", 1) != 8)
@@ -81,7 +81,7 @@ def test_grid_entries_carry_no_dots():
     assert grid_entry("ekf", (("q_scale", 0.5),)) == "ekf:q_scale=5e-1"
     assert grid_entry("ff-aukf:window=20@tight", (("window", 40), ("d", 0.96))) == \
         "ff-aukf:window=40:d=96e-2@tight"
-    assert parse_filter_spec("t", "ff-aukf:d=96e-2")[1] == {"d": 0.96}
+    assert check_filter_entry("t", "ff-aukf:d=96e-2")[1] == {"d": 0.96}
 
 
 @pytest.mark.parametrize("patch, match", [
@@ -104,10 +104,10 @@ def test_a_boolean_grid_of_strings_is_refused():
     raw = _spec(grid={"ff-aukf": {"adapt_q": ["false", "true"]}})
     raw["study"]["filters"] = ["ekf", "ff-aukf"]
     raw["claims"] = []
-    from sdr_di.studies.tuning_spec import _option_defaults
+    from sdr_di.filters.spec import filter_option_info
 
-    defaults = _option_defaults("ff-aukf")
-    flag = next((k for k, v in defaults.items() if isinstance(v, bool)), None)
+    infos, _ = filter_option_info("ff-aukf")
+    flag = next((i.name for i in infos if isinstance(i.default, bool)), None)
     if flag is None:
         pytest.skip("ff-aukf has no boolean option")
     raw["tuning"]["grid"] = {"ff-aukf": {flag: ["false", "true"]}}

@@ -11,25 +11,13 @@ vector-tracking measurement source.
 
 The receiver that runs every coupling mode (scalar start-up, hand-over, the integration
 loop) is :mod:`sdr_di.integration.receiver`; its file runner is
-:mod:`sdr_di.integration.run_integrated`. Their old names here (``sdr_di.deep.vector_loop``,
-``sdr_di.deep.run_deep``, ``sdr_di.deep.DeepReceiver`` ...) still import, with a
-:class:`DeprecationWarning`, until the next release.
+:mod:`sdr_di.integration.run_integrated` (their 0.1 names here were removed in 0.2.0:
+CHANGELOG.md). Deep mode imports nothing of :mod:`sdr_di.integration`; what it shares with
+the loop is :mod:`sdr_di.coupling`.
 """
 
-from .._deprecated import alias_modules, forwarding_getattr
 from .nco import NcoCommand, RangePrediction, nco_commands, predict_ranges
 from .prefilter import PreFilterBank, discriminator_variances
-
-alias_modules(__name__, {"vector_loop": "sdr_di.integration.receiver",
-                         "run_deep": "sdr_di.integration.run_integrated"})
-
-__getattr__ = forwarding_getattr(__name__, {
-    "MODES": "sdr_di.integration.receiver",
-    "HandoverError": "sdr_di.integration.receiver",
-    "IntegrationConfig": "sdr_di.integration.receiver",
-    "DeepConfig": "sdr_di.integration.receiver:IntegrationConfig",
-    "DeepReceiver": "sdr_di.integration.receiver:IntegratedReceiver",
-    "DeepResult": "sdr_di.integration.receiver:IntegrationResult"})
 
 __all__ = [
     "NcoCommand",

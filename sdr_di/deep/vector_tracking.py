@@ -25,16 +25,16 @@ import numba
 import numpy as np
 
 from ..constants import C_LIGHT, CHIP_RATE_B3I, CODE_LENGTH_B3I, LAMBDA_B3I
+from ..coupling.config import IntegrationConfig
+from ..coupling.interval import Interval, LoopState, Measurements
+from ..coupling.measurements import RangeRateMeasurementModel
 from ..errors import SdrDiError
 from ..frames import llh_to_ecef
-from ..integration.config import IntegrationConfig
-from ..integration.loop import IntegrationLoop, Interval, Measurements
-from ..integration.measurements import RangeRateMeasurementModel
-from ..receiver._numba_correlate_bits import correlate_epl_bits
-from ..receiver.correlator import (
+from ..receiver.correlator import (  # the kernel: receiver._numba_correlate_bits
     CODE_PAD,
     bit_windows,
     carrier_rotation,
+    correlate_epl_bits,
     padded_replicas,
     reduce_code_phase,
 )
@@ -52,7 +52,7 @@ from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
 from .architectures import block_ms, make_measurement_bank
 
-__all__ = ["SampleClock", "VectorTracking"]
+__all__ = ["SampleClock", "VectorChannel", "VectorTracking"]
 
 _FAST_MS = 60        # bit sums of the fast test (interval left out) [ms]
 _LOSS_MS = 120       # bit sums of the loss test [ms]
@@ -62,7 +62,7 @@ _SIGMA_TAU_MIN = 0.01  # floor of a reset pre-filter's code prior sigma [chips] 
 
 
 @dataclasses.dataclass
-class _Chan:
+class VectorChannel:
     """Vector-loop state of one handed-over channel."""
 
     prn: int
@@ -151,7 +151,7 @@ class VectorTracking:
     ----------
     cfg : IntegrationConfig
     source : IfSource
-    chans : list of _Chan
+    chans : list of VectorChannel
         Handed-over channels (:func:`~sdr_di.integration.handover.handover_channels`).
     navdata : NavDataInForce
     clock : SampleClock
@@ -237,7 +237,7 @@ class VectorTracking:
         numba.set_num_threads(self.threads_before)
 
     # ------------------------------------------------------------------------------------
-    def measure(self, loop: IntegrationLoop, iv: Interval) -> Measurements | None:
+    def measure(self, loop: LoopState, iv: Interval) -> Measurements | None:
         """NCO commands, correlation and pre-filters of interval ``iv`` (class notes)."""
         rows = self.command_ncos(iv)
         if not self.load_samples(rows):
@@ -256,7 +256,7 @@ class VectorTracking:
         pf.run(rows.starts.size, epl)
         return pf.measurements()
 
-    def launch(self, loop: IntegrationLoop, iv: Interval, work=None) -> bool:
+    def launch(self, loop: LoopState, iv: Interval, work=None) -> bool:
         """NCO commands and correlation of interval ``iv`` with the NCOs one interval ahead
         (``nco_latency = 1``, :meth:`~sdr_di.integration.loop.IntegrationLoop.run_ahead`):
         ``work()``, the previous interval's pre-filters, filter update and feedback, runs on
@@ -272,7 +272,7 @@ class VectorTracking:
         self._launched = (iv, rows, pred, epl, pending)
         return True
 
-    def measure_launched(self, loop: IntegrationLoop, iv: Interval) -> Measurements:
+    def measure_launched(self, loop: LoopState, iv: Interval) -> Measurements:
         """Pre-filters and measurements of the launched interval ``iv`` (:meth:`launch`).
         Each pre-filter is first moved by the NCO step at the interval's end, which the
         feedback of the filter's prediction to ``k1`` made while the interval was being
@@ -411,7 +411,7 @@ class VectorTracking:
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
         return epl, pending
 
-    def prefilter(self, iv: Interval, c: _Chan, E, P, L, nsamp, epochs, noise) -> bool:
+    def prefilter(self, iv: Interval, c: VectorChannel, E, P, L, nsamp, epochs, noise) -> bool:
         """Channel ``c``'s epochs of the interval (NH wiped off; their sample counts and
         epoch numbers): its noise-correlator values ``noise`` (:func:`~sdr_di.receiver.lock.
         noise_values`) to its :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, C/N0
@@ -432,7 +432,7 @@ class VectorTracking:
         c.used = good
         return good
 
-    def _test_channel(self, c: _Chan, prompts, nsamp, epochs, t_s: float) -> None:
+    def _test_channel(self, c: VectorChannel, prompts, nsamp, epochs, t_s: float) -> None:
         """Channel management on this interval's prompts (module notes): bit sums for the
         C/N0, navigation decoding, the fast test (interval left out), the loss test (channel
         lost, its C/N0 window emptied) and the C/N0 taken up once the window allows."""
@@ -465,7 +465,7 @@ class VectorTracking:
                 c.rejoining = False
                 c.cn0_dbhz = mon.cn0_dbhz(npow, fs)
 
-    def _usable(self, c: _Chan, n_epochs: int) -> bool:
+    def _usable(self, c: VectorChannel, n_epochs: int) -> bool:
         """Measurement-vector gate of channel ``c`` (module notes): C/N0 at least the gate
         (less the hysteresis while in the vector), epochs this interval, fast test passed,
         pre-filter NIS consistent."""
@@ -476,7 +476,7 @@ class VectorTracking:
                 and not self.pre.nis_p[c.idx] < cfg.nis_p_min)
 
     # ------------------------------------------------------------------------------------
-    def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+    def feed_back(self, loop: LoopState, iv: Interval, x: np.ndarray) -> None:
         """The correction ``x`` on the NCOs and the pre-filters: ranges at the next ``k0``
         are ``P1 - H x``, each pre-filter shifted by the projection of ``x`` on its line
         of sight (its NCOs move by it), then decorrelated, or restarted from the NCO when
@@ -502,7 +502,7 @@ class VectorTracking:
         for i in range(self.n_channels) if channels is None else channels:
             self.pre.shift(i, d_tau[i], d_f[i])
 
-    def restart_prefilters(self, loop: IntegrationLoop) -> None:
+    def restart_prefilters(self, loop: LoopState) -> None:
         """Each pre-filter after the filter update: restarted from its NCO when lost or
         inconsistent (frequency prior: the filter's rate sigma on that line of sight, at
         least ``_SIGMA_F_MIN``; geometry of the last :meth:`_move_ncos` or
@@ -532,14 +532,14 @@ class VectorTracking:
         iv_l, _, pred, _, _ = self._launched
         self.meas_all.set_geometry(iv.nav1.llh, pred.U[:, 0])
 
-    def feed_back_ahead(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+    def feed_back_ahead(self, loop: LoopState, iv: Interval, x: np.ndarray) -> None:
         """NCOs one interval ahead: the correction ``x`` the loop fed back at the end of
         the launched interval ``iv`` (the filter's prediction to ``iv.k1``) moves the NCO
         ranges of the next command (``P1 - H x``); the pre-filters take the same step after
         the launched interval's correlations (:meth:`measure_launched`)."""
         self._shift_end = self._move_ncos(iv.nav1.llh, self._pred, x)
 
-    def take_up_navigation_data(self, loop: IntegrationLoop, iv: Interval) -> None:
+    def take_up_navigation_data(self, loop: LoopState, iv: Interval) -> None:
         """Navigation data decoded so far, taken up at the interval's end
         (:func:`_take_up_model_change`): INS position, clock, NCO ranges and pre-filters
         move with the range model."""
@@ -710,11 +710,11 @@ class _NavLog:
             self._eph_entry(t_s, c.prn, c.eph, navdata.select_with_source(c.prn, week, sow)[1])
         self._iono_entry(t_s, iono)
 
-    def demodulate(self, c: _Chan, prompts, epochs, t_s: float) -> None:
+    def demodulate(self, c: VectorChannel, prompts, epochs, t_s: float) -> None:
         """Feed channel ``c``'s prompts to its decoder (it holds what it decodes)."""
         c.nav.add(prompts, epochs)
 
-    def confirm(self, c: _Chan, n_bits: int, t_s: float) -> None:
+    def confirm(self, c: VectorChannel, n_bits: int, t_s: float) -> None:
         """Channel ``c``'s test passed on its last ``n_bits`` bit sums: offer what the
         subframes its decoder held until then complete (deep.navdecode notes)."""
         for eph, klob in c.nav.confirm(n_bits):
@@ -778,7 +778,7 @@ class _NavLog:
         }
 
 
-def _epoch_rows(c: _Chan, c0: float, dc: float, dp0: float, dp1: float, k0: int, k1: int):
+def _epoch_rows(c: VectorChannel, c0: float, dc: float, dp0: float, dp1: float, k0: int, k1: int):
     """Correlator rows of channel ``c``: its code epochs that start in ``[next_start, k1)``.
 
     The code NCO's chip count is ``c0 + (k - k0) dc`` over the interval; epoch ``e`` ends at

@@ -11,34 +11,17 @@
   pieces (one receiver variant on shared files, generated inputs, figure names, PNG plots).
 
 Running experiments (one run, Monte Carlo campaigns on Dask, studies with paired
-statistics) and their reports are the package :mod:`sdr_di.studies`. Their old names here
-(``sdr_di.experiments.campaign``, ``sdr_di.experiments.run_campaign`` ...) still import,
-with a :class:`DeprecationWarning`, until the next release.
+statistics) and their reports are the package :mod:`sdr_di.studies` (their 0.1 names here
+were removed in 0.2.0: CHANGELOG.md).
 """
 
-from .._deprecated import alias_modules, forwarding_getattr
 from .registry import (
-                       Experiment,
-                       experiment_names,
-                       get_experiment,
-                       parse_params,
-                       register_experiment,
+    Experiment,
+    experiment_names,
+    get_experiment,
+    parse_params,
+    register_experiment,
 )
-
-_MOVED = {name: f"sdr_di.studies.{name}" for name in (
-    "aggregate", "campaign", "commands", "execute", "outputs", "paired", "single_run",
-    "study", "study_report", "tables", "tasks")}
-_MOVED.update(study_spec="sdr_di.studies.spec", report="sdr_di.studies.campaign_report")
-alias_modules(__name__, _MOVED)
-
-__getattr__ = forwarding_getattr(__name__, {
-    "CampaignResult": "sdr_di.studies.campaign",
-    "run_campaign": "sdr_di.studies.campaign",
-    "run_seed": "sdr_di.studies.campaign",
-    "render_report": "sdr_di.studies.campaign_report",
-    "RunResult": "sdr_di.studies.single_run",
-    "run_experiment": "sdr_di.studies.single_run",
-})
 
 __all__ = [
     "Experiment",

@@ -453,9 +453,9 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
     (``ValueError``, ``FloatingPointError``, ``numpy.linalg.LinAlgError``) are returned as
     ``error`` text, not raised: a filter that fails is a result of the experiment.
     """
-    from ..integration.receiver import (IntegrationConfig, IntegratedReceiver,
-                                        StartMismatchError)
     from ..errors import SdrDiError
+    from ..integration.settings import build_integration_config
+    from ..integration.receiver import IntegratedReceiver, StartMismatchError
 
     if mode != "deep":
         config["mode"] = mode
@@ -463,12 +463,7 @@ def run_deep_variant(inputs: Inputs, filter_name: str, *, mode: str = "deep",
             config.pop(key, None)
     scalar = CountingScalarReceiver(log=False)
     try:
-        cfg = IntegrationConfig(filter=filter_name, **config)
-        a = parse_assume(assume)
-        if a is not None:
-            from ..integration.assumptions import apply_to_deep
-
-            cfg = apply_to_deep(cfg, a)
+        cfg = build_integration_config(filter_name, assume=parse_assume(assume), **config)
         # the start-up (deep) or the whole scalar run (loose and tight: either mode's
         # serves both) is made once per hand-over rule and kept
         rule = (cfg.handover_wait_s, cfg.iono_wait_s) if cfg.mode == "deep" else \

@@ -32,7 +32,7 @@ from ._deep import (
     parse_assume,
     segment_metrics,
 )
-from .filter_figures import rmse_bar_plot
+from .plotting import rmse_bar_plot
 from .variants import (
     check_deep_options,
     loop_config,

@@ -66,7 +66,7 @@ from ._deep import (
     has_mean,
     run_deep_variant,
 )
-from .filter_figures import filter_list, parse_filter_spec
+from .entries import check_filter_entry, filter_list
 from .variants import check_deep_options, loop_config, mode_list
 from .weak_signal import MODES, scalar_run
 
@@ -287,7 +287,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     base = base_scenario({**params, "cn0_dbhz": None}, seed, duration)
     c0 = float(base.satellites.cn0_dbhz)
     cfg = loop_config(params, output_rate_hz=10.0)
-    filt, opts = parse_filter_spec(NAME, params["filter"])
+    filt, opts = check_filter_entry(NAME, params["filter"])
     if opts:
         cfg["filter_options"] = opts
     fig: dict = {"duration_s": duration, "t_on_s": float(params["t_on_s"]), "cn0_dbhz": c0,

@@ -109,7 +109,7 @@ def simulate_open_loop(architecture: str, cn0_dbhz: float, *, channels: int = 10
     feedback : float
         Share of each fused output by which the NCOs are moved (module notes).
     """
-    from ..integration.config import IntegrationConfig
+    from ..coupling.config import IntegrationConfig
 
     rate_hz = 1.0 / interval_s
     if fusion_intervals is None:

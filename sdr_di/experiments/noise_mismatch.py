@@ -26,17 +26,14 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ExperimentError, SdrDiError
-from ..integration.loose import load_lc_scenario, make_inputs, run_loose
+from ..integration.loose import load_lc_scenario, run_loose
+from ..sim.lc_inputs import make_inputs
 from ..integration.noise import NoiseWindow
 from ..scenario import REPO_ROOT
 from . import plotting
-from .filter_figures import (
-    QUANTITIES,
-    STATS,
-    filter_list,
-    filter_names_in,
-    rmse_bar_plot,
-)
+from .entries import filter_list
+from .filter_figures import QUANTITIES, STATS, filter_names_in
+from .plotting import rmse_bar_plot
 from .variants import nan_figures, plot_error_norms, variant_rows
 
 __all__ = ["DESCRIPTION", "NAME", "check_params", "default_params", "plots", "run", "tables"]

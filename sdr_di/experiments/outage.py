@@ -70,7 +70,8 @@ from ._deep import (
     segment_metrics,
     with_outages,
 )
-from .filter_figures import QUANTITIES, STATS, rmse_bar_plot
+from .filter_figures import QUANTITIES, STATS
+from .plotting import rmse_bar_plot
 from .variants import (
     check_deep_options,
     loop_config,

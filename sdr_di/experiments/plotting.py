@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import importlib
 import io
+import math
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -17,7 +19,7 @@ import numpy as np
 from ..io.atomic import atomic_open
 
 __all__ = ["PLOTS_SKIPPED", "bar_chart", "matplotlib_missing", "plain_log_axis", "ratio_axis",
-           "save_png", "time_series"]
+           "rmse_bar_plot", "save_png", "time_series"]
 
 PLOTS_SKIPPED = "plots skipped: matplotlib is not installed (pip install matplotlib)"
 
@@ -123,3 +125,24 @@ def bar_chart(path: Path, labels: Sequence[str],
     if title:
         fig.suptitle(title)
     return save_png(fig, path)
+
+
+def rmse_bar_plot(results: list[dict], out_dir: Path, title: str) -> list[Path]:
+    """``rmse_by_filter.png``: mean RMSE per filter over the runs, std as error bars."""
+    from .filter_figures import QUANTITIES, filter_names_in
+
+    if not results or matplotlib_missing():
+        return []
+    names = filter_names_in(results[0]["figures"])
+    if not names:
+        return []
+    panels = []
+    for q, label in QUANTITIES:
+        vals = np.array([[r["figures"].get(f"{n}.{q}_rmse", math.nan) for n in names]
+                         for r in results], float)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            panels.append((f"RMSE {label}", np.nanmean(vals, axis=0),
+                           np.nanstd(vals, axis=0) if len(results) > 1 else None))
+    return [bar_chart(Path(out_dir) / "rmse_by_filter.png", names, panels,
+                               title=f"{title} ({len(results)} runs)")]

@@ -31,25 +31,16 @@ from typing import Any
 import numpy as np
 
 from ..errors import ExperimentError
-from ..integration.config import DEEP_MEASUREMENTS
+from ..coupling.config import DEEP_MEASUREMENTS
+from ..filters.spec import canonical_entry
 from . import plotting
 from ._deep import DEEP_ONLY, Inputs, record_run, run_deep_variant, segment_metrics
-from .filter_figures import (
-    QUANTITIES,
-    STATS,
-    canonical_entry,
-    filter_list,
-    filter_names_in,
-    parse_filter_spec,
-)
+from .entries import MODES, check_filter_entry, filter_list, mode_list, split_entry
+from .filter_figures import QUANTITIES, STATS, filter_names_in
 
 __all__ = ["MODES", "Variant", "entry_label", "loop_config", "mode_list", "nan_figures", "plot_error_norms",
            "run_variants", "split_entry",
            "variant_label", "variant_list", "variant_rows", "write_errors_csv"]
-
-#: Coupling modes of the integration loop (``IntegrationConfig.mode``).
-MODES = ("loose", "tight", "deep")
-
 
 def variant_label(filter_spec: str, mode: str = "deep") -> str:
     """Figure prefix of a filter entry in a mode (module notes)."""
@@ -94,28 +85,6 @@ class Variant:
         return self.mode if self.mode in DEEP_MEASUREMENTS else None
 
 
-def mode_list(exp: str, text: str, allowed: Sequence[str] = MODES) -> list[str]:
-    """Modes of a ``modes`` parameter (comma list, duplicates dropped, order kept)."""
-    names = [m.strip().lower() for m in str(text).split(",") if m.strip()]
-    bad = [m for m in names if m not in allowed]
-    if bad or not names:
-        raise ExperimentError(f"{exp}: modes={text!r}: expected a comma list of "
-                              f"{', '.join(allowed)}")
-    return list(dict.fromkeys(names))
-
-
-def split_entry(exp: str, entry: str, mode: str = "deep") -> tuple[str, str]:
-    """``"ekf@tight"`` -> ``("ekf", "tight")``; an entry without ``@`` takes ``mode``. After
-    the ``@`` may also stand a deep measurement architecture (``"ekf@reset"``: deep mode with
-    ``deep_measurements = "reset"``, :attr:`Variant.architecture`), so that a study pairs
-    architectures on the same files as it pairs couplings."""
-    spec, at, m = canonical_entry(entry).partition("@")
-    if at:
-        mode_list(exp, m, MODES + DEEP_MEASUREMENTS)
-        return spec, m
-    return spec, mode
-
-
 def entry_label(entry: str, mode: str = "deep") -> str:
     """Label of a filter entry (``ekf``, ``ekf@tight``) run in a cell whose mode is ``mode``."""
     return variant_label(*split_entry("filters", entry, mode))
@@ -131,11 +100,11 @@ def variant_list(exp: str, filters: str, modes: str = "deep") -> list[Variant]:
     crossed = ",".join(e for e in entries if "@" not in e) if len(own) < len(entries) else ""
     for k, mode in enumerate(mode_list(exp, modes)):
         for spec in filter_list(exp, crossed) if crossed else []:
-            name, opts = parse_filter_spec(exp, spec)
+            name, opts = check_filter_entry(exp, spec)
             out.append(Variant(spec, name, opts, mode))
         for e in own if k == 0 else []:
             spec, m = split_entry(exp, e)
-            name, opts = parse_filter_spec(exp, spec)
+            name, opts = check_filter_entry(exp, spec)
             out.append(Variant(spec, name, opts, m))
     labels = [v.label for v in out]
     if len(set(labels)) != len(labels):
@@ -174,10 +143,10 @@ def loop_config(params: dict, **fixed: Any) -> dict:
 def check_deep_options(exp: str, params: dict) -> None:
     """Reject deep-mode settings the receiver would refuse: an ``nco_latency`` other than
     ``None`` (the receiver's default), 0 or 1; a ``deep_measurements`` that is not an
-    architecture (:data:`~sdr_di.integration.config.DEEP_MEASUREMENTS`); a
-    ``fusion_rate_hz`` that does not fit them (:class:`~sdr_di.integration.config.
+    architecture (:data:`~sdr_di.coupling.config.DEEP_MEASUREMENTS`); a
+    ``fusion_rate_hz`` that does not fit them (:class:`~sdr_di.coupling.config.
     IntegrationConfig`)."""
-    from ..integration.config import DEEP_MEASUREMENTS, IntegrationConfig, is_nco_latency
+    from ..coupling.config import DEEP_MEASUREMENTS, IntegrationConfig, is_nco_latency
 
     v = params.get("nco_latency")
     if v is not None and not is_nco_latency(v):

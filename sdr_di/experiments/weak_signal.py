@@ -61,7 +61,7 @@ from ._deep import (
     run_deep_variant,
     with_outages,
 )
-from .filter_figures import filter_list, parse_filter_spec
+from .entries import check_filter_entry, filter_list
 from .variants import MODES as LOOP_MODES
 from .variants import check_deep_options, loop_config, mode_list
 
@@ -265,7 +265,7 @@ def run(params: dict, seed: int, out_dir: Path) -> dict:
     rows = []
     passed: dict[str, dict[float, bool]] = {m: {} for m in modes}
     cfg = loop_config(params, output_rate_hz=10.0)
-    filt, opts = parse_filter_spec(NAME, params["filter"])
+    filt, opts = check_filter_entry(NAME, params["filter"])
     if opts:
         cfg["filter_options"] = opts
     base = base_scenario({**params, "cn0_dbhz": c0}, seed, duration)

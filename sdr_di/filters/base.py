@@ -245,7 +245,14 @@ class KalmanFilterBase:
         return 0.0 if rule is None else float(rule.adaptation_time_s)
 
     def attach_rule(self, rule) -> None:
-        """Attach an adaptive rule (replaces any previous one) and let it bind to the filter."""
+        """Attach an adaptive rule (replaces any previous one) and let it bind to the filter.
+
+        Parameters
+        ----------
+        rule : AdaptiveRule
+            The rule (:class:`~sdr_di.filters.adaptive.base.AdaptiveRule`): its ``bind``
+            captures the filter's nominal ``Q0``, floors and dimensions.
+        """
         rule.bind(self)
         self.rule = rule
 
@@ -273,6 +280,14 @@ class KalmanFilterBase:
         rule = self.rule
         if rule is not None and rule._has_after_predict:
             rule._timed_after_predict(self)
+
+    def _measurement_model(self, model: MeasurementModel | None) -> MeasurementModel:
+        """``model``, else the filter's own; FilterError when neither is given."""
+        model = model if model is not None else self.measurement_model
+        if model is None:
+            raise FilterError(f"{self.name}: no measurement model (give one to update or "
+                              "to the constructor)")
+        return model
 
     def update(self, z, R=None, measurement_model: MeasurementModel | None = None) -> None:
         """Measurement update with ``z`` (``m_k`` values; ``m_k`` may change every epoch).
@@ -326,7 +341,18 @@ class KalmanFilterBase:
             rule._timed_after_update(self, z_eff, R_prior)
 
     def predict_measurement(self, model: MeasurementModel | None = None) -> MeasurementPrediction:
-        """Predicted measurement, its covariance without noise and the cross covariance."""
+        """Predicted measurement, its covariance without noise and the cross covariance.
+
+        Parameters
+        ----------
+        model : MeasurementModel, optional
+            The measurement model of this update; default the filter's own.
+
+        Returns
+        -------
+        MeasurementPrediction
+            ``z_pred`` (m,), ``Pzz`` (m, m) without ``R``, ``Pxz`` (n, m) and the model.
+        """
         raise NotImplementedError
 
     # ------------------------------------------------------------------ internals

@@ -43,7 +43,7 @@ class EKF(KalmanFilterBase):
         return x_new, F @ P @ F.T
 
     def predict_measurement(self, model: MeasurementModel | None = None) -> MeasurementPrediction:
-        model = model if model is not None else self.measurement_model
+        model = self._measurement_model(model)
         H = np.atleast_2d(np.asarray(model.H(self.x), dtype=float))
         z_pred = np.atleast_1d(np.asarray(model.h(self.x), dtype=float))
         Pxz = self.P @ H.T

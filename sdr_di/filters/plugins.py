@@ -137,10 +137,7 @@ def unregister_filter(name: str) -> None:
 
 
 def _entry_points() -> dict:
-    try:
-        eps = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
-    except TypeError:  # an entry_points() without the group keyword
-        eps = importlib.metadata.entry_points().get(ENTRY_POINT_GROUP, [])
+    eps = importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)
     return {ep.name.strip().lower(): ep for ep in eps}
 
 
@@ -197,6 +194,7 @@ def resolve_plugin(name: str) -> Callable | None:
         callable.
     """
     name = str(name).strip()
+    factory: Callable | None
     if is_import_path(name):
         mod_name, _, attr = name.partition(":")
         if _DEFERRED.get() and mod_name and attr:

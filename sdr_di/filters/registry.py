@@ -82,8 +82,8 @@ _EQUATIONS = {
 FILTER_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 
 _BASE_OPTIONS = ("dt", "psd_fallback", "q_scale", "r_scale")
-_CORE_OPTIONS = {EKF: _BASE_OPTIONS, CKF: _BASE_OPTIONS,
-                 UKF: _BASE_OPTIONS + ("alpha", "beta", "kappa")}
+_CORE_OPTIONS: dict[type, tuple[str, ...]] = {
+    EKF: _BASE_OPTIONS, CKF: _BASE_OPTIONS, UKF: _BASE_OPTIONS + ("alpha", "beta", "kappa")}
 
 
 def _rule_options(rule_cls) -> tuple[str, ...]:
@@ -117,9 +117,20 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
     name : str
         One of :data:`FILTER_NAMES` (case-insensitive), a plugin name or an import path
         ``package.module:Name`` (:mod:`.plugins`).
-    process_model, measurement_model, x0, P0, Q0, R0
-        As :class:`~sdr_di.filters.base.KalmanFilterBase` (``R0`` may be ``None`` when ``R``
-        is given to every update).
+    process_model : ProcessModel
+        State propagation ``f(x, dt)`` and its Jacobian ``F``
+        (:class:`~sdr_di.filters.models.ProcessModel`).
+    measurement_model : MeasurementModel or None
+        ``h(x)`` and its Jacobian ``H`` (:class:`~sdr_di.filters.models.MeasurementModel`);
+        None when every update brings its own.
+    x0 : (n,) array_like
+        Initial state.
+    P0 : (n, n) array_like
+        Initial state covariance (positive definite).
+    Q0 : (n, n) array_like
+        Process noise covariance per step.
+    R0 : (m, m) array_like, optional
+        Measurement noise covariance; None when ``R`` is given to every update.
     **options
         Core options (``dt``, ``psd_fallback``, ``q_scale``, ``r_scale``; ``alpha``, ``beta``,
         ``kappa`` for the UKF cores) and rule options (e.g. ``window``, ``d`` for
@@ -165,6 +176,7 @@ def _make_plugin(name: str, process_model, measurement_model, x0, P0, Q0, R0,
     factory = resolve_plugin(name)
     if factory is None:
         _lookup(name)  # raises: unknown filter
+    assert factory is not None
     label = name.strip() if ":" in name else name.strip().lower()
     params, var_kw = _factory_params(factory)
     takes = {p.name for p in params}

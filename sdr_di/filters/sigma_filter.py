@@ -110,7 +110,7 @@ class SigmaPointFilter(KalmanFilterBase):
         return mean, cov
 
     def predict_measurement(self, model: MeasurementModel | None = None) -> MeasurementPrediction:
-        model = model if model is not None else self.measurement_model
+        model = self._measurement_model(model)
         X, dX = self._draw(self.x, self.P, "update")
         Z = np.asarray(model.h_batch(X), dtype=float)
         if Z.ndim == 1:

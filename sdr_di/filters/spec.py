@@ -41,7 +41,8 @@ from collections.abc import Callable
 from ..errors import FilterError
 from .plugins import is_import_path, resolve_plugin
 
-__all__ = ["FilterSpec", "OptionInfo", "filter_option_info", "parse_filter_spec"]
+__all__ = ["FilterSpec", "OptionInfo", "canonical_entry", "filter_option_info",
+           "parse_filter_spec", "split_filter_spec"]
 
 _TRUE = ("true", "1", "yes")
 _FALSE = ("false", "0", "no")
@@ -126,6 +127,27 @@ def split_filter_spec(text: str) -> tuple[str, list[tuple[str, str]]]:
     return name, pairs
 
 
+def canonical_entry(entry: str) -> str:
+    """A filter entry as the experiments and studies label it: in lower case, except an import
+    path (``pkg.mod:MyEKF``) and its options, whose case is kept; the options as written.
+
+    An entry may end with a coupling mode after ``@`` (``ekf@tight``: experiments and
+    studies). Two entries that differ only in how an option's value is written
+    (``scale=2``, ``scale=2.0``) have different labels but the same :attr:`FilterSpec.text`.
+    A malformed entry is returned in lower case (:func:`parse_filter_spec` reports it).
+    """
+    text = str(entry).strip()
+    spec, at, mode = text.partition("@")
+    try:
+        name, pairs = split_filter_spec(spec)
+    except FilterError:
+        return text.lower()
+    if not is_import_path(name):
+        return text.lower()
+    return ":".join([name] + [f"{k}={v}" for k, v in pairs]) + (
+        f"@{mode.strip().lower()}" if at else "")
+
+
 def _registered_names() -> tuple[str, ...]:
     from .plugins import plugin_names
 
@@ -162,7 +184,8 @@ def _factory_params(factory: Callable, skip_inputs: bool = True) -> tuple[list, 
     ``**kwargs`` (a subclass of :class:`~sdr_di.filters.EKF` takes ``psd_fallback``)."""
     if not inspect.isclass(factory):
         return _params(factory, skip_inputs)
-    seen, out = set(), []
+    seen: set[str] = set()
+    out: list[inspect.Parameter] = []
     for klass in factory.__mro__:
         init = klass.__dict__.get("__init__")
         if init is None:

@@ -325,10 +325,11 @@ class ImuErrorModel:
             Scale factors, turn-on biases and, for an extended model, the misalignment and
             g-sensitivity matrices (zero for a legacy one); no in-run paths yet.
         """
-        if self.draw == "gaussian":
-            const = lambda sigma, n=3: sigma * rng.standard_normal(n)
-        else:
-            const = lambda sigma, n=3: np.full(n, float(sigma))
+        def const(sigma, n=3):
+            """One draw of ``n`` constants: N(0, sigma^2) each, or sigma itself."""
+            if self.draw == "gaussian":
+                return sigma * rng.standard_normal(n)
+            return np.full(n, float(sigma))
         s_a = const(self.accel_scale_factor_ppm * 1e-6)
         s_g = const(self.gyro_scale_factor_ppm * 1e-6)
         b_a = const(self.accel_bias_si)

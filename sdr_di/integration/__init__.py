@@ -20,8 +20,8 @@
 The process model is :class:`sdr_di.ins.error_model.InsErrorModel`.
 """
 
-from .loose import LcResult, LcSettings, load_lc_scenario, run_loose, run_loose_scenario
-from .measurements import (
+from .loose import LcResult, LcSettings, load_lc_scenario, run_loose
+from ..coupling.measurements import (
                            LooseMeasurementModel,
                            RangeRateMeasurementModel,
                            loose_measurement,
@@ -43,6 +43,6 @@ __all__ = [
                            "predicted_observables",
                            "rmse_max",
                            "run_loose",
-                           "run_loose_scenario",
+
                            "summarize",
 ]

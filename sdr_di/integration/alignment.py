@@ -19,7 +19,7 @@ import numpy as np
 
 from ..frames import ecef_to_llh, radii_of_curvature
 from ..ins.mechanization import StrapdownINS
-from .config import IntegrationConfig
+from ..coupling.config import IntegrationConfig
 from .handover import HandoverError
 
 __all__ = ["align_ins", "gnss_alignment", "inject_initial_errors"]

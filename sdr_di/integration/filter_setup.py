@@ -1,5 +1,5 @@
 """The integration filter of a run: its process noise ``Q``, initial covariance ``P0`` and
-clock model from :class:`~sdr_di.integration.config.IntegrationConfig` and the hand-over fix.
+clock model from :class:`~sdr_di.coupling.config.IntegrationConfig` and the hand-over fix.
 
 ``make_integration_filter``  the configured filter over one interval (every mode)
 ``check_filter``             the same construction on dummy values, before the start-up, so
@@ -17,8 +17,8 @@ from ..filters import make_filter
 from ..frames import radii_of_curvature
 from ..ins.error_model import ClockModel, InsErrorModel, process_noise
 from ..oscillator import CLOCK_PRESETS, OscillatorSpec
-from .config import IntegrationConfig
-from .measurements import RangeRateMeasurementModel
+from ..coupling.config import IntegrationConfig
+from ..coupling.measurements import RangeRateMeasurementModel
 
 __all__ = ["check_filter", "clock_model", "make_integration_filter"]
 
@@ -54,8 +54,8 @@ def make_integration_filter(cfg: IntegrationConfig, T: float, sol, llh_fix, att_
     0.1 m/s of clock drift.
 
     ``meas``: the filter's measurement model (default
-    :class:`~sdr_di.integration.measurements.RangeRateMeasurementModel`; loose:
-    :class:`~sdr_di.integration.measurements.LooseMeasurementModel`).
+    :class:`~sdr_di.coupling.measurements.RangeRateMeasurementModel`; loose:
+    :class:`~sdr_di.coupling.measurements.LooseMeasurementModel`).
 
     Returns
     -------

@@ -14,26 +14,26 @@ module notes (*Hand-over*). This module makes what the loop takes over:
 
 from __future__ import annotations
 
+import dataclasses
+from typing import Any
+
+from ..coupling.config import IntegrationConfig
 from ..deep.bit_power import BitPower
 from ..deep.navdecode import ChannelNavDecoder
-from ..deep.vector_tracking import SampleClock, _Chan
-from ..errors import RunFailed
+from ..deep.vector_tracking import SampleClock, VectorChannel
+from ..errors import HandoverError  # noqa: F401  (defined in sdr_di.errors, imported from here)
 from ..receiver.navdata import NavDataInForce
 from ..receiver.scalar import ScalarReceiver
 from ..signal.navmsg import klobuchar_of_subframe
-from .config import IntegrationConfig
 
-__all__ = ["D1_BIT_RATE_HZ", "HandoverError", "handover_channels", "handover_decoder", "handover_span_s",
-           "offer_subframe_klobuchar"]
+__all__ = ["D1_BIT_RATE_HZ", "Handover", "HandoverError", "handover_channels",
+           "handover_decoder", "handover_span_s", "offer_subframe_klobuchar"]
 
 
 #: D1 navigation message bit rate [bit/s] (MEO/IGSO satellites; GEOs' D2 is 10 times faster).
 D1_BIT_RATE_HZ = 50.0
 
 
-class HandoverError(RunFailed):
-    """The scalar start-up never reached a state the vector loop can take over (a run
-    without a fix: exit status 1)."""
 
 
 def handover_span_s(config: IntegrationConfig) -> tuple[float, float]:
@@ -49,27 +49,61 @@ def handover_span_s(config: IntegrationConfig) -> tuple[float, float]:
     return usual, usual + config.handover_wait_s
 
 
+@dataclasses.dataclass
+class Handover:
+    """The scalar start-up's state at the hand-over to the integration loop (every mode).
+
+    Attributes
+    ----------
+    first_fix : int or None
+        Sample of the first valid fix (the hand-over's waits count from it).
+    sample : int or None
+        Sample of the hand-over epoch; None while it is not reached.
+    sol : PvtSolution or None
+        The WLS fix of that epoch (position, velocity, clock for the alignment and ``P0``).
+    prns : list of int
+        The channels handed over: tracked, with time, code lock and ephemeris in force.
+    next_start : int or None
+        Loose and tight: the first sample of the loop's grid (the handed-over channels'
+        next code epochs, where deep's would start).
+    channels : list of int
+        Loose and tight: every channel of the receiver at the hand-over.
+    """
+
+    first_fix: int | None = None
+    sample: int | None = None
+    sol: Any = None           # PvtSolution once reached
+    prns: list[int] = dataclasses.field(default_factory=list)
+    next_start: int | None = None
+    channels: list[int] = dataclasses.field(default_factory=list)
+
+    @property
+    def reached(self) -> bool:
+        """Whether the hand-over happened."""
+        return self.sample is not None
+
+
 def handover_channels(cfg: IntegrationConfig, rx: ScalarReceiver, navdata: NavDataInForce,
-                      hand: dict, clock: SampleClock) -> list[_Chan]:
+                      hand: Handover, clock: SampleClock) -> list[VectorChannel]:
     """Vector-loop state of every handed-over channel, from its scalar channel: next
     code epoch (sample and number on the satellite clock), carrier phase, C/N0, the
     ephemeris in force at the fix and the navigation decoder with its subframe in
     progress."""
-    sol = hand["sol"]
+    sol = hand.sol
     S0 = clock.S0
-    chans: list[_Chan] = []
-    for i, prn in enumerate(hand["prns"]):
+    chans: list[VectorChannel] = []
+    for i, prn in enumerate(hand.prns):
         c = rx.channels[prn]
         s = int(c.next_start)
         o = c.observation_at(s)
         eph = navdata.select(prn, sol.week, sol.sow)
         e = round((o.t_tx_sow - S0) * 1000.0)
         bit_ms = 20 if c.is_d1 else 2
-        chans.append(_Chan(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s, epoch=e,
-                           phase=float(c.phi),
-                           power=BitPower(max(cfg.cn0_window_ms // bit_ms, 2)),
-                           bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz),
-                           nav=handover_decoder(c, e, round(S0 * 1000.0))))
+        chans.append(VectorChannel(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s,
+                                   epoch=e, phase=float(c.phi),
+                                   power=BitPower(max(cfg.cn0_window_ms // bit_ms, 2)),
+                                   bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz),
+                                   nav=handover_decoder(c, e, round(S0 * 1000.0))))
     return chans
 
 

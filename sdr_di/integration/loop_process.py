@@ -53,7 +53,8 @@ import time
 import warnings
 from collections.abc import Callable
 
-from ..errors import SdrDiError
+from ..errors import LoopProcessError  # noqa: F401  (defined in sdr_di.errors)
+from ..settings import loop_on_thread
 from .loop import BackgroundLoop, IntegrationLoop
 
 __all__ = ["LoopChild", "LoopProcess", "LoopProcessError", "start_loop_behind"]
@@ -63,9 +64,6 @@ _LEN = struct.Struct("<Q")
 _WARNING_REGISTRY: dict = {}
 
 
-class LoopProcessError(SdrDiError):
-    """The loop failed in its child process with an exception that does not pickle (its
-    text)."""
 
 
 def _write_frame(fh, data: bytes) -> None:
@@ -115,8 +113,7 @@ class LoopChild:
         """A child, or None where the thread will run the loop (module notes)."""
         import multiprocessing
 
-        if (os.environ.get("SDR_DI_LOOP_THREAD", "") not in ("", "0")
-                or multiprocessing.current_process().daemon):
+        if loop_on_thread() or multiprocessing.current_process().daemon:
             return None
         try:
             return cls()

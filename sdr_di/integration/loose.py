@@ -60,7 +60,7 @@ from ..ins.error_model import InsErrorModel, NavState, process_noise, rotvec_to_
 from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..scenario.schema import Scenario, parse_scenario
-from .measurements import LooseMeasurementModel, loose_measurement
+from ..coupling.measurements import LooseMeasurementModel, loose_measurement
 from .consistency import (SD_COLUMNS, block_nis, consistency_summary, enu_blocks, formal_sd,
                           nees_per_dof)
 from .metrics import nav_errors, summarize
@@ -71,9 +71,7 @@ __all__ = [
     "LcSettings",
     "lc_summary",
     "load_lc_scenario",
-    "make_inputs",
     "run_loose",
-    "run_loose_scenario",
 ]
 
 ARCMIN = math.radians(1.0 / 60.0)
@@ -311,17 +309,6 @@ def check_lc_duration(duration_s: float, settings: LcSettings, what: str) -> Non
                             f"rows is about 0.3 GB of memory), got {duration_s:g}")
 
 
-def make_inputs(sc: Scenario, settings: LcSettings | None = None):
-    """Truth and measured IMU of a scenario (seeded from the scenario)."""
-    from ..sim.generate import simulate_truth
-
-    settings = settings or LcSettings()
-    truth = simulate_truth(sc)
-    model = ImuErrorModel.from_spec(sc.imu, draw=settings.imu_draw)
-    rng = np.random.default_rng(np.random.SeedSequence([sc.seed, 0x1A0]))
-    return truth, model.apply(truth, rng), model
-
-
 def _check_inputs(truth, imu) -> None:
     if len(imu.t) != len(truth.t) or not np.allclose(imu.t, truth.t, atol=1e-6):
         raise ImuDataError(f"IMU record ({len(imu.t)} samples) and truth ({len(truth.t)} "
@@ -459,27 +446,13 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
                     nis_blocks=np.array(NISB).reshape(-1, 2))
 
 
-def run_loose_scenario(sc: Scenario, settings: LcSettings,
-                       duration_s: float | None = None) -> LcResult:
-    """Simulate truth + IMU from a scenario and run :func:`run_loose` (GNSS seed = scenario)."""
-    if duration_s is not None:
-        sc = sc.with_overrides(duration_s=duration_s)
-    truth, imu, model = make_inputs(sc, settings)
-    return run_loose(truth, imu, model, settings, seed=sc.seed)
-
-
 def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, assumed,
                res: LcResult, *, seed: int) -> dict:
     """Summary of an ``lc`` run: metrics, the truth (scenario, IMU, GNSS noise) and what the
     filter assumed (its IMU spec, ``R``, ``P0`` sigmas, initial errors, scales, and the
     assumptions mapping given, if any)."""
+    from ..io.json_values import json_safe
     from .assumptions import truth_record
-
-    def _f(v):
-        v = v.tolist() if isinstance(v, (np.ndarray, np.generic)) else v
-        if isinstance(v, list):
-            return [_f(a) for a in v]
-        return None if isinstance(v, float) and not math.isfinite(v) else v
 
     noise = settings.noise
     truth = truth_record(sc)
@@ -505,7 +478,6 @@ def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, as
         "filter": res.filter_used,
     }
     return {"filter": res.filter_name,
-            "metrics": {k: _f(v) for k, v in res.metrics().items()},
-            "consistency": {k: {kk: _f(vv) for kk, vv in v.items()} if isinstance(v, dict)
-                            else v for k, v in res.consistency().items()},
+            "metrics": json_safe(res.metrics()),
+            "consistency": json_safe(res.consistency()),
             "truth": truth, "assumptions": beliefs}

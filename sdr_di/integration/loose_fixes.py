@@ -1,6 +1,6 @@
 """Loose coupling on the scalar receiver's WLS fixes (``sdr-di run --mode loose``).
 
-Measurement (papers 000/003 eq 13, :class:`~sdr_di.integration.measurements.
+Measurement (papers 000/003 eq 13, :class:`~sdr_di.coupling.measurements.
 LooseMeasurementModel`): ``z = [v_INS - v_GNSS (E, N, U) [m/s], position INS - GNSS (N, E,
 U) [m]]`` at the fix's BDT (receiver time minus the fix's clock bias / c), the INS
 interpolated to it (:mod:`~sdr_di.integration.gnss_epochs`). Only valid fixes with a valid
@@ -49,7 +49,7 @@ from ..receiver.pvt import PvtConfig, measurement_variances
 from ..receiver.tracking import TrackingConfig
 from .gnss_epochs import GnssEpoch, ScalarEpochSource
 from .loop import IntegrationLoop, Interval, Measurements
-from .measurements import loose_measurement
+from ..coupling.measurements import loose_measurement
 from .tight_ranges import range_correlation_factor, tracking_variances
 
 __all__ = ["LooseFixSource", "fix_covariance", "thermal_fix_covariance"]

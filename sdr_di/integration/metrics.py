@@ -13,6 +13,7 @@ import numpy as np
 
 from ..frames import radii_of_curvature
 from ..ins.error_model import dcm_to_rotvec
+from ..receiver.accuracy import rmse_max  # the one RMSE rule, beside the scalar fixes' errors
 
 __all__ = ["nav_errors", "rmse_max", "summarize", "time_window"]
 
@@ -26,15 +27,6 @@ def nav_errors(llh, v_n, C_b_n, llh_true, v_true, C_true):
     h = float(llh_true[2])
     pos = np.array([d[1] * (R_N + h) * math.cos(lat), d[0] * (R_M + h), d[2]])
     return att, np.asarray(v_n, float) - np.asarray(v_true, float), pos
-
-
-def rmse_max(e: np.ndarray) -> tuple[float, float]:
-    """``(sqrt(mean ||e_k||^2), max ||e_k||)`` of rows ``e`` (n, 3); NaN for no rows."""
-    e = np.atleast_2d(np.asarray(e, float))
-    if e.shape[0] == 0:
-        return math.nan, math.nan
-    n2 = np.sum(e * e, axis=1)
-    return float(math.sqrt(np.mean(n2))), float(math.sqrt(np.max(n2)))
 
 
 def time_window(t, t0: float | None = None, t1: float | None = None) -> np.ndarray:

@@ -24,13 +24,21 @@ hand-over without any feedback from the filter: its WLS fixes (loose,
 :mod:`~sdr_di.integration.tight_ranges`), every ``1 / gnss_rate_hz`` s
 (:mod:`~sdr_di.integration.gnss_epochs`). So the three report over the same time window.
 
-Code: :meth:`IntegratedReceiver._vector_loop` hands over and runs the mode-independent
+Code, in the order of a run (:meth:`IntegratedReceiver.run`): ``_check_inputs`` (IMU span,
+filter rate, filter, reference), then either ``_run_from`` (an earlier run's start-up or
+scalar run) or the scalar start-up, ``_StartUp`` (the receiver's epoch callback: fixes,
+navigation data in force, the hand-over rule ``_hand_over``, for loose and tight the loop
+started there and the measurement epochs after it) ending in a typed
+:class:`~sdr_di.integration.handover.Handover`; ``_no_handover`` says why there was none;
+``_keep_start`` keeps the start for other runs.
+:meth:`IntegratedReceiver._vector_loop` hands over and runs the mode-independent
 :class:`~sdr_di.integration.loop.IntegrationLoop` (INS propagation, filter predict/update,
 closed-loop feedback, solution rows) with deep mode's measurement source,
 :class:`~sdr_di.deep.vector_tracking.VectorTracking` (NCO commands, correlation,
 pre-filters and channel management, the NCO and pre-filter share of the feedback,
-navigation data taken up). :meth:`IntegratedReceiver._scalar_coupled_loop` runs the same loop
-with the loose or tight source, without the NCO feedback.
+navigation data taken up). :meth:`IntegratedReceiver._start_scalar_coupled_loop` runs the same loop
+with the loose or tight source, without the NCO feedback, behind the receiver
+(``_CoupledRun``), and ``_finish_scalar_coupled_loop`` collects it.
 
 Decisions
 ---------
@@ -122,7 +130,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .._deprecated import forwarding_getattr
 from ..deep.vector_tracking import SampleClock, VectorTracking
 from ..errors import ImuDataError
 from ..filters import filter_record
@@ -132,7 +139,7 @@ from ..integration.gnss_epochs import GnssEpochRecorder
 from ..integration.loop import BackgroundLoop, IntegrationLoop
 from ..integration.loop_process import LoopChild, LoopProcess, start_loop_behind
 from ..integration.loose_fixes import LooseFixSource
-from ..integration.measurements import LooseMeasurementModel, RangeRateMeasurementModel
+from ..coupling.measurements import LooseMeasurementModel, RangeRateMeasurementModel
 from ..integration.metrics import summarize
 from ..integration.tight_ranges import TightRangeSource
 from ..receiver.ifreader import IfSource
@@ -143,9 +150,9 @@ from ..receiver.pvt import PvtEngine
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import ChannelState
 from .alignment import align_ins
-from .config import MODES, SCALAR_EPOCH_S, IntegrationConfig
+from ..coupling.config import MODES, SCALAR_EPOCH_S, IntegrationConfig, imu_samples_per_interval
 from .filter_setup import check_filter, make_integration_filter
-from .handover import (HandoverError, handover_channels, handover_span_s,
+from .handover import (Handover, HandoverError, handover_channels, handover_span_s,
                        offer_subframe_klobuchar)
 
 __all__ = ["MODES", "DeepStart", "HandoverError", "IntegratedReceiver", "IntegrationConfig",
@@ -181,7 +188,7 @@ class DeepStart:
     nav : object
         The assistance navigation data the start-up took (compared by identity).
     state : tuple
-        ``(scalar receiver, PVT engine, navigation data in force, hand-over record)``.
+        ``(scalar receiver, PVT engine, navigation data in force, Handover)``.
     scalar_s : float
         Wall time of the start-up that made it [s].
     """
@@ -221,9 +228,9 @@ class ScalarRecord:
         As :attr:`DeepStart.key`, then ``gnss_every``.
     nav : object
         The assistance navigation data the run took (compared by identity).
-    hand : dict
-        The hand-over: ``sample``, ``sol``, ``prns``, ``next_start`` and ``channels`` (the
-        receiver's PRNs then).
+    hand : Handover
+        The hand-over (:class:`~sdr_di.integration.handover.Handover`: ``sample``, ``sol``,
+        ``prns``, ``next_start``, ``channels``).
     epochs : list of GnssEpoch
         Every recorded epoch (read-only).
     rx_time : ReceiverTime
@@ -237,10 +244,10 @@ class ScalarRecord:
 
     key: tuple
     nav: object
-    hand: dict
+    hand: Handover
     epochs: list
     rx_time: object
-    scalar: object
+    scalar: ScalarReceiver
     scalar_s: float
 
     def recorder(self) -> GnssEpochRecorder:
@@ -444,28 +451,67 @@ class IntegratedReceiver:
             (:attr:`DeepStart.key`, :attr:`ScalarRecord.key`), or of the other kind of mode
             (a ``ValueError``).
         """
-        cfg = self.config
         t_all = time.perf_counter()
-        fs = source.sampling_rate_hz
+        stop, off, n_per = self._check_inputs(source, imu, truth, duration_s)
+        key = (str(source.path), source.n_samples, stop,
+               None if prns is None else tuple(prns),
+               None if assist is None else tuple(sorted(assist.items())),
+               self.config.handover_wait_s, self.config.iono_wait_s, self.scalar.config)
+        self.deep_start, self.scalar_record = None, None        # set by _keep_start
+        if start is not None:
+            return self._run_from(start, key, nav, source, imu, off, n_per, stop, truth,
+                                  progress, t_all)
+        # the scalar start-up until the hand-over (deep), or the whole scalar run (loose
+        # and tight: the loop runs behind it from the hand-over)
+        up = _StartUp(self, source, nav, progress,
+                      lambda hand, recorder, engine: self._start_scalar_coupled_loop(
+                          source, imu, off, n_per, stop, hand, recorder, truth,
+                          self.scalar.config, engine.builder.rx_time, child=up.take_child()))
+        t_scalar = up.run(prns, stop, assist)
+        if not up.hand.reached:
+            raise self._no_handover(source, stop)
+        if keep_start:
+            self._keep_start(up, key, nav, t_scalar)
+        if self.config.mode != "deep":
+            assert up.coupled is not None        # started at the hand-over
+            return self._finish_scalar_coupled_loop(up.coupled, up.hand.prns,
+                                                    up.recorder.epochs, t_scalar, t_all)
+        return self._vector_loop(source, imu, off, n_per, stop, self.scalar, up.engine,
+                                 up.navdata, up.hand, truth, progress, t_scalar, t_all)
+
+    def _keep_start(self, up: _StartUp, key: tuple, nav, t_scalar: float) -> None:
+        """Loose and tight: the scalar run (:attr:`scalar_record`); deep: a copy of the
+        start-up's state at the hand-over (:attr:`deep_start`; the vector loop changes the
+        objects themselves)."""
+        if self.config.mode != "deep":
+            self.scalar_record = ScalarRecord(
+                key + (self.config.gnss_every,), nav, copy.copy(up.hand), up.recorder.epochs,
+                up.engine.builder.rx_time, self.scalar, t_scalar)
+            return
+        state = (self.scalar, up.engine, up.navdata, up.hand)
+        self.deep_start = DeepStart(key, nav, copy.deepcopy(state, memo={
+            id(up.source): up.source}), t_scalar, up.source)
+
+    def _check_inputs(self, source: IfSource, imu, truth,
+                      duration_s: float | None) -> tuple[int, float, int]:
+        """Before the start-up: the IMU span over the samples processed, the filter rate
+        against the IMU rate, the filter, the reference for a truth alignment. Returns the
+        end sample, the IMU-to-IF time offset [s] and the IMU samples per interval."""
+        cfg = self.config
         stop = source.n_samples if duration_s is None else min(
-            source.n_samples, round(duration_s * fs))
+            source.n_samples, round(duration_s * source.sampling_rate_hz))
         off = check_imu_span(source, imu, stop)
-        n_per = imu.rate_hz / cfg.filter_rate_hz
-        if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
-            raise ValueError(f"filter rate {cfg.filter_rate_hz} Hz must divide the IMU rate "
-                             f"{imu.rate_hz} Hz")
-        n_per = round(n_per)
+        n_per = imu_samples_per_interval(imu.rate_hz, cfg.filter_rate_hz)
         check_filter(cfg)              # filter name check before the (long) start-up
         if cfg.align == "truth" and truth is None:
             raise ImuDataError("align='truth' needs the reference (truth) file; use "
                                "align='gnss' without one")
+        return stop, off, n_per
 
-        key = (str(source.path), source.n_samples, stop,
-               None if prns is None else tuple(prns),
-               None if assist is None else tuple(sorted(assist.items())),
-               cfg.handover_wait_s, cfg.iono_wait_s, self.scalar.config)
-        self.deep_start = None
-        self.scalar_record = None
+    def _run_from(self, start: DeepStart | ScalarRecord, key: tuple, nav, source, imu, off,
+                  n_per, stop, truth, progress, t_all) -> IntegrationResult:
+        """A run from an earlier run's start-up (deep) or scalar run (loose and tight)."""
+        cfg = self.config
         if isinstance(start, ScalarRecord):
             if cfg.mode == "deep" or start.key != key + (cfg.gnss_every,) \
                     or start.nav is not nav:
@@ -474,139 +520,36 @@ class IntegratedReceiver:
                     "rule or GNSS rate (ScalarRecord.key), or the mode is deep")
             return self._replay_scalar_coupled_loop(source, imu, off, n_per, stop, start,
                                                     truth, t_all)
-        if start is not None:
-            if cfg.mode != "deep" or start.key != key or start.nav is not nav:
-                raise StartMismatchError(
-                    "start: the start-up state was made on other data or with another "
-                    "hand-over rule (DeepStart.key), or the mode is not deep")
-            t0 = time.perf_counter()
-            rx, engine, navdata, hand = start.copy_for(source)
-            self.scalar = rx                       # its records are this run's from here
-            t_scalar = time.perf_counter() - t0   # this run's own work: the copy
-            return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
-                                     hand, truth, progress, t_scalar, t_all)
-
-        # ---- scalar start-up until hand-over
-        rx = self.scalar
-        rt = None
-        if source.start_week is not None and source.start_sow is not None:
-            rt = ReceiverTime.from_sample_zero(fs, source.start_week, source.start_sow)
-        engine = PvtEngine(fs, {}, None, rx_time=rt)
-        navdata = NavDataInForce(nav)
-        engine.navdata = navdata
-        hand: dict = {}
-        recorder = GnssEpochRecorder(engine, navdata)
-        n_epoch = [0]
-        next_progress = [0.0]
-
-        def take_up(sample, ephs):
-            navdata.offer_decoded(ephs, rx.klobuchar, sample / fs)
-            if navdata.iono_source != "broadcast":
-                offer_subframe_klobuchar(rx, navdata, sample / fs)
-            engine.ephemerides, engine.iono = navdata, navdata.klobuchar
-
-        def after_handover(sample, obs, ephs):
-            """Loose and tight: the scalar receiver keeps running; every gnss_every-th
-            epoch is a measurement epoch (module notes)."""
-            n_epoch[0] += 1
-            take_up(sample, ephs)
-            if n_epoch[0] % cfg.gnss_every == 0:
-                recorder.record(sample, obs)
-            if progress is not None and sample / fs >= next_progress[0]:
-                progress(sample / fs, len(obs), len(obs))
-                next_progress[0] = sample / fs + 1.0
-            return False
-
-        def on_epoch(sample, obs, ephs):
-            if cfg.mode != "deep" and "child" not in hand:
-                # loose/tight: the loop's process, started once acquisition is done, so that
-                # its start-up uses the core tracking leaves idle (integration.loop_process)
-                hand["child"] = LoopChild.start()
-            if "sample" in hand:
-                return after_handover(sample, obs, ephs)
-            if progress is not None and sample / fs >= next_progress[0]:
-                progress(sample / fs, len(obs), None)     # start-up: no filter yet
-                next_progress[0] = sample / fs + 1.0
-            if not obs:            # nothing tracked at this epoch: no fix, keep going
-                return False
-            take_up(sample, ephs)
-            sol = engine.process(obs)
-            if not sol.valid or not sol.velocity_valid:
-                return False
-            hand.setdefault("first_fix", sample)
-            trk = [o for o in obs if o.state == ChannelState.TRACK.name]
-            ok = [o for o in trk if o.time_valid and o.code_lock
-                  and navdata.has(o.prn, sol.week, sol.sow)]
-            since_fix = (sample - hand["first_fix"]) / fs
-            waited = since_fix >= cfg.handover_wait_s
-            if navdata.klobuchar is None and since_fix < cfg.iono_wait_s:
-                return False       # wait for the ionosphere coefficients (module notes)
-            if len(ok) >= 4 and (len(ok) == len(trk) or waited):
-                if navdata.klobuchar is None:
-                    warnings.warn(
-                        f"deep: hand-over at {sample / fs:.1f} s without ionosphere "
-                        f"coefficients ({navdata.assistance_iono_label} in the assistance "
-                        f"data, none decoded after {since_fix:.1f} s): no ionosphere model "
-                        "until subframe 1 is decoded", NavDataWarning, stacklevel=3)
-                hand.update(sample=sample, sol=sol, prns=[o.prn for o in ok])
-                if cfg.mode == "deep":
-                    return True        # the vector loop takes over from the channels
-                # loose/tight: the loop's grid starts where deep's would (the channels'
-                # next code epochs); the fix of the hand-over epoch is the first measurement
-                hand["next_start"] = max(int(rx.channels[p].next_start) for p in hand["prns"])
-                hand["channels"] = sorted(int(p) for p in rx.channels)
-                recorder.record(sample, obs)
-                # lost channels are searched around, and timed from, the last fix
-                rx.predictor = FixPredictor(engine, fs, source.carrier_hz)
-                # the integration loop runs behind the receiver, on a second thread
-                hand["coupled"] = self._start_scalar_coupled_loop(
-                    source, imu, off, n_per, stop, hand, recorder, truth, rx.config,
-                    engine.builder.rx_time)
-                return False
-            return False
-
+        if cfg.mode != "deep" or start.key != key or start.nav is not nav:
+            raise StartMismatchError(
+                "start: the start-up state was made on other data or with another "
+                "hand-over rule (DeepStart.key), or the mode is not deep")
         t0 = time.perf_counter()
-        try:
-            rx.run(source, prns=prns, on_epoch=on_epoch, epoch_interval_s=SCALAR_EPOCH_S,
-                   stop_sample=stop, assist=assist)
-        except BaseException:
-            recorder.close()
-            if "coupled" in hand:
-                hand["coupled"]["thread"].abort()
-            raise
-        finally:
-            if hand.get("child") is not None:          # no hand-over: not used
-                hand["child"].close()
-        recorder.close()
-        t_scalar = time.perf_counter() - t0
-        if "sample" not in hand:
-            found = [c.prn for c in rx.channels.values() if c.n_acquisitions > 0]
-            usual, longest = handover_span_s(cfg)
-            span = stop / fs                       # the start-up runs from sample 0
-            need = (f"needs about {usual:.0f} s of file (two D1 subframes: the time of week), "
-                    f"up to {longest:.0f} s when a channel lacks navigation data")
-            short = (f"; the {span:.1f} s processed are too short for the hand-over, which "
-                     f"{need}" if span < usual else
-                     f"; the {span:.1f} s processed may be too short: the hand-over {need}"
-                     if span < longest else "")
-            loop = "vector" if cfg.mode == "deep" else cfg.mode
-            raise HandoverError(
-                f"{source.path}: no hand-over to the {loop} loop: " +
-                ("no satellite found" if not found else
-                 f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
-                 "ephemeris and a valid fix") + short)
-        if cfg.mode != "deep":
-            if keep_start:
-                self.scalar_record = ScalarRecord(
-                    key + (cfg.gnss_every,), nav,
-                    {k: hand[k] for k in ("sample", "sol", "prns", "next_start", "channels")},
-                    recorder.epochs, engine.builder.rx_time, rx, t_scalar)
-            return self._finish_scalar_coupled_loop(hand, recorder.epochs, t_scalar, t_all)
-        if keep_start:            # a copy: the vector loop below changes these objects
-            state = copy.deepcopy((rx, engine, navdata, hand), memo={id(source): source})
-            self.deep_start = DeepStart(key, nav, state, t_scalar, source)
+        rx, engine, navdata, hand = start.copy_for(source)
+        self.scalar = rx                       # its records are this run's from here
+        t_scalar = time.perf_counter() - t0   # this run's own work: the copy
         return self._vector_loop(source, imu, off, n_per, stop, rx, engine, navdata,
                                  hand, truth, progress, t_scalar, t_all)
+
+    def _no_handover(self, source: IfSource, stop: int) -> HandoverError:
+        """Why the start-up never handed over: what it found, and whether the file was long
+        enough (two D1 subframes for the time of week, plus ``handover_wait_s``)."""
+        cfg, fs = self.config, source.sampling_rate_hz
+        found = [c.prn for c in self.scalar.channels.values() if c.n_acquisitions > 0]
+        usual, longest = handover_span_s(cfg)
+        span = stop / fs                       # the start-up runs from sample 0
+        need = (f"needs about {usual:.0f} s of file (two D1 subframes: the time of week), "
+                f"up to {longest:.0f} s when a channel lacks navigation data")
+        short = (f"; the {span:.1f} s processed are too short for the hand-over, which "
+                 f"{need}" if span < usual else
+                 f"; the {span:.1f} s processed may be too short: the hand-over {need}"
+                 if span < longest else "")
+        loop = "vector" if cfg.mode == "deep" else cfg.mode
+        return HandoverError(
+            f"{source.path}: no hand-over to the {loop} loop: " +
+            ("no satellite found" if not found else
+             f"tracked {', '.join(f'C{p:02d}' for p in found)} but never 4 with time, "
+             "ephemeris and a valid fix") + short)
 
     # ------------------------------------------------------------------------------------
     def _vector_loop(self, source, imu, off, n_per, stop, rx, engine, navdata,
@@ -623,8 +566,9 @@ class IntegratedReceiver:
         """
         cfg = self.config
         fs = source.sampling_rate_hz
-        sol = hand["sol"]
-        k_h = int(hand["sample"])
+        sol = hand.sol
+        assert hand.sample is not None           # a reached hand-over
+        k_h = int(hand.sample)
         clock = SampleClock.of(engine.builder.rx_time, fs)
         chans = handover_channels(cfg, rx, navdata, hand, clock)
         # ---- IMU grid: the loop starts on the first IMU sample after the hand-over
@@ -693,9 +637,9 @@ class IntegratedReceiver:
                                else None))
 
     # ------------------------------------------------------------------------------------
-    def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, hand, recorder,
-                                   truth, tracking_config, rx_time,
-                                   behind: bool = True) -> dict:
+    def _start_scalar_coupled_loop(self, source, imu, off, n_per, stop, hand: Handover,
+                                   recorder, truth, tracking_config, rx_time,
+                                   behind: bool = True, child=None) -> _CoupledRun:
         """Loose or tight mode: start the loop at the hand-over (module notes).
 
         Same hand-over grid point, INS alignment, clock and filter as :meth:`_vector_loop`;
@@ -703,16 +647,17 @@ class IntegratedReceiver:
         LooseFixSource` or :class:`~sdr_di.integration.tight_ranges.TightRangeSource` over
         the epochs the scalar receiver records; the loop runs behind the receiver in a
         child process (:func:`~sdr_di.integration.loop_process.start_loop_behind`; else on
-        a second thread), with a channel column
-        for every channel of the receiver until :meth:`_finish_scalar_coupled_loop`.
+        a second thread; ``child``: the process started for it, else none), with a channel
+        column for every channel of the receiver until :meth:`_finish_scalar_coupled_loop`.
         """
         cfg = self.config
         fs = source.sampling_rate_hz
-        sol = hand["sol"]
-        k_h = int(hand["sample"])
+        sol = hand.sol
+        assert hand.sample is not None and hand.next_start is not None   # reached, coupled
+        k_h = int(hand.sample)
         clock = SampleClock.of(rx_time, fs)
         t_if = imu.t + off
-        i_h = max(int(np.searchsorted(t_if, max(k_h, hand["next_start"]) / fs)), 1)
+        i_h = max(int(np.searchsorted(t_if, max(k_h, hand.next_start) / fs)), 1)
         T = n_per / imu.rate_hz
         k_grid0 = round(t_if[i_h] * fs)
         ins, llh_fix, att_sig = align_ins(cfg, imu, truth, sol, t_if, i_h, k_h / fs)
@@ -723,8 +668,8 @@ class IntegratedReceiver:
         kf, process, meas = make_integration_filter(cfg, T, sol, llh_fix, att_sig, model)
         # the summary's record of what the filter uses, read from the built filter
         self.filter_used = filter_record(kf, cfg.filter, cfg.filter_options)
-        others = sorted(set(hand["channels"]) - set(hand["prns"]))
-        prns = tuple(hand["prns"]) + tuple(others)
+        others = sorted(set(hand.channels) - set(hand.prns))
+        prns = tuple(hand.prns) + tuple(others)
         prof = {"scalar": 0.0, "measure": 0.0, "filter": 0.0, "ins": 0.0, "output": 0.0}
         imu_epoch = (clock.week, clock.sow(0) + off)     # BDT of IMU t = 0 (module notes)
         src_cls = LooseFixSource if loose else TightRangeSource
@@ -742,12 +687,11 @@ class IntegratedReceiver:
         run_src = src if loose or cfg.noise_policy == "cn0" else \
             FixedNoiseSource(src, cfg.sigma_range_m, cfg.sigma_rate_mps)
         if behind:
-            thread = start_loop_behind(loop, run_src, src, recorder, child=hand.get("child"))
+            thread = start_loop_behind(loop, run_src, src, recorder, child=child)
         else:              # the epochs are all recorded: the loop runs on a thread at once
             thread = BackgroundLoop(loop, run_src)
-        hand["child"] = None                              # taken (or not needed)
-        return {"thread": thread, "loop": loop, "src": src, "clock": clock, "kf": kf,
-                "adapt0": adapt0, "k_grid0": k_grid0, "prof": prof}
+        return _CoupledRun(thread=thread, loop=loop, src=src, clock=clock, kf=kf,
+                           adapt0=adapt0, k_grid0=k_grid0, prof=prof)
 
     def _replay_scalar_coupled_loop(self, source, imu, off, n_per, stop, record: ScalarRecord,
                                     truth, t_all) -> IntegrationResult:
@@ -757,40 +701,174 @@ class IntegratedReceiver:
         hand = copy.deepcopy(record.hand)
         self.scalar = record.scalar                # its records are this run's
         recorder = record.recorder()
-        hand["coupled"] = self._start_scalar_coupled_loop(
+        run = self._start_scalar_coupled_loop(
             source, imu, off, n_per, stop, hand, recorder, truth, record.scalar.config,
             record.rx_time, behind=False)
-        return self._finish_scalar_coupled_loop(hand, recorder.epochs,
+        return self._finish_scalar_coupled_loop(run, hand.prns, recorder.epochs,
                                                 time.perf_counter() - t0, t_all)
 
-    def _finish_scalar_coupled_loop(self, hand, epochs, t_scalar, t_all) -> IntegrationResult:
+    def _finish_scalar_coupled_loop(self, run: _CoupledRun, handed: list[int], epochs,
+                                    t_scalar, t_all) -> IntegrationResult:
         """Loose or tight mode: wait for the loop (:meth:`_start_scalar_coupled_loop`),
         keep the channel columns of the handed-over PRNs and of those the receiver acquired
         later, in that order."""
-        run = hand["coupled"]
         t0 = time.perf_counter()
-        run["thread"].join()
-        if isinstance(run["thread"], LoopProcess):     # its objects as the loop ended
-            th = run["thread"]
-            run.update(loop=th.loop, src=th.epoch_source, kf=th.loop.kf, prof=th.loop.profile)
-        loop, src, prof = run["loop"], run["src"], run["prof"]
+        run.thread.join()
+        if isinstance(run.thread, LoopProcess):     # its objects as the loop ended
+            th = run.thread
+            run.loop, run.src, run.kf, run.prof = (th.loop, th.epoch_source, th.loop.kf,
+                                                   th.loop.profile)
+        loop, src, prof = run.loop, run.src, run.prof
         prof["scalar"] = t_scalar
         prof["loop_wait"] = time.perf_counter() - t0   # the loop's tail after the receiver
-        prof["loop_cpu"] = run["thread"].cpu_s          # CPU of the loop's thread
-        later = sorted({int(p) for ep in epochs for p in ep.obs.prn} - set(hand["prns"]))
-        prns = tuple(hand["prns"]) + tuple(later)
+        prof["loop_cpu"] = run.thread.cpu_s             # CPU of the loop's thread
+        later = sorted({int(p) for ep in epochs for p in ep.obs.prn} - set(handed))
+        prns = tuple(handed) + tuple(later)
         src.keep_columns(prns, loop.rows)
-        return self._result(loop, run["clock"], prns, run["kf"], run["adapt0"],
-                            run["k_grid0"], prof, t_all, src.navigation)
+        return self._result(loop, run.clock, prns, run.kf, run.adapt0, run.k_grid0, prof,
+                            t_all, src.navigation)
 
 
+@dataclasses.dataclass
+class _CoupledRun:
+    """Loose or tight: the integration loop started at the hand-over and running behind the
+    scalar receiver (:meth:`IntegratedReceiver._start_scalar_coupled_loop`), with what its
+    result needs."""
 
-#: Names of the first release (deep mode came first), kept for one release.
-__getattr__ = forwarding_getattr(__name__, {
-    "DeepConfig": f"{__name__}:IntegrationConfig",
-    "DeepReceiver": f"{__name__}:IntegratedReceiver",
-    "DeepResult": f"{__name__}:IntegrationResult",
-    # helpers that moved to the named modules of the hand-over, alignment, filter set-up
-    "clock_model": "sdr_di.integration.filter_setup",
-    "gnss_alignment": "sdr_di.integration.alignment",
-    "_handover_decoder": "sdr_di.integration.handover:handover_decoder"})
+    thread: LoopProcess | BackgroundLoop
+    loop: IntegrationLoop
+    src: LooseFixSource | TightRangeSource
+    clock: SampleClock
+    kf: object
+    adapt0: float            # the filter's adaptation time at the start [s]
+    k_grid0: int             # IF sample of the loop's first grid point
+    prof: dict
+
+
+class _StartUp:
+    """The scalar start-up (every mode): the scalar receiver's run with its epoch callback
+    (:meth:`on_epoch`), the fixes (PVT engine), the navigation data in force and the
+    hand-over rule (:meth:`_hand_over`; receiver notes). Deep: it ends at the hand-over.
+    Loose and tight: the receiver runs on; the loop is started at the hand-over
+    (``start_loop``) and every ``gnss_every``-th epoch after it is recorded for it
+    (:meth:`_after_handover`).
+    """
+
+    def __init__(self, owner: IntegratedReceiver, source: IfSource, nav, progress,
+                 start_loop: Callable) -> None:
+        self.cfg, self.rx, self.source = owner.config, owner.scalar, source
+        self.fs = source.sampling_rate_hz
+        rt = None
+        if source.start_week is not None and source.start_sow is not None:
+            rt = ReceiverTime.from_sample_zero(self.fs, source.start_week, source.start_sow)
+        self.engine = PvtEngine(self.fs, {}, None, rx_time=rt)
+        self.navdata = NavDataInForce(nav)
+        self.engine.navdata = self.navdata
+        self.recorder = GnssEpochRecorder(self.engine, self.navdata)
+        self.hand = Handover()
+        self.progress, self.start_loop = progress, start_loop
+        self.n_epoch = 0                 # epochs after the hand-over (loose and tight)
+        self.next_progress = 0.0         # file time of the next progress call [s]
+        self.child: LoopChild | None = None    # loose and tight: the loop's process
+        self.child_started = False
+        self.coupled: _CoupledRun | None = None
+
+    def run(self, prns, stop: int, assist) -> float:
+        """The scalar receiver over ``[0, stop)``; its wall time [s]."""
+        t0 = time.perf_counter()
+        try:
+            self.rx.run(self.source, prns=prns, on_epoch=self.on_epoch,
+                        epoch_interval_s=SCALAR_EPOCH_S, stop_sample=stop, assist=assist)
+        except BaseException:
+            self.recorder.close()
+            if self.coupled is not None:
+                self.coupled.thread.abort()
+            raise
+        finally:
+            if self.child is not None:          # no hand-over: not used
+                self.child.close()
+        self.recorder.close()
+        return time.perf_counter() - t0
+
+    def take_child(self):
+        """The loop's process for the loop that starts now (None: a thread runs it)."""
+        child, self.child = self.child, None
+        return child
+
+    def take_up(self, sample: int, ephs) -> None:
+        """Navigation data decoded by now into the data in force, and into the fixes."""
+        rx, navdata = self.rx, self.navdata
+        navdata.offer_decoded(ephs, rx.klobuchar, sample / self.fs)
+        if navdata.iono_source != "broadcast":
+            offer_subframe_klobuchar(rx, navdata, sample / self.fs)
+        self.engine.ephemerides, self.engine.iono = navdata, navdata.klobuchar
+
+    def _report(self, sample: int, n_obs: int, n_used: int | None) -> None:
+        if self.progress is not None and sample / self.fs >= self.next_progress:
+            self.progress(sample / self.fs, n_obs, n_used)
+            self.next_progress = sample / self.fs + 1.0
+
+    def on_epoch(self, sample: int, obs, ephs) -> bool:
+        """The scalar receiver's epoch callback: a fix, and the hand-over when its rule is
+        met; True ends the scalar run (deep: the vector loop takes over)."""
+        if self.cfg.mode != "deep" and not self.child_started:
+            # loose/tight: the loop's process, started once acquisition is done, so that
+            # its start-up uses the core tracking leaves idle (integration.loop_process)
+            self.child, self.child_started = LoopChild.start(), True
+        if self.hand.reached:
+            return self._after_handover(sample, obs, ephs)
+        self._report(sample, len(obs), None)           # start-up: no filter yet
+        if not obs:            # nothing tracked at this epoch: no fix, keep going
+            return False
+        self.take_up(sample, ephs)
+        sol = self.engine.process(obs)
+        if not sol.valid or not sol.velocity_valid:
+            return False
+        if self.hand.first_fix is None:
+            self.hand.first_fix = sample
+        return self._hand_over(sample, obs, sol)
+
+    def _hand_over(self, sample: int, obs, sol) -> bool:
+        """The hand-over rule (receiver notes): at least 4 channels with time, code lock and
+        ephemeris, every tracked one or ``handover_wait_s`` after the first fix, and the
+        ionosphere coefficients or ``iono_wait_s`` spent waiting for them."""
+        cfg, fs, navdata, hand = self.cfg, self.fs, self.navdata, self.hand
+        trk = [o for o in obs if o.state == ChannelState.TRACK.name]
+        ok = [o for o in trk if o.time_valid and o.code_lock
+              and navdata.has(o.prn, sol.week, sol.sow)]
+        assert hand.first_fix is not None        # on_epoch sets it before
+        since_fix = (sample - hand.first_fix) / fs
+        waited = since_fix >= cfg.handover_wait_s
+        if navdata.klobuchar is None and since_fix < cfg.iono_wait_s:
+            return False       # wait for the ionosphere coefficients (module notes)
+        if not (len(ok) >= 4 and (len(ok) == len(trk) or waited)):
+            return False
+        if navdata.klobuchar is None:
+            warnings.warn(
+                f"deep: hand-over at {sample / fs:.1f} s without ionosphere "
+                f"coefficients ({navdata.assistance_iono_label} in the assistance "
+                f"data, none decoded after {since_fix:.1f} s): no ionosphere model "
+                "until subframe 1 is decoded", NavDataWarning, stacklevel=4)
+        hand.sample, hand.sol, hand.prns = sample, sol, [o.prn for o in ok]
+        if cfg.mode == "deep":
+            return True        # the vector loop takes over from the channels
+        # loose/tight: the loop's grid starts where deep's would (the channels' next code
+        # epochs); the fix of the hand-over epoch is the first measurement
+        hand.next_start = max(int(self.rx.channels[p].next_start) for p in hand.prns)
+        hand.channels = sorted(int(p) for p in self.rx.channels)
+        self.recorder.record(sample, obs)
+        # lost channels are searched around, and timed from, the last fix
+        self.rx.predictor = FixPredictor(self.engine, fs, self.source.carrier_hz)
+        # the integration loop runs behind the receiver, on a second thread
+        self.coupled = self.start_loop(hand, self.recorder, self.engine)
+        return False
+
+    def _after_handover(self, sample: int, obs, ephs) -> bool:
+        """Loose and tight: the scalar receiver keeps running; every gnss_every-th epoch is
+        a measurement epoch (module notes)."""
+        self.n_epoch += 1
+        self.take_up(sample, ephs)
+        if self.n_epoch % self.cfg.gnss_every == 0:
+            self.recorder.record(sample, obs)
+        self._report(sample, len(obs), len(obs))
+        return False

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import sys
 import time
 import warnings
@@ -62,6 +61,7 @@ from ..integration.assumptions import deep_beliefs, sidecar_truth
 from ..ins.truth import Truth
 from ..integration.consistency import NIS_BLOCKS, SD_COLUMNS
 from ..io.atomic import atomic_open, ensure_output_dir
+from ..io.json_values import json_safe
 from ..io.sidecar import companion_files
 from ..receiver.ifreader import IfSource
 from ..receiver.navdata import NavDataWarning
@@ -73,10 +73,10 @@ from .receiver import IntegrationConfig, IntegratedReceiver, IntegrationResult, 
 #: The filter whose runs keep the plain names ``STEM_MODE.csv`` (:func:`solution_names`).
 DEFAULT_FILTER = IntegrationConfig.filter
 
-__all__ = ["DEEP_COLUMNS", "DeepRunSummary", "companion_files", "run_deep", "write_channel_series",
-           "write_deep_csv", "write_nis_series"]
+__all__ = ["SOLUTION_COLUMNS", "IntegratedRunSummary", "companion_files", "run_integrated",
+           "write_channel_series", "write_nis_series", "write_solution_csv"]
 
-DEEP_COLUMNS = (
+SOLUTION_COLUMNS = (
     "t_s", "bdt_week", "bdt_sow", "lat_deg", "lon_deg", "h_m", "v_e", "v_n", "v_u",
     "pitch_deg", "roll_deg", "yaw_deg", "clock_bias_m", "clock_drift_mps", "n_used",
     "att_err_e_deg", "att_err_n_deg", "att_err_u_deg", "vel_err_e", "vel_err_n", "vel_err_u",
@@ -85,8 +85,8 @@ DEEP_COLUMNS = (
 
 
 @dataclasses.dataclass
-class DeepRunSummary:
-    """What a deep run produced."""
+class IntegratedRunSummary:
+    """What an integrated run (deep, loose or tight) produced."""
 
     files: dict
     result: IntegrationResult
@@ -125,7 +125,7 @@ def iono_take_up_s(res: IntegrationResult) -> float | None:
     return float(res.t[int(np.argmax(on))])
 
 
-def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
+def write_solution_csv(path: Path, res: IntegrationResult) -> Path:
     """Write the solution rows (atomic)."""
     data = np.column_stack([
         res.t, np.full(res.t.size, res.week), res.sow, np.degrees(res.llh[:, :2]),
@@ -134,7 +134,7 @@ def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
         res.nav_change if res.nav_change.size == res.t.size else np.zeros(res.t.size),
         res.sd if res.sd.shape[0] == res.t.size else np.full((res.t.size, 9), np.nan)]) \
         if res.t.size else np.zeros(
-        (0, len(DEEP_COLUMNS)))
+        (0, len(SOLUTION_COLUMNS)))
     label = (res.filter_used or {}).get("spec", res.filter_name)  # name:options as run
     with atomic_open(path, "w") as fh:
         # the measurement architecture is named when it is not paper 004's cascade (whose
@@ -143,7 +143,7 @@ def write_deep_csv(path: Path, res: IntegrationResult) -> Path:
         arch = "" if arch in (None, "prefilter") else f", measurements {arch}"
         fh.write(f"# sdr-di {res.mode} solution, filter {label}{arch}, hand-over at "
                  f"{res.handover_s:.3f} s, channels {' '.join(f'C{p:02d}' for p in res.prns)}\n")
-        fh.write(",".join(DEEP_COLUMNS) + "\n")
+        fh.write(",".join(SOLUTION_COLUMNS) + "\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.12g")
     return path
 
@@ -185,20 +185,6 @@ def write_nis_series(path: Path, res: IntegrationResult) -> Path:
         np.savetxt(fh, np.column_stack([t, nis, dof]).reshape(t.size, 4), delimiter=",",
                    fmt="%.10g")
     return path
-
-
-def _finite(v):
-    if isinstance(v, np.ndarray):
-        return [_finite(x) for x in v.tolist()]
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
-def _finite_tree(d: dict) -> dict:
-    """``d`` with non-finite floats as None, one level of nesting deep."""
-    return {k: {kk: _finite(vv) for kk, vv in v.items()} if isinstance(v, dict)
-            else _finite(v) for k, v in d.items()}
 
 
 def _progress_stage(mode: str, n_channels: int, n_used: int | None) -> str:
@@ -270,14 +256,16 @@ def solution_names(out_dir: Path, stem: str, cfg: IntegrationConfig) -> dict[str
             "nis": out_dir / f"{stem}_{tag}_nis.csv"}
 
 
-def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig | None = None,
-             imu_path: str | Path | None = None, truth_path: str | Path | None = None,
-             nav_path: str | Path | None = None, assist: bool = True, prns=None,
-             stem: str | None = None, progress: bool = True,
-             duration_s: float | None = None,
-             search: bool | dict[int, float | None] = True,
-             tracking: TrackingConfig | None = None) -> DeepRunSummary:
-    """Run the deep receiver over ``source`` and write the solution files (module notes).
+def run_integrated(source: IfSource, out_dir: str | Path, *,
+                   config: IntegrationConfig | None = None,
+                   imu_path: str | Path | None = None, truth_path: str | Path | None = None,
+                   nav_path: str | Path | None = None, assist: bool = True, prns=None,
+                   stem: str | None = None, progress: bool = True,
+                   duration_s: float | None = None,
+                   search: bool | dict[int, float | None] = True,
+                   tracking: TrackingConfig | None = None) -> IntegratedRunSummary:
+    """Run the integrated receiver (deep, loose or tight: ``config.mode``) over ``source``
+    and write the solution files (module notes).
 
     ``search`` is the start-up's acquisition assistance, the same rule as scalar mode's
     (:func:`~sdr_di.receiver.run_scalar.search_assistance`: True, the sidecar's list around
@@ -379,7 +367,7 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
         warnings.warn(f"metrics are null: {note}", ReferenceGridWarning, stacklevel=2)
     t_iono = iono_take_up_s(res)
     m_iono = None if t_iono is None else res.metrics(t0=t_iono)
-    write_deep_csv(files["solution"], res)
+    write_solution_csv(files["solution"], res)
     write_channel_series(files["channels"], res)
     write_nis_series(files["nis"], res)
     summary = {
@@ -390,23 +378,23 @@ def run_deep(source: IfSource, out_dir: str | Path, *, config: IntegrationConfig
                            else None),
         "prns": list(res.prns), "rows": int(res.t.size),
         "channels_always_used": bool(res.used.all()) if res.used.size else False,
-        "used_fraction": _finite(res.used.mean(axis=0)) if res.used.size else [],
-        "metrics": {k: _finite(v) for k, v in metrics.items()},
+        "used_fraction": res.used.mean(axis=0) if res.used.size else [],
+        "metrics": metrics,
         "metrics_note": note,
-        "consistency": _finite_tree(res.consistency()),
+        "consistency": res.consistency(),
         "iono_from_s": t_iono,
-        "metrics_after_iono": None if m_iono is None else {k: _finite(v)
-                                                           for k, v in m_iono.items()},
+        "metrics_after_iono": m_iono,
         "adaptation_s": res.adaptation_s,
-        "profile": {k: _finite(v) for k, v in res.profile.items()},
+        "profile": res.profile,
         "wall_s": wall,
         "navigation": res.navigation,
         "warnings": notes,
         "truth": sidecar_truth(getattr(source, "meta", None)),
         "assumptions": {**deep_beliefs(cfg), "filter": res.filter_used},
     }
-    with atomic_open(files["summary"], "w") as fh:
-        json.dump(summary, fh, indent=2)
+    with atomic_open(files["summary"], "w") as fh:   # NaN and inf as null (io.json_values)
+        json.dump(json_safe(summary), fh, indent=2)
         fh.write("\n")
-    return DeepRunSummary(files=files, result=res, metrics=metrics, wall_s=wall,
-                          iono_from_s=t_iono, metrics_after_iono=m_iono, metrics_note=note)
+    return IntegratedRunSummary(files=files, result=res, metrics=metrics, wall_s=wall,
+                                iono_from_s=t_iono, metrics_after_iono=m_iono,
+                                metrics_note=note)

@@ -1,7 +1,7 @@
 """Tight coupling on the scalar receiver's pseudoranges and rates (``sdr-di run --mode
 tight``).
 
-Measurement (paper 004 eq 6-12, :class:`~sdr_di.integration.measurements.
+Measurement (paper 004 eq 6-12, :class:`~sdr_di.coupling.measurements.
 RangeRateMeasurementModel`): for every usable channel of the epoch ``z = [P^_i - P_i,
 D^_i - D_i]``, with ``P_i``, ``D_i`` the scalar receiver's pseudorange [m] and pseudorange
 rate [m/s] and ``P^_i``, ``D^_i`` the same quantities predicted from the INS (interpolated

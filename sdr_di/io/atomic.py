@@ -21,7 +21,7 @@ import contextlib
 import os
 import shutil
 from pathlib import Path
-from typing import BinaryIO, Iterator
+from typing import IO, Any, Iterator
 
 from ..errors import OutputError
 from .paths import check_not_input
@@ -103,7 +103,7 @@ def output_dir_removed_on_failure(path: str | Path) -> Iterator[Path]:
 
 
 @contextlib.contextmanager
-def atomic_open(final: str | Path, mode: str = "wb") -> Iterator[BinaryIO]:
+def atomic_open(final: str | Path, mode: str = "wb") -> Iterator[IO[Any]]:
     """Open ``final.part`` for writing; rename to ``final`` on success, delete on failure.
 
     Parameters
@@ -179,7 +179,7 @@ class OutputSet:
         return final.with_name(final.name + ".part")
 
     @contextlib.contextmanager
-    def open(self, final: str | Path, mode: str = "wb") -> Iterator[BinaryIO]:
+    def open(self, final: str | Path, mode: str = "wb") -> Iterator[IO[Any]]:
         """Open the member ``final`` for writing under its ``.part`` name.
 
         Raises

@@ -70,7 +70,7 @@ from .. import __version__
 from ..constants import C_LIGHT
 from ..errors import OutputError
 from ..orbits.ephemeris import Ephemeris, Klobuchar
-from ..orbits.rinex_nav import _URA_BOUNDS_M, _toc_datetime  # the reader's own conventions
+from ..orbits.rinex_nav import URA_BOUNDS_M, toc_datetime  # the reader's own conventions
 from ..timebase import bdt_to_datetime
 from .atomic import FinalizingWriter, atomic_open
 
@@ -511,7 +511,7 @@ def _d12(v: float) -> str:
 def _accuracy_m(urai: int) -> float:
     """SV accuracy [m] written for a URA index (the upper bound of the index)."""
     i = int(urai)
-    return _URA_BOUNDS_M[i] if 0 <= i < len(_URA_BOUNDS_M) else _URA_NONE_M
+    return URA_BOUNDS_M[i] if 0 <= i < len(URA_BOUNDS_M) else _URA_NONE_M
 
 
 def format_nav_record(eph: Ephemeris, t_tx_sow: float | None = None) -> str:
@@ -524,7 +524,7 @@ def format_nav_record(eph: Ephemeris, t_tx_sow: float | None = None) -> str:
     t_tx_sow : float, optional
         Transmission time of message [s of BDT week]; default the toe.
     """
-    t = _toc_datetime(eph)
+    t = toc_datetime(eph)
     if t.microsecond:
         raise ValueError(f"C{eph.prn:02d} toc {eph.toc!r} s is not a whole second")
     tx = eph.toe if t_tx_sow is None or not math.isfinite(float(t_tx_sow)) else float(t_tx_sow)

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..constants import SECONDS_PER_WEEK
-from ..errors import OutputError, SdrDiError
+from ..errors import OutputError, SdrDiError, SolutionFileError  # noqa: F401
 from ..frames import C_e_n
 from ..timebase import bdt_minus_utc, bdt_to_datetime
 from .atomic import FinalizingWriter, atomic_open
@@ -82,8 +82,6 @@ _FMT = {"sow": "%.9f", "rx_sow": "%.9f", "lat_deg": "%.10f", "lon_deg": "%.10f",
 _KNOTS_PER_MPS = 3600.0 / 1852.0
 
 
-class SolutionFileError(SdrDiError, ValueError):
-    """A solution file that cannot be read (wrong header, columns or values)."""
 
 
 class _Abort(Exception):

@@ -111,10 +111,12 @@ from .ephemeris import Ephemeris, Klobuchar
 __all__ = [
     "DEFAULT_MAX_AGE_S",
     "DEFAULT_MAX_AGE_GEO_S",
+    "URA_BOUNDS_M",
     "NavData",
     "load_nav",
     "merge_nav",
     "read_klobuchar",
+    "toc_datetime",
     "crosscheck_with_georinex",
     "ura_index",
 ]
@@ -145,13 +147,13 @@ _FIELDS = (
 _SPARE = frozenset(("spare_5_2", "spare_5_4", "spare_7_3", "spare_7_4"))
 
 #: URA upper bounds [m] for URA index 0..14 (BDS ICD / GPS convention; 15 = no prediction).
-_URA_BOUNDS_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0,
-                 1536.0, 3072.0, 6144.0)
+URA_BOUNDS_M = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0,
+                1536.0, 3072.0, 6144.0)
 
 
 def ura_index(accuracy_m: float) -> int:
     """ICD user range accuracy index for an accuracy [m] (smallest index whose bound holds)."""
-    for i, bound in enumerate(_URA_BOUNDS_M):
+    for i, bound in enumerate(URA_BOUNDS_M):
         if accuracy_m <= bound:
             return i
     return 15
@@ -719,7 +721,7 @@ def crosscheck_with_georinex(nav: NavData) -> dict[str, int]:
     ours = {}
     for prn in nav.prns:
         for r in nav.records[prn]:
-            ours[(prn, _toc_datetime(r))] = r
+            ours[(prn, toc_datetime(r))] = r
     for path in nav.sources:
         try:
             with warnings.catch_warnings():
@@ -768,7 +770,7 @@ def crosscheck_with_georinex(nav: NavData) -> dict[str, int]:
     return stats
 
 
-def _toc_datetime(eph: Ephemeris) -> _dt.datetime:
+def toc_datetime(eph: Ephemeris) -> _dt.datetime:
     """toc of a record as a naive BDT datetime (toc week taken next to the toe week)."""
     week = eph.week
     d = eph.toc - eph.toe

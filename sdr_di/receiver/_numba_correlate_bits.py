@@ -94,26 +94,20 @@ float64 replica tables indexed per sample (1.6-1.9 ns for the sums alone).
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 from numba import njit, prange
 
+from ..settings import integer_correlator
 from ._numba_correlate_blocks import add_task_parts, code_wrap_split, rotate_block
 from ._numba_correlate_int import correlate_epl_int8, int_kernel_pays
 
 
-def _integer_path_from_env() -> bool:
-    v = os.environ.get("SDR_DI_CORRELATOR", "int").strip().lower()
-    if v not in ("int", "float", ""):
-        raise ValueError(f"SDR_DI_CORRELATOR must be 'int' or 'float', got {v!r}")
-    return v != "float"
-
-
 #: Use the integer kernel (:mod:`~sdr_di.receiver._numba_correlate_int`) for ``int8``
-#: samples. Environment ``SDR_DI_CORRELATOR=float`` (read at import) or setting this to
-#: False forces the float32 kernel for every input (the reference path).
-INTEGER_PATH = _integer_path_from_env()
+#: samples. Environment ``SDR_DI_CORRELATOR=float`` (read at import,
+#: :func:`sdr_di.settings.integer_correlator`) or setting this to False forces the float32
+#: kernel for every input (the reference path).
+INTEGER_PATH = integer_correlator()
 
 #: Entries of the padded table one run may span (two 64-bit words, minus a safety margin).
 _SPAN = 124.0

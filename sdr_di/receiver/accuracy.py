@@ -7,14 +7,26 @@ velocity error the ENU 3-D error [m/s]. RMSE = sqrt(mean ||e||^2) (DESIGN sectio
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
 from ..frames import C_e_n
-from ..integration.metrics import rmse_max
 from ..io.imu_files import read_truth
 from ..io.solution_files import read_solution_csv
+
+__all__ = ["rmse_max", "solution_errors", "solution_vs_truth"]
+
+
+def rmse_max(e: np.ndarray) -> tuple[float, float]:
+    """``(sqrt(mean ||e_k||^2), max ||e_k||)`` of rows ``e`` (n, 3); NaN for no rows
+    (DESIGN section 6: RMSE = sqrt(mean ||e||^2); every mode's metrics use it)."""
+    e = np.atleast_2d(np.asarray(e, float))
+    if e.shape[0] == 0:
+        return math.nan, math.nan
+    n2 = np.sum(e * e, axis=1)
+    return float(math.sqrt(np.mean(n2))), float(math.sqrt(np.max(n2)))
 
 
 def solution_errors(solution_csv: str | Path, truth_csv: str | Path,

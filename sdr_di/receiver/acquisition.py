@@ -111,7 +111,7 @@ import scipy.fft
 from scipy import special
 
 from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I, is_geo
-from ..errors import AcquisitionError, RunFailed
+from ..errors import AcquisitionError, ImplausibleAcquisition  # noqa: F401
 from ._numba_acquire import accumulate_power
 from ._numba_correlate_bits import correlate_epl_bits
 from .correlator import (
@@ -559,9 +559,6 @@ class AcquisitionWarning(UserWarning):
     """Detections that real signals cannot give (:func:`implausible_detections`)."""
 
 
-class ImplausibleAcquisition(RunFailed):
-    """A run's acquisition gave detections that real signals cannot give: the samples are
-    read wrongly (the CLI's exit status 1)."""
 
 
 def implausible_detections(results: Iterable[AcquisitionResult]

@@ -50,7 +50,7 @@ from ._numba_correlate_bits import correlate_epl_bits, pack_bit_windows
 from ._numba_correlate_blocks import rotation_tables
 
 __all__ = ["CODE_PAD", "CorrelationResult", "Correlator", "bit_windows", "check_prn",
-           "correlate", "correlate_table", "padded_replicas"]
+           "correlate", "correlate_epl_bits", "correlate_table", "padded_replicas"]
 
 #: Chips of periodic padding on each side of the replica table (spacing must be < CODE_PAD - 1).
 CODE_PAD = 8

@@ -93,7 +93,7 @@ from typing import Any
 import numpy as np
 
 from ..constants import F_B3I, SECONDS_PER_WEEK
-from ..errors import SampleFormatError
+from ..errors import FormatCheckError, SampleFormatError  # noqa: F401  (FormatCheckError: its old home)
 from ..io.sample_formats import SampleFormat, byte_layout, get_format
 from ..io.page_cache import aligned_empty, open_uncached, pread_uncached, release_read_behind
 from ..io.paths import note_input
@@ -102,17 +102,6 @@ from ..io.sidecar import check_member, member_path, read_sidecar
 __all__ = ["FormatCheckError", "IfFileWarning", "IfSource", "check_format_statistics"]
 
 
-class FormatCheckError(SampleFormatError):
-    """The layout heuristic says the bytes are not in the declared format (module notes).
-
-    ``str()`` ends with how to read the file anyway (``hint``); :attr:`finding` is the
-    message without it, for a caller that names its own switch (the CLI's
-    ``--no-format-check``).
-    """
-
-    def __init__(self, finding: str, hint: str):
-        super().__init__(f"{finding} ({hint})")
-        self.finding = finding
 
 
 class IfFileWarning(UserWarning):

@@ -27,7 +27,7 @@ import math
 import time
 from pathlib import Path
 
-from ..errors import RunFailed
+from ..errors import NoSatelliteError  # noqa: F401  (defined in sdr_di.errors, imported from here)
 from ..io.atomic import atomic_open, ensure_output_dir
 from ..io.rinex_writer import RinexOutputs, rinex_names
 from ..io.solution_files import NmeaWriter, SolutionCsvWriter
@@ -38,8 +38,6 @@ from .pvt import PvtEngine
 from .scalar import ScalarReceiver
 
 
-class NoSatelliteError(RunFailed):
-    """Acquisition found no satellite in the IF file (a run without a fix: exit status 1)."""
 
 
 def open_source(path: str | Path, *, sampling_rate_hz: float | None = None,

@@ -74,6 +74,7 @@ ran 5.1x real time (before: 1.7x), same accuracy.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Iterable
@@ -200,6 +201,39 @@ class _Bank:
 
         self.threads.run_rows(rows_ab, nsamp, take)
         take(n_rows)
+
+
+@dataclasses.dataclass
+class _ScalarPass:
+    """The state of one :meth:`ScalarReceiver.run` over a file, shared by its stages.
+
+    Sample indices count from the file's first sample; ``[buf0, buf1)`` is the chunk read in
+    ``x`` (``n_comp`` values per sample); ``t_now`` the earliest sample a tracking channel
+    still needs; ``next_out`` the next output epoch (number ``k_out``).
+    """
+
+    source: IfSource
+    on_epoch: OnEpoch | None
+    epoch_interval_s: float
+    fs: float
+    start: int
+    stop: int
+    chans: list[Channel]
+    slot_of: dict[int, int]
+    bank: _Bank
+    threads_before: int
+    prof: dict
+    n_acq: int
+    reacq_step: int
+    retry_step: int | None
+    chunk: int
+    n_comp: int
+    buf0: int
+    buf1: int
+    next_out: int
+    t_now: int
+    k_out: int = 1
+    x: np.ndarray = dataclasses.field(default_factory=lambda: np.empty(0, dtype=np.float32))
 
 
 class ScalarReceiver:
@@ -412,6 +446,13 @@ class ScalarReceiver:
             assist: dict[int, float | None] | None = None) -> dict[int, TrackingLog]:
         """Acquire and track ``prns`` over ``source``.
 
+        The stages (module notes): :meth:`_begin` (channels, correlator bank, initial
+        acquisition), then until the end of the samples: :meth:`_emit_epochs` (output
+        epochs every channel has passed: ``on_epoch``), :meth:`_reacquire` (searches due),
+        :meth:`_advance_idle` (nothing tracked: to the next search), :meth:`_next_batch`
+        (the channels whose next block is read, reading a chunk when needed) and
+        :meth:`_correlate` (their blocks); :meth:`_end` (profile, logs).
+
         Parameters
         ----------
         source : IfSource
@@ -439,6 +480,30 @@ class ScalarReceiver:
             when ``log=False``).
         """
         t_total = time.perf_counter()
+        r = self._begin(source, prns, on_epoch, epoch_interval_s, start_sample, stop_sample,
+                        assist)
+        t_track = time.perf_counter()
+        while True:
+            act = [c for c in r.chans if c.tracking]
+            if act:
+                r.t_now = max(r.t_now, min(c.next_start for c in act))
+            if self._emit_epochs(r, act):
+                break
+            if self._reacquire(r):
+                continue
+            if not act:
+                if self._advance_idle(r):
+                    continue
+                break
+            batch = self._next_batch(r, act)
+            if batch is not None:
+                self._correlate(r, batch)
+        return self._end(r, t_total, t_track)
+
+    def _begin(self, source: IfSource, prns, on_epoch, epoch_interval_s: float,
+               start_sample: int, stop_sample: int | None, assist) -> _ScalarPass:
+        """The channels of ``prns`` (default: the assisted ones, else all 63), the correlator
+        bank, and the initial acquisition that starts the channels it detects."""
         fs = source.sampling_rate_hz
         assist = {check_prn(p): (None if d is None or not math.isfinite(d) else float(d))
                   for p, d in (assist or {}).items()}
@@ -463,157 +528,166 @@ class ScalarReceiver:
         self.channels = {c.prn: c for c in chans}
         self.ephemerides = {}
         self.klobuchar = None
-        slot_of = {id(c): i for i, c in enumerate(chans)}
         bank = _Bank(len(chans), cfg.spacing_chips, self.threads)
         bank.set_prns(prn_list)
-        threads_before = numba.get_num_threads()
-        prof = {"acquisition": 0.0, "read": 0.0, "correlate": 0.0, "channels": 0.0, "callback": 0.0,
-                    "steps": 0}
-        n_acq = self._acq_len(fs)
-        reacq_step = max(1, round(cfg.reacq_interval_ms * 1e-3 * fs))
-        retry_step = None if self.retry_acquisition_s is None else \
-            max(1, round(float(self.retry_acquisition_s) * fs))
-
-        # initial acquisition
+        r = _ScalarPass(
+            source=source, on_epoch=on_epoch, epoch_interval_s=epoch_interval_s, fs=fs,
+            start=start, stop=stop, chans=chans,
+            slot_of={id(c): i for i, c in enumerate(chans)}, bank=bank,
+            threads_before=numba.get_num_threads(),
+            prof={"acquisition": 0.0, "read": 0.0, "correlate": 0.0, "channels": 0.0,
+                  "callback": 0.0, "steps": 0},
+            n_acq=self._acq_len(fs),
+            reacq_step=max(1, round(cfg.reacq_interval_ms * 1e-3 * fs)),
+            retry_step=None if self.retry_acquisition_s is None else
+            max(1, round(float(self.retry_acquisition_s) * fs)),
+            chunk=max(2 * round(fs * 1e-3), round(self.chunk_ms * 1e-3 * fs)),
+            n_comp=2 if source.is_complex else 1, buf0=start, buf1=start,
+            next_out=start + round(epoch_interval_s * fs), t_now=start)
         t0 = time.perf_counter()
         self.acquisition_results = []
         if stop - start >= round(fs * 1e-3):  # a file shorter than its search: what it holds
             self.acquisition_results = self._initial_search(
                 source, start, prn_list, assist, listed=prns is not None or bool(assist))
             self._refuse_implausible(source)
-        for c, r in zip(chans, self.acquisition_results):
-            if r.detected:
-                c.start(start, r.code_phase_chips, r.doppler_hz, r.cn0_dbhz,
-                        fll_bw_hz=self._pull_in_fll_bw(r))
-            elif retry_step is not None:
-                c.next_reacq_sample = start + retry_step
-        prof["acquisition"] += time.perf_counter() - t0
+        for c, res in zip(chans, self.acquisition_results):
+            if res.detected:
+                c.start(start, res.code_phase_chips, res.doppler_hz, res.cn0_dbhz,
+                        fll_bw_hz=self._pull_in_fll_bw(res))
+            elif r.retry_step is not None:
+                c.next_reacq_sample = start + r.retry_step
+        r.prof["acquisition"] += time.perf_counter() - t0
+        return r
 
-        n1 = round(fs * 1e-3)
-        chunk = max(2 * n1, round(self.chunk_ms * 1e-3 * fs))
-        x = np.empty(0, dtype=np.float32)
-        n_comp = 2 if source.is_complex else 1
-        buf0 = buf1 = start
-        k_out = 1
-        next_out = start + round(k_out * epoch_interval_s * fs)
-        t_now = start
-        t_track = time.perf_counter()
-        stop_now = False
-        while True:
-            act = [c for c in chans if c.tracking]
-            if act:
-                t_now = max(t_now, min(c.next_start for c in act))
-            # output epochs every channel has passed
-            while next_out < t_now and next_out < stop:
-                t0 = time.perf_counter()
-                stop_now = False
-                if on_epoch is not None:
-                    obs = [c.observation_at(next_out) for c in act]
-                    stop_now = bool(on_epoch(next_out, obs, self._collect_ephemerides()))
-                prof["callback"] += time.perf_counter() - t0
-                k_out += 1
-                next_out = start + round(k_out * epoch_interval_s * fs)
-                if stop_now:
-                    break
-            if stop_now:
-                break
-            # (re-)acquisition attempts due now
-            due = [c for c in chans if not c.tracking and not c.finished
-                   and c.next_reacq_sample is not None and c.next_reacq_sample <= t_now]
-            started = False
-            if due:
-                t0 = time.perf_counter()
-                if t_now + n_acq > stop:
-                    for c in due:
-                        c.next_reacq_sample = None
-                    due = []
-                # PRNs never found: one full search for all of them (shared FFTs)
-                cold = [c for c in due if c.state == ChannelState.ACQUIRE]
-                results = []
-                if cold:
-                    results = list(zip(cold, self._acquire(source, t_now,
-                                                           [c.prn for c in cold])))
-                # lost channels: narrow search around each one's predicted Doppler (from the
-                # last fix), else around its last Doppler
-                preds = {}
-                for c in due:
-                    if c.state == ChannelState.ACQUIRE:
-                        continue
-                    c.begin_reacquisition(t_now)
-                    centre, half = c.reacquire_search(t_now)
-                    pred = None if self.predictor is None else self.predictor(c.prn, t_now)
-                    if pred is not None:
-                        preds[c.prn] = pred
-                        centre, half = pred.doppler_hz, self.config.reacq_doppler_range_hz
-                    results.append((c, self._acquire(source, t_now, [c.prn],
-                                                     doppler_center_hz=centre,
-                                                     doppler_range_hz=half)[0]))
-                for c, r in results:
-                    step = retry_step if c.state == ChannelState.ACQUIRE else reacq_step
-                    if r.detected:
-                        p = preds.get(c.prn)
-                        c.reacquired(t_now, r.code_phase_chips, r.doppler_hz, r.cn0_dbhz,
-                                     t_tx=None if p is None else (p.t_tx_week, p.t_tx_sow))
-                        started = True
-                    else:
-                        c.next_reacq_sample = None if step is None else t_now + step
-                prof["acquisition"] += time.perf_counter() - t0
-            if started:
-                continue
-            if not act:
-                due = [c.next_reacq_sample for c in chans
-                       if not c.finished and c.next_reacq_sample is not None]
-                if not due or min(due) + n_acq > stop:
-                    if t_now < stop:  # nothing more to search: the rest of the file's epochs
-                        t_now = stop
-                        continue
-                    break
-                t_now = max(t_now, min(due))
-                continue
-            horizon = min(c.block_end for c in act)
-            batch = [c for c in act if c.next_start < horizon]
-            need_end = max(c.block_end for c in batch)
-            if need_end > buf1:
-                if need_end > stop:
-                    for c in batch:
-                        if c.block_end > stop:
-                            c.finished = True
-                    continue
-                t0 = time.perf_counter()
-                # read afresh from the earliest sample still needed: re-reading the short
-                # overlap (< 2 coherent blocks) is cheaper than concatenating the new chunk
-                n_read = min(max(chunk, need_end - t_now), stop - t_now)
-                # with the input noise power per sample, for the channels' C/N0 estimators
-                x, n_comp, npow = source.read_stored_power(t_now, n_read)
-                buf0 = t_now
-                buf1 = t_now + n_read
-                for c in chans:
-                    c.noise_power_per_sample = npow
-                prof["read"] += time.perf_counter() - t0
-                continue
+    def _emit_epochs(self, r: _ScalarPass, act: list[Channel]) -> bool:
+        """The output epochs every tracking channel has passed, each handed to ``on_epoch``;
+        True when it asked to stop there."""
+        while r.next_out < r.t_now and r.next_out < r.stop:
             t0 = time.perf_counter()
-            slots = tuple(slot_of[id(c)] for c in batch)
-            t_ch = [0.0]
+            stop_now = False
+            if r.on_epoch is not None:
+                obs = [c.observation_at(r.next_out) for c in act]
+                stop_now = bool(r.on_epoch(r.next_out, obs, self._collect_ephemerides()))
+            r.prof["callback"] += time.perf_counter() - t0
+            r.k_out += 1
+            r.next_out = r.start + round(r.k_out * r.epoch_interval_s * r.fs)
+            if stop_now:
+                return True
+        return False
 
-            def ready(j: int, outs: list, noise, batch=batch, t_ch=t_ch) -> None:
-                # a channel's block needs only its own rows: the channels of the kernel's
-                # leading part are processed while its worker correlates the others
-                tc = time.perf_counter()
-                batch[j].process_block(outs, noise)
-                t_ch[0] += time.perf_counter() - tc
+    def _reacquire(self, r: _ScalarPass) -> bool:
+        """The (re-)acquisition searches due now: one full search for the PRNs never found
+        (shared FFTs), a narrow one around each lost channel's predicted Doppler (from the
+        last fix) or its last Doppler. True when a channel started tracking."""
+        t_now, stop = r.t_now, r.stop
+        due = [c for c in r.chans if not c.tracking and not c.finished
+               and c.next_reacq_sample is not None and c.next_reacq_sample <= t_now]
+        if not due:
+            return False
+        started = False
+        t0 = time.perf_counter()
+        if t_now + r.n_acq > stop:
+            for c in due:
+                c.next_reacq_sample = None
+            due = []
+        cold = [c for c in due if c.state == ChannelState.ACQUIRE]
+        results = []
+        if cold:
+            results = list(zip(cold, self._acquire(r.source, t_now, [c.prn for c in cold])))
+        preds = {}
+        for c in due:
+            if c.state == ChannelState.ACQUIRE:
+                continue
+            c.begin_reacquisition(t_now)
+            centre, half = c.reacquire_search(t_now)
+            pred = None if self.predictor is None else self.predictor(c.prn, t_now)
+            if pred is not None:
+                preds[c.prn] = pred
+                centre, half = pred.doppler_hz, self.config.reacq_doppler_range_hz
+            results.append((c, self._acquire(r.source, t_now, [c.prn],
+                                             doppler_center_hz=centre,
+                                             doppler_range_hz=half)[0]))
+        for c, res in results:
+            step = r.retry_step if c.state == ChannelState.ACQUIRE else r.reacq_step
+            if res.detected:
+                p = preds.get(c.prn)
+                c.reacquired(t_now, res.code_phase_chips, res.doppler_hz, res.cn0_dbhz,
+                             t_tx=None if p is None else (p.t_tx_week, p.t_tx_sow))
+                started = True
+            else:
+                c.next_reacq_sample = None if step is None else t_now + step
+        r.prof["acquisition"] += time.perf_counter() - t0
+        return started
 
-            bank.correlate(x, n_comp, buf0, slots, batch, ready)
-            prof["correlate"] += time.perf_counter() - t0 - t_ch[0]
-            prof["channels"] += t_ch[0]
-            prof["steps"] += 1
+    def _advance_idle(self, r: _ScalarPass) -> bool:
+        """Nothing tracked: on to the next search due; with none left, to the end of the
+        samples (their output epochs still come). False when the run is over."""
+        due = [c.next_reacq_sample for c in r.chans
+               if not c.finished and c.next_reacq_sample is not None]
+        if not due or min(due) + r.n_acq > r.stop:
+            if r.t_now < r.stop:  # nothing more to search: the rest of the file's epochs
+                r.t_now = r.stop
+                return True
+            return False
+        r.t_now = max(r.t_now, min(due))
+        return True
+
+    def _next_batch(self, r: _ScalarPass, act: list[Channel]) -> list[Channel] | None:
+        """The channels whose next block starts before every channel's block end, when the
+        samples it needs are read; None after reading them (or after finishing the channels
+        whose block runs past the end)."""
+        horizon = min(c.block_end for c in act)
+        batch = [c for c in act if c.next_start < horizon]
+        need_end = max(c.block_end for c in batch)
+        if need_end <= r.buf1:
+            return batch
+        if need_end > r.stop:
+            for c in batch:
+                if c.block_end > r.stop:
+                    c.finished = True
+            return None
+        t0 = time.perf_counter()
+        # read afresh from the earliest sample still needed: re-reading the short overlap
+        # (< 2 coherent blocks) is cheaper than concatenating the new chunk
+        n_read = min(max(r.chunk, need_end - r.t_now), r.stop - r.t_now)
+        # with the input noise power per sample, for the channels' C/N0 estimators
+        r.x, r.n_comp, npow = r.source.read_stored_power(r.t_now, n_read)
+        r.buf0 = r.t_now
+        r.buf1 = r.t_now + n_read
+        for c in r.chans:
+            c.noise_power_per_sample = npow
+        r.prof["read"] += time.perf_counter() - t0
+        return None
+
+    def _correlate(self, r: _ScalarPass, batch: list[Channel]) -> None:
+        """One kernel call over the batch's blocks; a channel's block needs only its own
+        rows, so the channels of the kernel's leading part are processed while its worker
+        correlates the others."""
+        t0 = time.perf_counter()
+        slots = tuple(r.slot_of[id(c)] for c in batch)
+        t_ch = [0.0]
+
+        def ready(j: int, outs: list, noise, batch=batch, t_ch=t_ch) -> None:
+            tc = time.perf_counter()
+            batch[j].process_block(outs, noise)
+            t_ch[0] += time.perf_counter() - tc
+
+        r.bank.correlate(r.x, r.n_comp, r.buf0, slots, batch, ready)
+        r.prof["correlate"] += time.perf_counter() - t0 - t_ch[0]
+        r.prof["channels"] += t_ch[0]
+        r.prof["steps"] += 1
+
+    def _end(self, r: _ScalarPass, t_total: float, t_track: float) -> dict[int, TrackingLog]:
+        """The run's profile and the channels' logs."""
         self._collect_ephemerides()
-        numba.set_num_threads(threads_before)
-        prof["kernel_s_per_msample"] = {t: c * 1e6 for t, c in bank.threads.cost.items()}
+        numba.set_num_threads(r.threads_before)
+        prof = r.prof
+        prof["kernel_s_per_msample"] = {t: c * 1e6 for t, c in r.bank.threads.cost.items()}
         end = time.perf_counter()
         prof["tracking"] = end - t_track
         prof["total"] = end - t_total
-        prof["processed_s"] = (min(t_now, stop) - start) / fs
+        prof["processed_s"] = (min(r.t_now, r.stop) - r.start) / r.fs
         prof["realtime_factor"] = prof["processed_s"] / prof["tracking"] \
             if prof["tracking"] > 0 else math.inf
         self.profile = prof
-        return {c.prn: c.log for c in chans if c.n_acquisitions > 0 and c.log is not None}
+        return {c.prn: c.log for c in r.chans if c.n_acquisitions > 0 and c.log is not None}

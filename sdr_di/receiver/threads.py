@@ -57,11 +57,13 @@ from concurrent.futures import wait as futures_wait
 import numba
 import numpy as np
 
+from ..settings import KERNEL_THREADS, kernel_threads
+
 __all__ = ["KernelThreads", "RowsCall", "balanced_cuts", "split_stats", "wait_for_split_calls"]
 
 #: Environment variable fixing the thread count of every automatic :class:`KernelThreads`
 #: (benchmarks: ``scripts/bench_deep.py --kernel-threads``).
-ENV_THREADS = "SDR_DI_KERNEL_THREADS"
+ENV_THREADS = KERNEL_THREADS
 #: Interpreter switch interval while the caller runs ``before`` in :meth:`KernelThreads.
 #: run_rows` [s] (default 5 ms: a worker that ends its part would wait that long for the
 #: GIL to return).
@@ -175,8 +177,8 @@ class KernelThreads:
 
     def __init__(self, threads: int | None = None) -> None:
         self.max_threads = max(1, int(numba.config.NUMBA_NUM_THREADS))
-        if threads is None and os.environ.get(ENV_THREADS, "").strip():
-            threads = int(os.environ[ENV_THREADS])
+        if threads is None:
+            threads = kernel_threads()     # SDR_DI_KERNEL_THREADS (sdr_di.settings)
         self.fixed = None if threads is None else max(1, min(int(threads), self.max_threads))
         self.costs: dict[int, dict[int, float]] = {}
         self.cost = {1: 0.0, self.max_threads: 0.0}

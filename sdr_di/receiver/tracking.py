@@ -59,7 +59,41 @@ import numpy as np
 
 from ..constants import CODE_LENGTH_B3I
 
-__all__ = ["LOG_FIELDS", "ChannelObservation", "ChannelState", "TrackingConfig", "TrackingLog"]
+__all__ = ["LOG_FIELDS", "PLL_BT_MAX", "ChannelObservation", "ChannelState", "TrackingConfig",
+           "TrackingLog", "pll_stability_problem"]
+
+#: Largest product of the PLL noise bandwidth [Hz] and the coherent time [s] for which the
+#: third-order loop stays stable (the one limit of ``TrackingConfig``, ``sdr-di run
+#: --pll-bw`` and ``sdr_di.run(pll_bw_hz=)``).
+PLL_BT_MAX = 0.25
+
+
+def pll_stability_problem(pll_bw_hz: float, coherent_s: float,
+                          name: str = "track_pll_bw_hz") -> str | None:
+    """What is wrong with a PLL noise bandwidth for a coherent time, or None if it is stable.
+
+    Parameters
+    ----------
+    pll_bw_hz : float
+        PLL noise bandwidth once locked [Hz].
+    coherent_s : float
+        Longest coherent integration time of the loop [s]
+        (:attr:`TrackingConfig.max_coherent_s`).
+    name : str
+        How the message names the bandwidth (the CLI's ``--pll-bw``, the API's
+        ``pll_bw_hz``).
+
+    Returns
+    -------
+    str or None
+        ``"NAME B Hz x T ms coherent time = BT > 0.25 (unstable loop): at most B_max Hz"``
+        when ``B T`` exceeds :data:`PLL_BT_MAX`.
+    """
+    bt = pll_bw_hz * coherent_s
+    if bt <= PLL_BT_MAX:
+        return None
+    return (f"{name} {pll_bw_hz:g} Hz x {coherent_s * 1e3:g} ms coherent time = {bt:g} > "
+            f"{PLL_BT_MAX:g} (unstable loop): at most {PLL_BT_MAX / coherent_s:g} Hz")
 
 
 class ChannelState(enum.IntEnum):
@@ -233,10 +267,9 @@ class TrackingConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v}")
-        t_max = self.max_coherent_s
-        if self.track_pll_bw_hz * t_max > 0.25:
-            raise ValueError(f"track_pll_bw_hz x coherent time = "
-                             f"{self.track_pll_bw_hz * t_max:g} > 0.25 (unstable loop)")
+        problem = pll_stability_problem(self.track_pll_bw_hz, self.max_coherent_s)
+        if problem is not None:
+            raise ValueError(problem)
         if not 0.0 <= self.spacing_chips < 1.0:
             raise ValueError(f"spacing_chips must be in [0, 1), got {self.spacing_chips}")
         if self.cn0_window_ms < 10 or self.lock_eval_ms < 1:

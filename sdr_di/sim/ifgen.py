@@ -36,7 +36,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Iterator
 
@@ -49,6 +48,7 @@ from ..frames import ecef_to_llh
 from ..io.sample_formats import get_format, quantizer_levels
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from ..scenario.schema import Scenario
+from ..settings import passive_kernel_workers
 from ..signal.codes import NH20_BITS, b3i_code
 from ..signal.navmsg import NavBits, nav_bits
 from ._numba_ifgen import code_words, pack_iq_int4_kernel, synthesize_chunk
@@ -56,15 +56,6 @@ from .geometry import ReceiverPath, satellite_delays
 from .interference import JammerPlan
 from .multipath import SignalRow, replica_rows
 
-# numba's ``omp`` layer keeps its workers spinning for milliseconds after each parallel
-# region unless told otherwise: after each generator chunk (one region of ~0.2 s) they took
-# CPU from the writer thread and from other processes (measured: `sdr-di generate` of the
-# 60 s default file, 13.0 -> 11.3 user CPU-s; docs/notes/speed.md). libgomp reads this when
-# numba first loads it, so it holds in a process that imports the generator before any
-# parallel kernel ran; a user's setting is kept. Not set for the receivers, whose short
-# parallel calls on idle cores wake the workers faster when they spin (their kernels run on
-# their own threads, receiver.threads, and are not affected either way).
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 #: Version of the sample-synthesis algorithm (recorded in the sidecar's ``generator``): files
 #: of one scenario and seed are byte-identical within a version. 2: counter-based
@@ -179,6 +170,7 @@ class IfGenerator:
 
     def __init__(self, sc: Scenario, sats: list[SatelliteSignal], path: ReceiverPath,
                  iono: Klobuchar | None):
+        passive_kernel_workers()       # before the first parallel kernel (sdr_di.settings)
         self.sc = sc
         self.sats = sats
         self.path = path

@@ -46,6 +46,7 @@ from ..io.atomic import ensure_output_dir
 from .aggregate import aggregate
 from .execute import execute_run, write_json, write_run_record
 from .outputs import write_campaign_outputs
+from .seeds import run_seed
 from ..experiments.registry import Experiment, get_experiment, parse_params
 from .tasks import Task, run_tasks
 
@@ -83,12 +84,6 @@ def _quiet_on_sigint():
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-
-
-def run_seed(base_seed: int, index: int) -> int:
-    """Seed of run ``index`` of a campaign with ``base_seed`` (deterministic, independent)."""
-    ss = np.random.SeedSequence(int(base_seed), spawn_key=(int(index),))
-    return int(ss.generate_state(1, np.uint32)[0])
 
 
 @dataclasses.dataclass

@@ -1,4 +1,6 @@
-"""CLI handlers: ``sdr-di campaign``, ``sdr-di robustness``, ``sdr-di study``, ``sdr-di report``.
+"""CLI handlers: ``sdr-di campaign``, ``sdr-di robustness``, ``sdr-di report`` (``sdr-di study``
+is the CLI's own, :mod:`sdr_di.cli`: it calls the public API, which this package must not
+import).
 
 :func:`add_parsers` adds the four sub-commands to the ``sdr-di`` sub-parser set; each sets
 ``func`` to its handler, which returns the exit status (0: all runs completed; 1: some runs
@@ -14,14 +16,14 @@ from pathlib import Path
 
 from ..errors import CampaignError
 
-__all__ = ["add_parsers", "cmd_campaign", "cmd_report", "cmd_robustness", "cmd_study"]
+__all__ = ["add_parsers", "cmd_campaign", "cmd_report", "cmd_robustness"]
 
 
 #: Dask worker preload (script text) of a local campaign: the worker processes ignore SIGINT.
 #: Ctrl-C in a terminal goes to the whole process group; only the sdr-di process should act
 #: on it (record the campaign as interrupted, close the cluster, print one line), not every
 #: worker with its own KeyboardInterrupt traceback and the nanny's error log.
-_WORKERS_IGNORE_SIGINT = "import signal; signal.signal(signal.SIGINT, signal.SIG_IGN)"
+WORKERS_IGNORE_SIGINT = "import signal; signal.signal(signal.SIGINT, signal.SIG_IGN)"
 
 
 def _default_out(kind: str, experiment: str) -> Path:
@@ -68,29 +70,6 @@ def add_parsers(subparsers) -> None:
         "time series, plots and report.html.")
     _common(p)
     p.set_defaults(func=cmd_robustness)
-
-    p = subparsers.add_parser(
-        "study", help="cells x filters x seeds, paired on the same files, with statistics",
-        description="Run a study spec (docs/studies.md): every cell's experiment with every "
-        "filter on the same generated files per seed, on a local Dask cluster (or "
-        "--scheduler), each (cell, seed) written as it finishes; then paired differences "
-        "against the baseline filter with Holm-corrected intervals, the claims' verdicts, "
-        "cells.csv, runs.csv and report.html. Re-running the same spec into the same folder "
-        "resumes it.")
-    p.add_argument("spec", type=Path, help="study TOML file (studies/*.toml)")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    p.add_argument("--runs", type=int, default=None, metavar="N",
-                   help="seeds per cell (default: the spec's runs)")
-    p.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="Dask scheduler address (tcp://host:8786); default: local processes")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="local worker processes (default: number of cores; 0: run in this "
-                   "process, no cluster)")
-    p.add_argument("--force", action="store_true",
-                   help="replace a different study's runs in --out (runs of unchanged cells "
-                   "are kept); run a study beyond 10,000 (cell, seed) runs")
-    p.add_argument("--no-report", action="store_true", help="do not write report.html")
-    p.set_defaults(func=cmd_study)
 
     p = subparsers.add_parser(
         "report", help="render report.html for a campaign, robustness, study or run "
@@ -156,7 +135,7 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 
     import dask
 
-    preload = [*dask.config.get("distributed.worker.preload", []), _WORKERS_IGNORE_SIGINT]
+    preload = [*dask.config.get("distributed.worker.preload", []), WORKERS_IGNORE_SIGINT]
     with dask.config.set({"distributed.worker.preload": preload}):
         res = run_campaign(exp, params, args.runs, base_seed=args.seed,
                            scheduler=args.scheduler, workers=args.workers, out_dir=out,
@@ -229,47 +208,6 @@ class StudyProgress:
     def __exit__(self, *exc) -> None:
         if self._bar is not None:
             self._bar.close()
-
-
-def cmd_study(args: argparse.Namespace) -> int:
-    """Handler of ``sdr-di study``."""
-    import dask
-
-    from ..io.atomic import check_output_dir
-    from .study import _check_folder, run_study, study_outputs
-    from .spec import load_study
-
-    spec = load_study(args.spec, force=args.force)
-    check_output_dir(args.out)
-    if args.runs is not None and args.runs < 1:
-        raise CampaignError(f"--runs must be >= 1, got {args.runs}")
-    if args.workers is not None and args.workers < 0:
-        raise CampaignError(f"--workers must be >= 0, got {args.workers}")
-    _check_folder(spec, args.out, args.force)
-
-    show = StudyProgress(len(spec.cells) * (args.runs or spec.runs))
-    preload = [*dask.config.get("distributed.worker.preload", []), _WORKERS_IGNORE_SIGINT]
-    with dask.config.set({"distributed.worker.preload": preload}), show:
-        res = run_study(spec, args.out, runs=args.runs, scheduler=args.scheduler,
-                        workers=args.workers, force=args.force, on_record=show,
-                        render=not args.no_report)
-        if res.n_skipped:                       # the runs already in the folder
-            show.bar.update(res.n_skipped)
-    print(f"study {spec.name} ({spec.hash}): {res.n_run} (cell, seed) runs done, "
-          f"{res.n_skipped} already there; {len(res.failed)} filter runs failed or diverged; "
-          f"{res.elapsed_s:.1f} s")
-    for c in (res.tuning or {}).values():
-        where = f" in {c.cell}" if c.cell else ""
-        print(f"tuned: {c.filter}{where} -> {c.entry} (training score {c.score:.4g})")
-    for r in res.failed:
-        print(f"  failed: {r['cell']} seed {r['seed_index']} {r['filter']}: {r['error']}",
-              file=sys.stderr)
-    for j, cl in enumerate(spec.claims, 1):
-        verdicts = [f"{r['cell']}: {r[f'claim{j}']}" for r in res.cells if r[f"claim{j}"]]
-        print(f"claim {j} ({cl.text}): {'; '.join(verdicts)}")
-    for label, path in study_outputs(args.out).items():   # every file, named
-        print(f"{label:11s} {path}")
-    return 1 if res.failed else 0
 
 
 def cmd_report(args: argparse.Namespace) -> int:

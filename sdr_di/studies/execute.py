@@ -12,7 +12,6 @@ safely); only a worker's death surfaces as an exception of the Dask future.
 from __future__ import annotations
 
 import json
-import math
 import socket
 import tempfile
 import time
@@ -21,6 +20,7 @@ from pathlib import Path
 
 from ..errors import ExperimentError
 from ..io.atomic import atomic_open, ensure_output_dir
+from ..io.json_values import finite_or_nan, json_safe  # noqa: F401  (json_safe: its old home)
 from ..experiments.registry import Experiment
 
 __all__ = ["MAX_FILE_BYTES", "execute_run", "failed_record", "json_safe", "read_json",
@@ -90,19 +90,9 @@ def failed_record(index: int, seed: int, error: str) -> dict:
             "files": {}}
 
 
-def json_safe(obj):
-    """``obj`` with non-finite floats as strings (``"nan"``, ``"inf"``) so it is strict JSON."""
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return str(obj)
-    if isinstance(obj, dict):
-        return {str(k): json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_safe(v) for v in obj]
-    return obj
-
-
 def write_json(path: Path, obj) -> Path:
-    """Write ``obj`` as indented strict JSON, atomically."""
+    """Write ``obj`` as indented strict JSON, atomically (non-finite floats as ``null``:
+    :func:`~sdr_di.io.json_values.json_safe`)."""
     with atomic_open(path, "w") as fh:
         json.dump(json_safe(obj), fh, indent=1, sort_keys=False)
         fh.write("\n")
@@ -143,13 +133,13 @@ def write_run_record(runs_dir: Path, rec: dict, files_dir: Path | None = None,
 
 
 def read_json(path: Path) -> dict:
-    """Read a JSON file written by :func:`write_json` (``"nan"`` strings stay strings)."""
+    """Read a JSON file written by :func:`write_json` (``null`` stays None:
+    :func:`restore_floats` for figures)."""
     return json.loads(Path(path).read_text(encoding="utf-8"))
 
 
 def restore_floats(figures: dict) -> dict:
-    """Figures read back from JSON with ``"nan"``/``"inf"`` strings as floats again."""
-    out = {}
-    for k, v in figures.items():
-        out[k] = float(v) if v in ("nan", "inf", "-inf") else v
-    return out
+    """Figures read back from JSON with ``null`` (and the ``"nan"``/``"inf"`` strings of
+    records written before issue 48) as floats again (:func:`~sdr_di.io.json_values.
+    finite_or_nan`)."""
+    return {k: finite_or_nan(v) for k, v in figures.items()}

@@ -18,6 +18,7 @@ and the run's own files.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from ..experiments import plotting
 from .aggregate import single_stats
@@ -70,8 +71,9 @@ def write_campaign_outputs(exp: Experiment, result, config: dict) -> Path:
 def write_single_outputs(exp: Experiment, rec: dict, params: dict, out: Path) -> Path:
     """Write the tables, plots and ``result.json`` of one run (module docstring)."""
     out = Path(out)
-    notes = []
-    tables, plots = [], []
+    notes: list[str] = []
+    tables: list[Any] = []
+    plots: list[Any] = []
     if rec["status"] == "ok":
         stats = single_stats(rec["figures"])
         write_table(out, "figures", [{"figure": k, "value": v}

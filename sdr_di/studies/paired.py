@@ -40,9 +40,9 @@ from scipy import stats
 __all__ = ["Comparison", "claim_verdict", "compare_pair", "holm", "t_interval"]
 
 
-def holm(p: Sequence[float]) -> np.ndarray:
+def holm(p_values: Sequence[float]) -> np.ndarray:
     """Holm step-down adjusted p-values (NaN stays NaN and is not counted in ``m``)."""
-    p = np.asarray(p, float)
+    p = np.asarray(p_values, float)
     out = np.full(p.shape, math.nan)
     ok = np.flatnonzero(np.isfinite(p))
     m = ok.size
@@ -136,22 +136,22 @@ def compare_pair(cell: str, filt: str, against: str, quantity: str, x_f: Sequenc
                  x_b: Sequence[float], level: float) -> Comparison:
     """Win count, sign tests and paired t intervals of ``x_f`` vs ``x_b`` (one value per
     seed, NaN where the run failed or diverged) at interval ``level`` (module notes)."""
-    x_f = np.asarray(x_f, float)
-    x_b = np.asarray(x_b, float)
-    ok_f = np.isfinite(x_f) & (x_f >= 0)
-    ok_b = np.isfinite(x_b) & (x_b >= 0)
+    xf = np.asarray(x_f, float)     # RMSE of the filter and of the baseline, per seed
+    xb = np.asarray(x_b, float)
+    ok_f = np.isfinite(xf) & (xf >= 0)
+    ok_b = np.isfinite(xb) & (xb >= 0)
     both = ok_f & ok_b
-    wins = int(np.sum(both & (x_f < x_b)) + np.sum(ok_f & ~ok_b))
-    losses = int(np.sum(both & (x_b < x_f)) + np.sum(ok_b & ~ok_f))
-    n = int(x_f.size)
+    wins = int(np.sum(both & (xf < xb)) + np.sum(ok_f & ~ok_b))
+    losses = int(np.sum(both & (xb < xf)) + np.sum(ok_b & ~ok_f))
+    n = int(xf.size)
     sign_p = float(stats.binomtest(wins, n, 0.5, alternative="greater").pvalue) if n else \
         math.nan
     sign_r = float(stats.binomtest(losses, n, 0.5, alternative="greater").pvalue) if n else \
         math.nan
-    d = x_f[both] - x_b[both]
+    d = xf[both] - xb[both]
     d_mean, d_lo, d_hi, d_p = t_interval(d, level)
-    pos = both & (x_f > 0) & (x_b > 0)
-    lr = np.log(x_f[pos] / x_b[pos])
+    pos = both & (xf > 0) & (xb > 0)
+    lr = np.log(xf[pos] / xb[pos])
     l_mean, l_lo, l_hi, l_p = t_interval(lr, level) if pos.sum() == both.sum() else \
         (math.nan,) * 4
     return Comparison(cell, filt, against, quantity, n, int(both.sum()), wins, losses,

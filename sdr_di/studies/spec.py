@@ -66,9 +66,9 @@ import math
 from pathlib import Path
 
 from ..errors import SdrDiError, StudyError
-from ..experiments.filter_figures import canonical_entry, parse_filter_spec
+from ..experiments.entries import MODES, check_filter_entry, split_entry
 from ..experiments.registry import get_experiment, parse_params
-from ..experiments.variants import MODES, split_entry
+from ..filters.spec import canonical_entry
 from .tuning_spec import TuningSpec, parse_tuning
 
 __all__ = ["QUANTITY_KEYS", "Cell", "Claim", "StudySpec", "load_study", "parse_study"]
@@ -160,7 +160,7 @@ def _scenario_digests(cells) -> dict:
     """SHA-256 of each scenario file the cells read (an edited scenario is another study)."""
     from ..scenario import DEFAULT_SCENARIO
 
-    out = {}
+    out: dict[str, str | None] = {}
     for c in cells:
         path = Path(str(c.params.get("scenario") or DEFAULT_SCENARIO))
         if str(path) not in out:
@@ -216,7 +216,7 @@ def load_study(path: str | Path, *, force: bool = False) -> StudySpec:
     return parse_study(raw, source=path, force=force)
 
 
-def _need(cond: bool, where: str, msg: str) -> None:
+def _need(cond: object, where: str, msg: str) -> None:
     if not cond:
         raise StudyError(f"{where}: {msg}")
 
@@ -302,7 +302,7 @@ def _parse_study(raw: dict, source: Path | None, force: bool) -> StudySpec:
     _need(len(set(filters)) == len(filters), where, "[study] filters has duplicates")
     for f in filters:
         try:
-            parse_filter_spec(f"{where}: [study] filters",
+            check_filter_entry(f"{where}: [study] filters",
                               split_entry(f"{where}: [study] filters", f)[0])
         except SdrDiError as exc:
             raise StudyError(str(exc)) from None

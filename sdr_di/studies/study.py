@@ -104,6 +104,26 @@ class StudyResult:
         return [r for r in self.runs if r["status"] != "ok"]
 
 
+def check_study_counts(runs, workers, scheduler, names: dict | None = None) -> None:
+    """Seeds per cell (an integer >= 1, or None: the spec's), local workers (an integer >= 0
+    or None) and a scheduler address, which takes no worker count: the rule of ``sdr-di
+    study`` and ``sdr_di.study``.
+
+    ``names``: how the message names ``runs`` and ``workers`` (the CLI's flags).
+
+    Raises
+    ------
+    StudyError
+        A count out of range or of the wrong type, or workers with a scheduler.
+    """
+    n = (names or {}).get
+    for key, v, low in (("runs", runs, 1), ("workers", workers, 0)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < low):
+            raise StudyError(f"{n(key, key)} must be an integer >= {low}, got {v!r}")
+    if scheduler is not None and workers is not None:
+        raise StudyError(f"{n('workers', 'workers')} applies to the local cluster only")
+
+
 def _record_path(runs_dir: Path, c: int, i: int) -> Path:
     return runs_dir / f"{c}_{i}.json"
 
@@ -131,7 +151,7 @@ def _keep_unchanged_runs(spec: StudySpec, runs_dir: Path) -> None:
             continue
         if not isinstance(rec, dict) or rec.get("lost"):
             continue
-        c, i = wanted.get(rec.get("run_key")), rec.get("seed_index")
+        c, i = wanted.get(str(rec.get("run_key"))), rec.get("seed_index")
         if c is None or not isinstance(i, int):
             continue
         files = old_dir / path.stem
@@ -199,13 +219,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = None,
                                force=force, on_record=on_record, render=render)
     t0 = time.perf_counter()
     runs = spec.runs if runs is None else runs
-    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
-        raise StudyError(f"--runs must be an integer >= 1, got {runs!r}")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
-                                or workers < 0):
-        raise StudyError(f"--workers must be an integer >= 0, got {workers!r}")
-    if scheduler is not None and workers is not None:
-        raise StudyError("--workers applies to the local cluster only")
+    check_study_counts(runs, workers, scheduler, {"runs": "--runs", "workers": "--workers"})
     check_study_size(f"study {spec.name}", len(spec.cells), runs, force)
     out = Path(out_dir)
     _check_folder(spec, out, force)
@@ -397,17 +411,17 @@ def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> Stu
                 best = min((means[(g, q)] for g in spec.filters
                             if math.isfinite(means[(g, q)])), default=math.nan)
                 row[f"{q}_best"] = int(math.isfinite(means[(f, q)]) and means[(f, q)] == best)
-                c = by.get((cell.name, f, spec.baseline, q))
-                row[f"d_{q}_{u}"] = c.d_mean if c else math.nan
-                row[f"d_{q}_ci_low"] = c.d_ci_low if c else math.nan
-                row[f"d_{q}_ci_high"] = c.d_ci_high if c else math.nan
-                row[f"{q}_ratio"] = c.ratio if c else math.nan
-                row[f"{q}_ratio_ci_low"] = ratio_of_log(c.log_ci_low) if c else math.nan
-                row[f"{q}_ratio_ci_high"] = ratio_of_log(c.log_ci_high) if c else math.nan
-                row[f"{q}_wins"] = c.wins if c else ""
-                row[f"{q}_sign_p"] = c.sign_p if c else math.nan
-                row[f"{q}_sign_p_holm"] = c.sign_p_holm if c else math.nan
-                row[f"{q}_t_p_holm"] = c.t_p_holm if c else math.nan
+                pair = by.get((cell.name, f, spec.baseline, q))
+                row[f"d_{q}_{u}"] = pair.d_mean if pair else math.nan
+                row[f"d_{q}_ci_low"] = pair.d_ci_low if pair else math.nan
+                row[f"d_{q}_ci_high"] = pair.d_ci_high if pair else math.nan
+                row[f"{q}_ratio"] = pair.ratio if pair else math.nan
+                row[f"{q}_ratio_ci_low"] = ratio_of_log(pair.log_ci_low) if pair else math.nan
+                row[f"{q}_ratio_ci_high"] = ratio_of_log(pair.log_ci_high) if pair else math.nan
+                row[f"{q}_wins"] = pair.wins if pair else ""
+                row[f"{q}_sign_p"] = pair.sign_p if pair else math.nan
+                row[f"{q}_sign_p_holm"] = pair.sign_p_holm if pair else math.nan
+                row[f"{q}_t_p_holm"] = pair.t_p_holm if pair else math.nan
             for j, cl in enumerate(spec.claims, 1):
                 verdict = ""
                 if f == cl.filter and (cl.cells is None or cell.name in cl.cells):

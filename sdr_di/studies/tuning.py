@@ -62,6 +62,7 @@ def _raw_without_tuning(spec: StudySpec) -> dict:
 def training_spec(spec: StudySpec) -> StudySpec:
     """The training study: tuning cells x training seeds, one entry per grid point."""
     t = spec.tuning
+    assert t is not None                     # a tuned study
     raw = _raw_without_tuning(spec)
     entries = [grid_entry(f, p) for f, pts in t.grids.items() for p in pts]
     raw["study"] = {**raw["study"], "name": f"{spec.name}-tuning", "filters": entries,
@@ -88,6 +89,7 @@ def tuned_spec(spec: StudySpec, choices: dict) -> StudySpec:
     StudyError
         A chosen entry equals another filter entry of the study.
     """
+    assert spec.tuning is not None           # a tuned study
     cells = []
     for cell in spec.cells:
         entries = {f: (choices.get((cell.name, f)) or choices[(None, f)]).entry
@@ -161,7 +163,7 @@ def _score_point(t: TuningSpec, f: str, point, by_entry: dict, quantity: str,
     if t.nis_band is not None:
         vals = []
         for r in runs:
-            for c in t.nis_column:
+            for c in t.nis_column or ():
                 if c not in r:
                     raise StudyError(f"[tuning] nis_column {c!r} is not a runs.csv column")
                 vals.append(r[c])
@@ -178,10 +180,10 @@ def _table_rows(t: TuningSpec, f: str, sc: dict, label: str, chosen: bool) -> li
     extra = {"nis_ok": "" if sc["ok"] is None else int(sc["ok"])} if band else {}
     out = [{"cell": r["cell"], "filter": f, "options": opts, "seed_index": r["seed_index"],
             "seed": r["seed"], "score": s,
-            **({c: r.get(c, "") for c in t.nis_column} if band else {}), **extra,
+            **({c: r.get(c, "") for c in t.nis_column or ()} if band else {}), **extra,
             "chosen": int(chosen)} for r, s in zip(sc["runs"], sc["scores"])]
     out.append({"cell": label, "filter": f, "options": opts, "seed_index": "", "seed": "mean",
-                "score": sc["mean"], **(dict.fromkeys(t.nis_column, "") if band else {}),
+                "score": sc["mean"], **(dict.fromkeys(t.nis_column or (), "") if band else {}),
                 **extra, "chosen": int(chosen)})
     return out
 
@@ -204,6 +206,7 @@ def run_tuned_study(spec: StudySpec, out_dir: str | Path, *, runs: int | None = 
 
     out = Path(out_dir)
     t = spec.tuning
+    assert t is not None                     # run_study sends only tuned studies here
     n_eval = spec.runs if runs is None else runs
     if isinstance(n_eval, int) and not isinstance(n_eval, bool) and n_eval >= 1 and \
             set(training_seeds(t)) & {run_seed(spec.base_seed, i) for i in range(n_eval)}:

@@ -14,8 +14,8 @@ __all__ = ["tuning_html"]
 def tuning_html(path: Path) -> str:
     """``<h2>Tuning</h2>``: per filter the chosen options, then the criterion over the grid
     (mean over the tuning cells and training seeds; the chosen point in bold)."""
-    head, rows = read_csv_table(path)
-    rows = [dict(zip(head, r)) for r in rows]
+    head, table = read_csv_table(path)
+    rows = [dict(zip(head, r)) for r in table]
     means = [r for r in rows if r["seed"] == "mean"]
     seeds = list(dict.fromkeys(r["seed"] for r in rows if r["seed"] != "mean"))
     parts = ["<h2>Tuning</h2>",

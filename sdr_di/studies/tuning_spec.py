@@ -12,9 +12,15 @@ Format (``docs/studies.md``)::
     nis_band = [0.5, 2.0]            # given: a grid point is eligible when every training
                                      # run's runs.csv value of each column (one name or a
                                      # list) lies in the band
-    [tuning.grid.ekf]                # per study filter entry, a grid over registry options
+    [tuning.grid.ekf]                # per study filter entry, a grid over its options
     q_scale = [0.5, 1.0, 2.0]
     r_scale = [1.0, 4.0]
+    [tuning.grid."my_filters:ScaledQEKF"]   # a plugin: import path or entry-point name
+    scale = [0.5, 2.0]
+
+A grid key names a study filter by the canonical text of its entry (one parser,
+:func:`~sdr_di.filters.parse_filter_spec`): built-in, entry-point and import-path names all
+work, in any case for the first two.
 
 The grid of a filter is the product of its option lists. One choice is made per filter for
 the whole study, from the scores pooled over the tuning cells and the training seeds, or,
@@ -27,16 +33,20 @@ from __future__ import annotations
 
 import dataclasses
 import decimal
-import inspect
 import itertools
 import math
 
-from ..errors import StudyError
-from ..filters.registry import FILTER_NAMES, filter_options
-from .campaign import run_seed
+from ..errors import FilterError, StudyError
+from ..filters.spec import (
+    canonical_entry,
+    filter_option_info,
+    parse_filter_spec,
+    split_filter_spec,
+)
+from .seeds import run_seed
 
 __all__ = ["CRITERIA", "TuningSpec", "check_option_value", "grid_entry", "parse_tuning",
-           "training_seeds"]
+           "study_filter_of", "training_seeds"]
 
 #: criterion name -> (quantity, take the log of each run's RMSE)
 CRITERIA: dict[str, tuple[str, bool]] = {
@@ -75,50 +85,44 @@ def training_seeds(t: TuningSpec) -> list[int]:
     return [run_seed(t.base_seed, i) for i in range(t.runs)]
 
 
-def _option_defaults(filter_name: str) -> dict:
-    """``{option: default}`` of a registry filter (core constructors along the MRO, then the
-    rule's constructor)."""
-    from ..filters.registry import _lookup
-
-    core_cls, rule_cls = _lookup(filter_name)
-    out: dict = {}
-    for cls in (*reversed(core_cls.__mro__), rule_cls):
-        if cls is None or "__init__" not in vars(cls):
-            continue
-        for p in inspect.signature(cls.__init__).parameters.values():
-            if p.default is not inspect.Parameter.empty:
-                out[p.name] = p.default
-    core, rule = filter_options(filter_name)
-    return {k: out.get(k) for k in (*core, *rule)}
-
-
 def check_option_value(filter_name: str, option: str, value, where: str) -> None:
     """Refuse a grid value whose type is not that of the option's default.
 
-    A boolean default takes a TOML boolean; an integer default an integer; a float default a
-    number; a string default a string; an option without a default any scalar.
+    The options are the filter's own (:func:`~sdr_di.filters.spec.filter_option_info`: a
+    built-in's core and rule constructors, a plugin's signature). A boolean default takes a
+    TOML boolean; an integer default an integer; a float default a number; a string default
+    a string; an option without a default takes its annotation's type (``bool``, ``int``,
+    ``float``, ``str``), else any scalar; a plugin that takes ``**kwargs`` any other option
+    as a scalar.
 
     Raises
     ------
     StudyError
-        Unknown option, or a value of the wrong type.
+        Unknown filter or option, or a value of the wrong type.
     """
-    defaults = _option_defaults(filter_name)
-    if option not in defaults:
+    try:
+        infos, open_ended = filter_option_info(filter_name)
+    except FilterError as exc:
+        raise StudyError(f"{where}: {exc}") from None
+    by_name = {i.name: i for i in infos}
+    info = by_name.get(option)
+    if info is None and not open_ended:
         raise StudyError(f"{where}: {filter_name} has no option {option!r}; accepted: "
-                         f"{', '.join(defaults)}")
-    d = defaults[option]
-    if isinstance(d, bool):
+                         f"{', '.join(by_name)}")
+    d = None if info is None else info.default
+    kind = type(d) if d is not None else {"bool": bool, "int": int, "float": float,
+                                          "str": str}.get(info.type if info else "")
+    if kind is bool:
         ok = isinstance(value, bool)
         want = "true or false (a TOML boolean, not a string)"
-    elif isinstance(d, int):
+    elif kind is int:
         ok = isinstance(value, int) and not isinstance(value, bool)
         want = "an integer"
-    elif isinstance(d, float):
+    elif kind is float:
         ok = isinstance(value, (int, float)) and not isinstance(value, bool) \
             and math.isfinite(value)
         want = "a finite number"
-    elif isinstance(d, str):
+    elif kind is str:
         ok = isinstance(value, str)
         want = "a string"
     else:
@@ -129,6 +133,31 @@ def check_option_value(filter_name: str, option: str, value, where: str) -> None
     if isinstance(value, str) and (not value or any(c in value for c in ".@,:=")):
         raise StudyError(f"{where}: {filter_name} option {option}={value!r}: a string value "
                          "must be non-empty without '.', '@', ',', ':' or '='")
+
+
+def study_filter_of(key: str, filters, where: str) -> str:
+    """The study filter entry a ``[tuning.grid."KEY"]`` table names: the one whose filter
+    has the same canonical spec text (:attr:`~sdr_di.filters.spec.FilterSpec.text`) and
+    coupling mode as ``key``, so ``"my_filters:ScaledQEKF"``, an entry-point name, or an
+    entry written with other case or number spelling all find theirs.
+
+    Raises
+    ------
+    StudyError
+        A key that is no filter entry, or names none of the study's filters.
+    """
+    def canon(entry: str) -> tuple[str, str]:
+        spec, _, mode = canonical_entry(entry).partition("@")
+        return parse_filter_spec(spec).text, mode
+
+    try:
+        want = canon(key)
+    except FilterError as exc:
+        raise StudyError(f"{where}: {exc}") from None
+    for f in filters:
+        if canon(f) == want:
+            return f
+    raise StudyError(f"{where}: not one of the study's filters ({', '.join(filters)})")
 
 
 def _text(value) -> str:
@@ -147,12 +176,12 @@ def _text(value) -> str:
 
 
 def grid_entry(entry: str, point) -> str:
-    """The study filter ``entry`` (``"ekf"``, ``"ff-aukf:q_states=nominal@tight"``) with the
-    grid point's options set: ``"ekf:q_scale=5e-1@tight"``. An option the entry already
-    gives is replaced."""
+    """The study filter ``entry`` (``"ekf"``, ``"ff-aukf:q_states=nominal@tight"``,
+    ``"my_filters:ScaledQEKF"``) with the grid point's options set:
+    ``"ekf:q_scale=5e-1@tight"``. An option the entry already gives is replaced."""
     spec, at, mode = entry.partition("@")
-    name, *opts = spec.split(":")
-    keep = [o for o in opts if o.partition("=")[0] not in dict(point)]
+    name, pairs = split_filter_spec(spec)
+    keep = [f"{k}={v}" for k, v in pairs if k not in dict(point)]
     new = [f"{k}={_text(v)}" for k, v in point]
     return ":".join([name, *keep, *new]) + (f"@{mode}" if at else "")
 
@@ -211,13 +240,9 @@ def parse_tuning(raw, *, where: str, filters, cells, base_seed: int, runs: int
                          "option lists")
     grids = {}
     for entry, table in grid_raw.items():
-        e = str(entry).strip().lower()
         gw = f"{w} grid.{entry}"
-        if e not in filters:
-            raise StudyError(f"{gw}: not one of the study's filters ({', '.join(filters)})")
-        name = e.partition("@")[0].partition(":")[0]
-        if name not in FILTER_NAMES:
-            raise StudyError(f"{gw}: unknown filter {name!r}")
+        e = study_filter_of(str(entry), filters, gw)
+        name = parse_filter_spec(e.partition("@")[0]).name
         if not (isinstance(table, dict) and table and all(
                 isinstance(v, list) and v for v in table.values())):
             raise StudyError(f"{gw} must map options to non-empty lists of values")

@@ -94,7 +94,8 @@ class AdaptiveRule:
         self.n_adaptations = 0
         self.filter = None
         self._q_floor_opt = q_floor
-        self.q_floor: np.ndarray | None = None
+        #: Per-state floor of an adapted ``Q`` (n,), set by :meth:`bind`.
+        self.q_floor: np.ndarray = np.empty(0)
         cls = type(self)
         self._has_after_predict = cls.after_predict is not AdaptiveRule.after_predict
         self._has_before_update = cls.before_update is not AdaptiveRule.before_update

@@ -1,8 +1,10 @@
 """Settings of the integrated receiver in any coupling mode: :class:`IntegrationConfig`.
 
 The reasons for the defaults are the notes of :mod:`sdr_di.integration.receiver`. This module
-imports nothing of the receiver, so the measurement sources (deep mode's
-:mod:`~sdr_di.deep.vector_tracking`) can name the settings without an import circle.
+is in :mod:`sdr_di.coupling`, below both the integration loop and deep mode's measurement
+source (:mod:`~sdr_di.deep.vector_tracking`), which both read the settings. The one builder
+from a filter entry and assumptions is
+:func:`sdr_di.integration.settings.build_integration_config`.
 """
 
 from __future__ import annotations
@@ -10,11 +12,12 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from ..errors import OptionsError
 from ..ins.imu import ImuErrorModel
 from ..oscillator import CLOCK_PRESETS, OscillatorSpec
 
-__all__ = ["DEEP_MEASUREMENTS", "MODES", "RESET_FUSION_HZ", "NCO_LATENCIES", "SCALAR_EPOCH_S", "IntegrationConfig",
-           "is_nco_latency"]
+__all__ = ["DEEP_MEASUREMENTS", "MODES", "NCO_LATENCIES", "RESET_FUSION_HZ", "SCALAR_EPOCH_S",
+           "IntegrationConfig", "imu_samples_per_interval", "is_nco_latency"]
 
 #: Coupling modes of :class:`IntegratedReceiver` (receiver notes).
 MODES = ("deep", "loose", "tight")
@@ -253,3 +256,30 @@ class IntegrationConfig:
     def gnss_every(self) -> int:
         """Scalar output epochs (0.1 s) per loose/tight measurement epoch."""
         return max(1, round(1.0 / (SCALAR_EPOCH_S * self.gnss_rate_hz)))
+
+
+def imu_samples_per_interval(imu_rate_hz: float, filter_rate_hz: float,
+                             name: str = "filter rate", where: str = "") -> int:
+    """IMU samples per integration-filter interval: the filter rate must divide the IMU rate
+    (the INS is propagated over whole IMU samples between two updates).
+
+    Parameters
+    ----------
+    imu_rate_hz, filter_rate_hz : float
+        IMU sample rate and integration-filter rate [Hz].
+    name : str
+        How the message names the filter rate (``--filter-rate``, ``filter_rate_hz``).
+    where : str
+        The IMU file, named in the message.
+
+    Raises
+    ------
+    OptionsError
+        ``imu_rate_hz / filter_rate_hz`` is not a whole number >= 1.
+    """
+    n_per = imu_rate_hz / filter_rate_hz
+    if abs(n_per - round(n_per)) > 1e-9 or round(n_per) < 1:
+        of = f" of {where}" if where else ""
+        raise OptionsError(f"{name} {filter_rate_hz:g} Hz must divide the IMU rate "
+                           f"{imu_rate_hz:g} Hz{of}")
+    return round(n_per)
