@@ -42,8 +42,8 @@ row per run. Expected value of every figure: 1 (a consistent filter).
 
 ``--ensemble`` (Bar-Shalom, Li and Kirubarajan 2001, section 5.4): also the ensemble
 averages over the seeds, at every solution row (NEES of position, velocity, attitude) and
-every filter update (NIS per block) from ``--t0`` on, at the times all runs of the cell
-share: ANEES and ANIS per degree of freedom, their mean over time, the two-sided 95 %
+every filter update (NIS per block) from ``--t0`` on, at the epochs all runs of the cell
+share (times in whole output or update periods: the runs hand over at different times): ANEES and ANIS per degree of freedom, their mean over time, the two-sided 95 %
 chi-square band of an average of ``N`` runs
 (:func:`~sdr_di.integration.consistency.ensemble_band`, dimension 3 for NEES and the
 block's size for NIS) and the share of times inside it (95 % for a consistent filter;
@@ -134,6 +134,18 @@ def run_series(res, t0: float) -> dict:
     return {"rows": rows, "updates": ups}
 
 
+def _binned(series: dict) -> dict:
+    """A run's series keyed by its time in whole periods (the median spacing of its times):
+    the runs of a cell hand over at different times, so their rows and updates fall on
+    grids offset by a fraction of a period; the same bin is the same epoch to within half
+    a period."""
+    t = np.array(sorted(series), float)
+    if t.size < 2:
+        return {}
+    period = float(np.median(np.diff(t)))
+    return {int(round(k / period)): v for k, v in series.items()}
+
+
 def ensemble_rows(recs: list[dict], args: argparse.Namespace) -> list[dict]:
     """One record per cell (mode x C/N0 x filter x rate x architecture): ANEES and ANIS per
     degree of freedom averaged over the times all its runs share, their bands for the
@@ -156,23 +168,24 @@ def ensemble_rows(recs: list[dict], args: argparse.Namespace) -> list[dict]:
         if n < 2:
             out.append(rec)
             continue
-        times = sorted(set.intersection(*(set(r["series"]["rows"]) for r in rs)))
+        rows = [_binned(r["series"]["rows"]) for r in rs]
+        times = sorted(set.intersection(*(set(b) for b in rows)))
         if times:
-            nees = np.array([[r["series"]["rows"][t][0] for t in times] for r in rs])
+            nees = np.array([[b[t][0] for t in times] for b in rows])
             lo, hi = ensemble_band(n, 3)
             for j, q in enumerate(("pos", "vel", "att")):
                 a = np.nanmean(nees[:, :, j], axis=0)        # ANEES at each time
                 rec[f"anees_{q}"] = float(np.nanmean(a))
                 rec[f"anees_{q}_band"] = (lo, hi)
                 rec[f"anees_{q}_inside"] = float(np.mean((a >= lo) & (a <= hi)))
-                sq = np.array([[r["series"]["rows"][t][1 + j] for t in times] for r in rs])
+                sq = np.array([[b[t][1 + j] for t in times] for b in rows])
                 rec[f"{q}_rmse"] = float(np.sqrt(np.nanmean(sq)))
-        t_up = sorted(set.intersection(*(set(r["series"]["updates"]) for r in rs)))
+        ups = [_binned(r["series"]["updates"]) for r in rs]
+        t_up = sorted(set.intersection(*(set(u) for u in ups)))
         if t_up:
             for b, name in enumerate(NIS_BLOCKS[cell[0]]):
-                vals = np.array([[r["series"]["updates"][t][0][b] for t in t_up]
-                                 for r in rs])
-                dof = int(np.median([rs[0]["series"]["updates"][t][1] for t in t_up]))
+                vals = np.array([[u[t][0][b] for t in t_up] for u in ups])
+                dof = int(np.median([ups[0][t][1] for t in t_up]))
                 lo, hi = ensemble_band(n, dof)
                 a = np.nanmean(vals, axis=0)
                 rec[f"anis_{name}"] = float(np.nanmean(a))
@@ -218,14 +231,14 @@ def table(recs: list[dict], args: argparse.Namespace) -> str:
     for mode in args.modes:
         b1, b2 = NIS_BLOCKS[mode]
         for cn0 in args.cn0:
-            for f, rate, arch in itertools.product(args.filters, args.filter_rates,
-                                                   args.architectures):
+            archs = getattr(args, "architectures", [""])
+            for f, rate, arch in itertools.product(args.filters, args.filter_rates, archs):
+                if mode != "deep" and arch != archs[0]:
+                    continue                # one row: loose and tight have no architecture
                 arch = arch if mode == "deep" else ""
                 rs = [r for r in recs if (r["mode"], r["cn0_dbhz"], r["filter"],
-                                          r["filter_rate_hz"], r["architecture"]) == (
+                                          r["filter_rate_hz"], r.get("architecture", "")) == (
                     mode, cn0, f, rate, arch)]
-                if not rs:
-                    continue
                 ok = [r for r in rs if not r["error"]]
 
                 def m(key):

@@ -177,9 +177,9 @@ def test_check_consistency_script_table_means_over_seeds():
                  "nees_vel": 1.0, "nees_att": 1.0})
     text = mod.table(recs, args)
     rows = [ln for ln in text.splitlines() if ln.startswith("| deep")]
-    assert rows[0].split("|")[4:9] == [" 50 ", " 2 ", " 1 ", " code 1 ", " rate 2 "]
-    assert rows[1].split("|")[4:9] == [" 10 ", " 1 ", " 0 ", " code 3 ", " rate 3 "]
-    assert "| loose | 30 | ekf | 50 | 0 | 0 | vel - | pos - |" in text
+    assert rows[0].split("|")[4:10] == [" 50 ", " - ", " 2 ", " 1 ", " code 1 ", " rate 2 "]
+    assert rows[1].split("|")[4:10] == [" 10 ", " - ", " 1 ", " 0 ", " code 3 ", " rate 3 "]
+    assert "| loose | 30 | ekf | 50 | - | 0 | 0 | vel - | pos - |" in text
 
 
 @pytest.mark.parametrize(("n_runs", "dim"), [(1, 1), (8, 3), (24, 3), (50, 2), (200, 2)])
@@ -195,6 +195,45 @@ def test_ensemble_band_is_the_chi_square_quantiles(n_runs, dim):
     assert ensemble_band(n_runs, dim) == pytest.approx(ref / dim, rel=1e-10)
     ref99 = chi2.ppf([0.005, 0.995], n_runs * dim) / (n_runs * dim)
     assert ensemble_band(n_runs, dim, 0.99) == pytest.approx(ref99, rel=1e-10)
+
+
+def test_check_consistency_ensemble_averages_runs_on_a_shared_grid():
+    """``--ensemble``: runs that hand over at different times (rows on grids offset by a
+    fraction of the output period) are averaged epoch by epoch; consistent NEES (chi-square
+    3 / 3 draws) give an ANEES inside the band of N runs (scipy's quantiles), 2x too large
+    errors (NEES 4x) one above it, and the share of epochs inside follows."""
+    import argparse
+    import importlib.util
+    from pathlib import Path
+
+    from scipy.stats import chi2
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "check_consistency.py"
+    spec = importlib.util.spec_from_file_location("check_consistency", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rng = np.random.default_rng(0)
+    n_runs, n_rows = 30, 200
+    recs = []
+    for arch, scale in (("reset", 1.0), ("prefilter", 4.0)):
+        for k in range(n_runs):
+            t0 = 12.0 + rng.uniform(0.0, 0.2)           # each run's own hand-over
+            rows = {round(t0 + 0.2 * i, 3): (scale * rng.chisquare(3, 3) / 3, 0.0, 0.0, 0.0)
+                    for i in range(n_rows)}
+            ups = {round(t0 + 0.02 * i, 3): (rng.chisquare(7, 2) / 7, 7)
+                   for i in range(10 * n_rows)}
+            recs.append({"mode": "deep", "cn0_dbhz": 40.0, "filter": "ekf",
+                         "filter_rate_hz": 50.0, "architecture": arch, "seed": k, "error": "",
+                         "series": {"rows": rows, "updates": ups}})
+    out = {r["architecture"]: r for r in mod.ensemble_rows(recs, argparse.Namespace())}
+    lo, hi = (chi2.ppf(q, 3 * n_runs) / (3 * n_runs) for q in (0.025, 0.975))
+    good, bad = out["reset"], out["prefilter"]
+    assert good["n"] == n_runs and good["anees_pos_band"] == pytest.approx((lo, hi))
+    assert lo < good["anees_pos"] < hi and good["anees_pos_inside"] > 0.85
+    assert bad["anees_pos"] > 3.5 and bad["anees_pos_inside"] == 0.0
+    lo7, hi7 = (chi2.ppf(q, 7 * n_runs) / (7 * n_runs) for q in (0.025, 0.975))
+    assert good["anis_code_band"] == pytest.approx((lo7, hi7))
+    assert lo7 < good["anis_code"] < hi7
 
 
 def test_ensemble_band_book_example_and_bad_input():

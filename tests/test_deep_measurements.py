@@ -154,16 +154,23 @@ def geo_file(tmp_path_factory):
 
 
 def test_each_architecture_tracks_a_geo_channel_in_the_vector_loop(geo_file, capsys):
-    """``run --mode deep --deep-measurements A`` on a file with a GEO satellite: the
+    """``run --mode deep --deep-measurements A`` (``reset`` through ``sdr_di.run``) on a
+    file with a GEO satellite: the
     architecture is in the summary (and named in the solution's header unless it is the
     cascade), every channel, C05 included, stays in the measurement vector, and the errors
     against the truth stay small (measured: position 0.65-0.67 m, velocity 0.008 (cascade),
     0.011 (reset) and 0.086 m/s (discriminator))."""
+    import sdr_di
+
     for arch, vel_max in (("prefilter", 0.03), ("reset", 0.03), ("discriminator", 0.2)):
         out = geo_file / f"run_{arch}"
-        rc = main(["run", str(geo_file / "g.bin"), "--mode", "deep", "--no-progress",
-                   "--deep-measurements", arch, "--out", str(out)])
-        assert rc == 0, capsys.readouterr().out
+        if arch == "reset":             # the API door
+            res = sdr_di.run(geo_file / "g.bin", mode="deep", deep_measurements=arch, out=out)
+            assert res.details.result.deep_measurements == arch
+        else:
+            rc = main(["run", str(geo_file / "g.bin"), "--mode", "deep", "--no-progress",
+                       "--deep-measurements", arch, "--out", str(out)])
+            assert rc == 0, capsys.readouterr().out
         s = json.loads((out / "g_deep_summary.json").read_text())
         assert s["deep_measurements"] == arch
         assert s["fusion_rate_hz"] == (5.0 if arch == "reset" else 50.0)
