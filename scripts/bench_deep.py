@@ -6,6 +6,7 @@ Usage::
     python scripts/bench_deep.py [--duration 40] [--filter ff-aukf] [--if-file F.bin]
                                  [--filter-rate 50] [--keep] [--repeat 1]
                                  [--kernel-threads N] [--nco-latency 0 [1]]
+                                 [--architectures prefilter [reset discriminator]]
 
 Generates the default scenario (7 satellites, 25 MHz, 4-bit ``iq_int8``; ``--duration`` s)
 unless ``--if-file`` names one with its sidecar, then runs the deep receiver (the pipeline of
@@ -64,12 +65,14 @@ def sched(tid=None):
 
 path, out, filt, rate = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
 latency = int(sys.argv[5])
+arch = sys.argv[6]
 meta = json.loads(Path(path).with_suffix('.json').read_text())
 prns = [s['prn'] for s in meta['satellites']]
 s0 = sched()
 t0 = time.perf_counter()
 res = run_integrated(open_source(path), out, config=IntegrationConfig(
-    filter=filt, filter_rate_hz=rate, nco_latency=latency), prns=prns, progress=False)
+    filter=filt, filter_rate_hz=rate, nco_latency=latency, deep_measurements=arch),
+    prns=prns, progress=False)
 wall, cpu_main = time.perf_counter() - t0, time.thread_time()   # main thread, from start
 s1 = sched()
 main_sched = None if s0 is None or s1 is None else {
@@ -96,13 +99,13 @@ TARGET_RT = 3.0
 
 
 def _one(path: Path, out: Path, filt: str, rate: float, threads: int | None = None,
-         latency: int = 0) -> dict:
+         latency: int = 0, arch: str = "prefilter") -> dict:
     from bench import child_env, run_result_child
 
     # SDR_DI_KERNEL_THREADS: receiver.threads.ENV_THREADS
     env = child_env({"SDR_DI_KERNEL_THREADS": str(threads)} if threads else None)
     d, wall, stolen, cpu = run_result_child(
-        _CHILD, [str(path), str(out), filt, str(rate), str(latency)], "deep run failed",
+        _CHILD, [str(path), str(out), filt, str(rate), str(latency), arch], "deep run failed",
         env=env, err_tail=2000)
     d.update(process_wall=wall, stolen_s=stolen, cpu_s=cpu)
     return d
@@ -124,7 +127,8 @@ def run(args: argparse.Namespace) -> list[dict]:
         print(f"machine: {os.cpu_count()} cores, load average "
               f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}; file {path.name}; filter "
               f"{args.filter} at {args.filter_rate:g} Hz; NCO latency "
-              f"{' and '.join(map(str, args.nco_latency))} (run column: repeat.latency)")
+              f"{' and '.join(map(str, args.nco_latency))}; measurements "
+              f"{' and '.join(args.architectures)} (run column: repeat.latency.architecture)")
         print(speed_line("at start"))
         from bench import print_bytecode_note, stolen_note
 
@@ -132,15 +136,16 @@ def run(args: argparse.Namespace) -> list[dict]:
         print(f"{'run':>3} {'file s':>7} {'wall s':>7} {'CPU s':>6} {'main':>5} {'x RT':>6} {'start-up s':>10} "
               f"{'loop s':>7} {'loop xRT':>8} {'corr%':>6} {'pref%':>6} {'filt%':>6} "
               f"{'ins%':>5} {'nco%':>5} {'read%':>6} {'RSS MiB':>8}")
-        for i, lat in ((i, lat) for i in range(args.repeat) for lat in args.nco_latency):
-            d = _one(path, tmp / f"out{i}_{lat}", args.filter, args.filter_rate,
-                     args.kernel_threads, lat)
-            d["latency"] = lat
+        for i, lat, arch in ((i, lat, a) for i in range(args.repeat)
+                             for lat in args.nco_latency for a in args.architectures):
+            d = _one(path, tmp / f"out{i}_{lat}_{arch}", args.filter, args.filter_rate,
+                     args.kernel_threads, lat, arch)
+            d["latency"], d["architecture"] = lat, arch
             p = d["profile"]
             loop = max(p["loop"], 1e-9)
             sh = {k: 100 * p[k] / loop for k in ("correlate", "prefilter", "filter", "ins",
                                                  "nco", "read")}
-            print(f"{f'{i}.{lat}':>3} {p['processed_s']:7.1f} {d['process_wall']:7.1f} {d['cpu_s']:6.1f} "
+            print(f"{f'{i}.{lat}.{arch[0]}':>3} {p['processed_s']:7.1f} {d['process_wall']:7.1f} {d['cpu_s']:6.1f} "
                   f"{d['cpu_main']:5.1f} "
                   f"{p['processed_s'] / d['process_wall']:6.2f} {p['scalar']:10.1f} "
                   f"{loop:7.1f} {p['deep_s'] / loop:8.2f} {sh['correlate']:6.0f} "
@@ -164,7 +169,9 @@ def run(args: argparse.Namespace) -> list[dict]:
                       + stolen_note(d))
             rows.append(d)
         for lat in args.nco_latency:
-            _best_line([r for r in rows if r["latency"] == lat], lat)
+            for arch in args.architectures:
+                _best_line([r for r in rows if (r["latency"], r["architecture"]) == (lat, arch)],
+                           lat, arch)
         print(speed_line("at the end"))
     finally:
         if not args.keep:
@@ -174,14 +181,14 @@ def run(args: argparse.Namespace) -> list[dict]:
     return rows
 
 
-def _best_line(rows: list[dict], latency: int) -> None:
-    """The closing line of the best run of one NCO latency."""
+def _best_line(rows: list[dict], latency: int, arch: str = "prefilter") -> None:
+    """The closing line of the best run of one NCO latency and measurement architecture."""
     b = min(rows, key=lambda r: r["process_wall"])
     p = b["profile"]
     loop = max(p["loop"], 1e-9)
     # wall time on idle cores (receiver.threads.split_stats): the main thread's chain
     idle = b["cpu_main"] + b["split"]["wait_cpu_s"]
-    print(f"target 3 (deep, NCO latency {latency}, best of {len(rows)}): "
+    print(f"target 3 (deep, NCO latency {latency}, {arch}, best of {len(rows)}): "
           f"{p['processed_s']:.0f} s file in "
           f"{b['process_wall']:.2f} s wall = {p['processed_s'] / b['process_wall']:.2f}x "
           f"real time (target >= {TARGET_RT:g}x, start-up and hand-over included), CPU "
@@ -211,6 +218,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--nco-latency", type=int, nargs="+", choices=(0, 1), default=[0],
                    help="deep's NCO latency [filter intervals] (default 0); several: each "
                         "in turn in every repeat (interleaved)")
+    p.add_argument("--architectures", nargs="+", default=["prefilter"],
+                   choices=("prefilter", "reset", "discriminator"),
+                   help="deep measurement architectures (--deep-measurements; default the "
+                        "cascade); several: each in turn in every repeat (interleaved)")
 
 
 def main(argv=None) -> int:
