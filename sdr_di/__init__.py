@@ -53,6 +53,7 @@ from .errors import (
     NoSatelliteError,
     OptionsError,
     OutputError,
+    PluginError,
     RunFailed,
     SampleFormatError,
     ScenarioError,
@@ -73,5 +74,5 @@ __all__ = ["GenerateOptions", "GeneratedFiles", "RunOptions", "RunResult", "Stud
            "EphemerisError", "ExperimentError", "FileSetError", "FilterError", "FormatCheckError",
            "HandoverError", "ImplausibleAcquisition", "ImuDataError", "LoopProcessError",
            "NavMessageError", "NoEphemerisError", "NoSatelliteError", "OptionsError",
-           "OutputError", "RunFailed", "SampleFormatError", "ScenarioError", "SdrDiError",
+           "OutputError", "PluginError", "RunFailed", "SampleFormatError", "ScenarioError", "SdrDiError",
            "SidecarError", "SolutionFileError", "StudyError", "UnknownPrnError"]

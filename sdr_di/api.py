@@ -45,12 +45,12 @@ F = TypeVar("F", bound=Callable)
 
 
 def _guarded(func: F) -> F:
-    """Run ``func`` inside :func:`sdr_di.io.paths.command_scope` (no output of the call may
+    """Run ``func`` inside :func:`sdr_di.paths.command_scope` (no output of the call may
     be one of its inputs); the module is imported on the first call, not with ``sdr_di``."""
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
-        from .io.paths import command_scope
+        from .paths import command_scope
 
         with command_scope():
             return func(*args, **kwargs)

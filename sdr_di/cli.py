@@ -605,7 +605,7 @@ def _cmd_lc(args: argparse.Namespace) -> int:
                                 f"GNSS interval ({shortest:g} s): no filter update, no result")
         check_lc_duration(sc.duration_s, st, f"{sc.source}: duration_s")
         truth, imu, model = make_inputs(sc, st)
-    from .io.paths import check_outputs, file_safe
+    from .paths import check_outputs, file_safe
 
     stem = file_safe(name)  # an import path's ':' out of file names
     csv, summary = out / f"{sc.name}_lc_{stem}.csv", out / f"{sc.name}_lc_{stem}_summary.json"
@@ -746,8 +746,23 @@ def build_parser() -> argparse.ArgumentParser:
     from .studies.commands import add_parsers as add_experiment_parsers
 
     add_experiment_parsers(sub)
+    sub.choices["report"].set_defaults(func=_cmd_report)
     _add_study(sub)
     return parser
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    """``sdr-di report DIR``: a run's folder (``run``, ``lc``) to :mod:`sdr_di.report`, a
+    campaign, robustness or study folder to :func:`sdr_di.studies.commands.cmd_report`."""
+    from .report import is_run_folder, render_run_report
+    from .studies.commands import cmd_report
+
+    folder = Path(args.dir)
+    if not any((folder / f).is_file() for f in ("campaign.json", "result.json", "study.json")) \
+            and is_run_folder(folder):
+        print(render_run_report(folder))
+        return 0
+    return cmd_report(args)
 
 
 _NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
@@ -796,9 +811,9 @@ def main(argv: list[str] | None = None) -> int:
         parser = build_parser()
         argv = attach_negative_values(argv)
         args = parser.parse_args(argv)
-        from .io.paths import command_scope, path_error
+        from .paths import command_scope, path_error
 
-        with command_scope():  # no output may land on an input (sdr_di.io.paths)
+        with command_scope():  # no output may land on an input (sdr_di.paths)
             try:
                 return args.func(args)
             except OSError as exc:  # a path the system refused: a bad input, one line

@@ -164,7 +164,7 @@ def test_a_plugins_failure_is_an_sdr_di_error_that_a_study_records_per_filter(pl
     from sdr_di.errors import PluginError
     from sdr_di.filters import make_filter
     from sdr_di.ins.error_model import InsErrorModel
-    from sdr_di.integration.measurements import RangeRateMeasurementModel
+    from sdr_di.coupling.measurements import RangeRateMeasurementModel
 
     f = make_filter("i49_boom:Boom", InsErrorModel(), RangeRateMeasurementModel(),
                     np.zeros(17), np.eye(17), np.eye(17), None, dt=0.02)
@@ -357,7 +357,7 @@ def test_generate_failing_mid_write_leaves_no_folder(tmp_path, capsys, monkeypat
 # -- item 13: two filters never share a file name --------------------------------------------
 
 def test_integrated_runs_of_two_filters_have_their_own_files(tmp_path):
-    from sdr_di.integration.config import IntegrationConfig
+    from sdr_di.coupling.config import IntegrationConfig
     from sdr_di.integration.run_integrated import solution_names
 
     names = [solution_names(tmp_path, "s", IntegrationConfig(filter=f, mode=m))

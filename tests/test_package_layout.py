@@ -173,7 +173,7 @@ def test_studies_import_experiments_never_the_reverse():
 #: measurement source and the integration loop share, below both.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("errors",),
-    ("constants", "settings"),
+    ("constants", "settings", "kernel_cache", "paths"),
     ("timebase", "frames", "oscillator", "filters"),
     ("orbits", "ins"),
     ("scenario", "signal", "io", "coupling"),
@@ -183,6 +183,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("sim",),
     ("experiments",),
     ("studies",),
+    ("report",),
     ("options",),
     ("api",),
     ("cli",),

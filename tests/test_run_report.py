@@ -57,7 +57,7 @@ def _no_truth_run(folder, filter_name: str = "my_filters:ScaledQEKF"):
     foreign IF file): error columns NaN, no NEES; one channel's C/N0 drops and it leaves
     the measurement vector for 2 s."""
     from sdr_di.integration.receiver import IntegrationResult
-    from sdr_di.integration.run_integrated import (write_channel_series, write_deep_csv,
+    from sdr_di.integration.run_integrated import (write_channel_series, write_solution_csv,
                                                    write_nis_series)
 
     t = 12.4 + 0.2 * np.arange(40)
@@ -81,7 +81,7 @@ def _no_truth_run(folder, filter_name: str = "my_filters:ScaledQEKF"):
         updates={"t": tu, "nis": np.random.default_rng(1).chisquare(4, (400, 2)) / 4,
                  "dof": np.full(400, 4)})
     folder.mkdir(parents=True, exist_ok=True)
-    write_deep_csv(folder / "rec_deep.csv", res)
+    write_solution_csv(folder / "rec_deep.csv", res)
     write_channel_series(folder / "rec_deep_channels.csv", res)
     write_nis_series(folder / "rec_deep_nis.csv", res)
     cons = res.consistency()

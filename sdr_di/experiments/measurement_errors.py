@@ -67,11 +67,15 @@ class OpenLoopErrors:
         ``(output - truth) / stated sigma`` of the code and the frequency (rate).
     stated_over_mc : dict
         ``{"code", "rate"}``: mean stated variance over the Monte Carlo variance.
+    design_over_mc : dict
+        The same for a pre-filter's design covariance ``P`` (what the cascade stated before
+        issue 25; empty for the discriminators).
     """
 
     code: np.ndarray
     rate: np.ndarray
     stated_over_mc: dict
+    design_over_mc: dict = dataclasses.field(default_factory=dict)
 
 
 def simulate_open_loop(architecture: str, cn0_dbhz: float, *, channels: int = 100,
@@ -139,6 +143,8 @@ def simulate_open_loop(architecture: str, cn0_dbhz: float, *, channels: int = 10
     bits = rng.choice([-1.0, 1.0], n)
     code: list = []
     rate: list = []
+    design_P = getattr(bank, "P", None)
+    design: list | None = None if design_P is None else []
     epoch = (20 - bit_offset_ms) % 20      # satellite-clock ms: bits start at multiples of 20
     total = (fusions + burn_in) * fusion_intervals
     for k in range(total):
@@ -169,6 +175,8 @@ def simulate_open_loop(architecture: str, cn0_dbhz: float, *, channels: int = 10
                 if keep:
                     code.append((dtau - tau[i], vt))
                     rate.append((df - f[i], vf))
+                    if design is not None:
+                        design.append((design_P[i, 0, 0], design_P[i, 2, 2]))
                 # the NCOs steered by part of the output (the integration filter's feedback):
                 # the truth and the bank move together
                 d_tau, d_f = feedback * dtau, feedback * df
@@ -179,9 +187,15 @@ def simulate_open_loop(architecture: str, cn0_dbhz: float, *, channels: int = 10
         f = f + sig_walk * rng.normal(size=n)   # the drift after the interval's end
     e_c, v_c = (np.array(a).reshape(-1, n) for a in zip(*code))
     e_r, v_r = (np.array(a).reshape(-1, n) for a in zip(*rate))
+    d_over = {}
+    if design:
+        d_c, d_r = np.array(design).T
+        d_over = {"code": float(d_c.mean() / np.mean(e_c ** 2)),
+                  "rate": float(d_r.mean() / np.mean(e_r ** 2))}
     return OpenLoopErrors(code=e_c / np.sqrt(v_c), rate=e_r / np.sqrt(v_r),
                           stated_over_mc={"code": float(v_c.mean() / np.mean(e_c ** 2)),
-                                          "rate": float(v_r.mean() / np.mean(e_r ** 2))})
+                                          "rate": float(v_r.mean() / np.mean(e_r ** 2))},
+                          design_over_mc=d_over)
 
 
 def whiteness_figures(yn: np.ndarray, lags=(1, 2, 5, 10, 25), sums=(1, 5, 25, 100)) -> dict:

@@ -264,7 +264,7 @@ def load_assumptions(path: str | Path) -> Assumptions:
     AssumptionsError
         Unreadable file, not TOML, or a bad table/key (:func:`parse_assumptions`).
     """
-    from ..io.paths import read_toml
+    from ..paths import read_toml
 
     path = Path(path)
     raw = read_toml(path, "assumptions", AssumptionsError)

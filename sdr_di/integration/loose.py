@@ -194,7 +194,7 @@ def load_lc_scenario(path: str | Path) -> tuple[Scenario, LcSettings]:
     ScenarioError
         Unreadable file, bad scenario or bad ``[lc]`` key.
     """
-    from ..io.paths import read_toml
+    from ..paths import read_toml
 
     path = Path(path)
     raw = read_toml(path, "scenario", ScenarioError)

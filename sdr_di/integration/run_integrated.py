@@ -247,7 +247,7 @@ def solution_names(out_dir: Path, stem: str, cfg: IntegrationConfig) -> dict[str
     ``STEM_MODE_channels.csv`` and ``STEM_MODE_nis.csv`` with the default filter,
     ``STEM_MODE_FILTER...`` with any other, so that runs of two filters into one folder
     never share a file (issue 49 item 13)."""
-    from ..io.paths import file_safe
+    from ..paths import file_safe
 
     tag = cfg.mode if cfg.filter == DEFAULT_FILTER else f"{cfg.mode}_{file_safe(cfg.filter)}"
     return {"solution": out_dir / f"{stem}_{tag}.csv",
@@ -312,7 +312,7 @@ def run_integrated(source: IfSource, out_dir: str | Path, *,
     fs = source.sampling_rate_hz
     check_imu_span(source, imu, source.n_samples if duration_s is None else min(
         source.n_samples, round(duration_s * fs)))            # before any output or work
-    from ..io.paths import check_outputs
+    from ..paths import check_outputs
 
     files = solution_names(Path(out_dir), stem or source.path.stem, cfg)
     check_outputs(files.values())

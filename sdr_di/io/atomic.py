@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import IO, Any, Iterator
 
 from ..errors import OutputError
-from .paths import check_not_input
+from ..paths import check_not_input
 
 
 def ensure_output_dir(path: str | Path) -> Path:

@@ -53,7 +53,7 @@ from ..frames import euler_to_C_b_n
 from ..ins.imu import ImuData
 from ..ins.truth import Truth
 from .atomic import OutputSet, atomic_open
-from .paths import note_input
+from ..paths import note_input
 
 IMU_COLUMNS = ("t", "gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z")
 TRUTH_COLUMNS = (

@@ -620,7 +620,7 @@ def load_nav(path: str | Path, crosscheck: bool = False) -> NavData:
         file, no BDS record, malformed/blank required/non-finite field, truncated record,
         inconsistent week, georinex disagreement. The message is one line naming the file.
     """
-    from ..io.paths import note_input
+    from ..paths import note_input
 
     path = Path(path)
     text = _read_text(path)

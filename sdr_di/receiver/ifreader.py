@@ -96,7 +96,7 @@ from ..constants import F_B3I, SECONDS_PER_WEEK
 from ..errors import FormatCheckError, SampleFormatError  # noqa: F401  (FormatCheckError: its old home)
 from ..io.sample_formats import SampleFormat, byte_layout, get_format
 from ..io.page_cache import aligned_empty, open_uncached, pread_uncached, release_read_behind
-from ..io.paths import note_input
+from ..paths import note_input
 from ..io.sidecar import check_member, member_path, read_sidecar
 
 __all__ = ["FormatCheckError", "IfFileWarning", "IfSource", "check_format_statistics"]

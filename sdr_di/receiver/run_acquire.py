@@ -122,7 +122,7 @@ def run_acquisition(source: IfSource, out_dir: str | Path, *, prns=None, coheren
     OutputError
         The table cannot be written.
     """
-    from ..io.paths import check_outputs
+    from ..paths import check_outputs
 
     stem = stem or source.path.stem
     check_outputs([Path(out_dir) / f"{stem}_acquisition.csv"])

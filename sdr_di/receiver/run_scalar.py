@@ -143,7 +143,7 @@ def open_sigmf(meta_path: str | Path, *, rfch: int | None = None, **options) -> 
     if rfch not in (None, 1):
         raise SampleFormatError(f"{meta_path}: --rfch {rfch}: a SigMF recording read here has "
                                 "one channel")
-    from ..io.paths import note_input
+    from ..paths import note_input
 
     ss = sigmf_source(meta_path, **options)
     note_input(meta_path, what="SigMF metadata")
@@ -263,7 +263,7 @@ def run_scalar(source: IfSource, out_dir: str | Path, *, prns=None, rate_hz: flo
     OutputError
         Outputs cannot be written (nothing is left under the final names).
     """
-    from ..io.paths import check_outputs
+    from ..paths import check_outputs
 
     out_dir = Path(out_dir)
     stem = stem or source.path.stem

@@ -299,7 +299,7 @@ def load_scenario(path: str | Path) -> Scenario:
     ScenarioError
         The file is missing, not TOML, or any key is missing, of the wrong type or impossible.
     """
-    from ..io.paths import read_toml
+    from ..paths import read_toml
 
     path = Path(path)
     raw = read_toml(path, "scenario", ScenarioError)

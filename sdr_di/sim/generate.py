@@ -40,7 +40,7 @@ from ..io.atomic import (
 )
 from ..io.imu_files import write_imu, write_truth
 from ..io.page_cache import ReleaseBehind
-from ..io.paths import check_free_space, check_outputs
+from ..paths import check_free_space, check_outputs
 from ..io.sample_formats import get_format
 from ..io.sidecar import file_fingerprint, write_sidecar
 from ..io.sigmf_files import check_b3i_in_band, sigmf_metadata

@@ -211,7 +211,8 @@ class StudyProgress:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    """Handler of ``sdr-di report``."""
+    """Handler of ``sdr-di report`` on a campaign, robustness or study folder (a run's
+    folder: :func:`sdr_di.cli` hands it to :mod:`sdr_di.report`, the layer above)."""
     print(_render(args.dir))
     return 0
 
@@ -227,11 +228,6 @@ def _render(folder: Path) -> Path:
         from .study_report import render_study_report
 
         return render_study_report(folder)
-    from ..report import is_run_folder, render_run_report   # the CLI glue: report is above
-
-    if not any((Path(folder) / f).is_file() for f in ("campaign.json", "result.json")) \
-            and is_run_folder(folder):
-        return render_run_report(folder)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ReportWarning)
         path = render_report(folder)

@@ -60,7 +60,7 @@ def run_experiment(experiment: str | Experiment, params: Mapping | None = None, 
         raise CampaignError(f"seed must be an integer >= 0, got {seed!r}")
     out = ensure_output_dir(out_dir)
     if scheduler is None:
-        from ..io.paths import outside_scope
+        from ..paths import outside_scope
 
         with outside_scope():   # the run's intermediate files are its own, as on a worker
             rec = execute_run(exp, params, seed, 0)

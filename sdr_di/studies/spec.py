@@ -209,7 +209,7 @@ def load_study(path: str | Path, *, force: bool = False) -> StudySpec:
     StudyError
         Missing file, not TOML, or anything :func:`parse_study` rejects.
     """
-    from ..io.paths import read_toml
+    from ..paths import read_toml
 
     path = Path(path)
     raw = read_toml(path, "study", StudyError)

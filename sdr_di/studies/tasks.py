@@ -78,9 +78,9 @@ def run_tasks(client, tasks: Sequence[Task], on_result: Callable[[Task, dict], A
 
 def run_tasks_here(tasks: Sequence[Task], on_result: Callable[[Task, dict], Any]) -> None:
     """Run ``tasks`` one after the other in this process (no cluster), each outside the
-    command's input guard (:func:`~sdr_di.io.paths.outside_scope`: a task's intermediate
+    command's input guard (:func:`~sdr_di.paths.outside_scope`: a task's intermediate
     files are its own), as on a worker."""
-    from ..io.paths import outside_scope
+    from ..paths import outside_scope
 
     for t in tasks:
         with outside_scope():

@@ -27,7 +27,7 @@ import os
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from ..errors import OutputError, SdrDiError
+from .errors import OutputError, SdrDiError
 
 #: Real paths (and (device, inode) pairs) of the files read by the running command; None
 #: outside :func:`command_scope`.
