@@ -71,6 +71,7 @@ import numpy as np
 
 from ..constants import C_LIGHT, SECONDS_PER_WEEK
 from ..errors import SdrDiError
+from ..orbits.ephemeris import Klobuchar
 from ..receiver.loops import pll_rate_dynamic_error
 from ..receiver.observables import Observables
 from ..receiver.pvt import PvtEngine, PvtSolution, SatelliteStates, satellite_states
@@ -117,7 +118,7 @@ class GnssEpoch:
     sample: int
     obs: Observables
     sat: SatelliteStates | None
-    iono: object
+    iono: Klobuchar | None
     sol: PvtSolution
     nav: dict
 
@@ -138,7 +139,8 @@ class GnssEpochRecorder:
         Navigation data in force.
     """
 
-    def __init__(self, engine: PvtEngine, navdata) -> None:
+    def __init__(self, engine: PvtEngine | None, navdata) -> None:
+        # engine None: a replay's closed recorder (ScalarRecord.recorder), never recording
         self.engine, self.navdata = engine, navdata
         self.epochs: list[GnssEpoch] = []
         self.closed = False
@@ -179,8 +181,10 @@ class GnssEpochRecorder:
 
     def record(self, sample: int, channels: list) -> GnssEpoch:
         """PVT of the epoch at ``sample`` from the channel observations; kept and returned."""
+        assert self.engine is not None          # only a replay's recorder has none
         sol = self.engine.process(channels, sample)
         obs = self.engine.last_observables
+        assert obs is not None                  # set by process
         # the PVT's own satellite states (the engine's ephemerides are this navdata)
         sat = self.engine.last_satellites if self.engine.ephemerides is self.navdata else (
             satellite_states(obs, self.navdata) if obs.n else None)
@@ -252,7 +256,7 @@ class ScalarEpochSource:
         self._used = np.zeros(self.n_channels, bool)
         self._cn0 = np.full(self.n_channels, math.nan)
         self._nav_prev: dict = {}
-        self._iono_prev = None
+        self._iono_prev: Klobuchar | None = None
         self._flag = 0
         self.last: GnssEpoch | None = None
         self.min_cn0_dbhz = None if min_cn0_dbhz is None else float(min_cn0_dbhz)
@@ -300,6 +304,7 @@ class ScalarEpochSource:
         t0, t1 = self.imu_t[iv.i0], self.imu_t[iv.i1]
         a = min(max((t_imu - t0) / (t1 - t0), 0.0), 1.0)
         n0, n1 = iv.nav0, iv.nav1
+        assert n0 is not None and n1 is not None    # set by the loop's propagate_ins
         return n0.llh + a * (n1.llh - n0.llh), n0.v_n + a * (n1.v_n - n0.v_n)
 
     def loop_velocity(self, v_n: np.ndarray, t_imu: float, pll_bw_hz: float) -> np.ndarray:

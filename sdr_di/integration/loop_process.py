@@ -52,10 +52,14 @@ import threading
 import time
 import warnings
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ..errors import LoopProcessError  # noqa: F401  (defined in sdr_di.errors)
 from ..settings import loop_on_thread
 from .loop import BackgroundLoop, IntegrationLoop
+
+if TYPE_CHECKING:
+    from ..orbits.ephemeris import Klobuchar
 
 __all__ = ["LoopChild", "LoopProcess", "LoopProcessError", "start_loop_behind"]
 
@@ -285,7 +289,7 @@ class _EpochStream:
         self.fh = fh
         self.epochs: list = []
         self.closed = False
-        self._iono: dict[int, object] = {}
+        self._iono: dict[int, Klobuchar] = {}
 
     def wait_for(self, i: int) -> bool:
         while i >= len(self.epochs) and not self.closed:

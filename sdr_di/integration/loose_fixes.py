@@ -139,12 +139,14 @@ class LooseFixSource(ScalarEpochSource):
         col = {int(p): i for i, p in enumerate(ep.obs.prn)}
         cn0 = np.array([ep.obs.cn0_dbhz[col[int(p)]] for p in sol.prns], float)
         R = thermal_fix_covariance(sol, cn0, self.tracking_config, None, self.interval_s)
+        assert iv.nav1 is not None              # set by the loop's propagate_ins
         return Measurements(z=z, R=R, geometry=(iv.nav1.llh,),
                             used=self.used_mask(sol.prns))
 
     def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
              m: Measurements) -> Measurements:
         """The whole fix out when its NIS ``y^T S^-1 y`` exceeds the 6-dof quantile."""
+        assert m.z is not None                  # _gated calls it only with a measurement
         S = self.innovation_covariance(loop, m)
         if float(m.z @ np.linalg.solve(S, m.z)) <= self.gate_limit(m.z.size):
             return m

@@ -145,6 +145,7 @@ class TightRangeSource(ScalarEpochSource):
         var_p, var_d = tracking_variances(obs.prn[idx], obs.cn0_dbhz[idx],
                                           self.tracking_config)
         z = np.r_[P - obs.pseudorange_m[idx], D - obs.pseudorange_rate_mps[idx]]
+        assert iv.nav1 is not None              # set by the loop's propagate_ins
         return Measurements(z=z, R=np.diag(np.r_[var_p, var_d]), geometry=(iv.nav1.llh, U),
                             used=self.used_mask(obs.prn[idx]), channels=obs.prn[idx],
                             columns=self.columns_of(obs.prn[idx]))
@@ -154,6 +155,8 @@ class TightRangeSource(ScalarEpochSource):
         """Drop each channel whose pseudorange or rate innovation fails the 1-dof test
         (module notes of :mod:`~sdr_di.integration.gnss_epochs`; the pseudoranges' ``S``
         with the correlation allowance of this module's notes)."""
+        # _gated calls it only with a measurement (z, and so R and channels, not None)
+        assert m.z is not None and m.R is not None
         S = self.innovation_covariance(loop, m)
         n = m.z.size // 2
         s_gate = np.diag(S).copy()
