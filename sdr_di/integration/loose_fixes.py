@@ -48,7 +48,8 @@ from ..frames import C_e_n
 from ..receiver.pvt import PvtConfig, measurement_variances
 from ..receiver.tracking import TrackingConfig
 from .gnss_epochs import GnssEpoch, ScalarEpochSource
-from .loop import IntegrationLoop, Interval, Measurements
+from .loop import Interval, Measurements
+from ..coupling.interval import LoopState
 from ..coupling.measurements import loose_measurement
 from .tight_ranges import range_correlation_factor, tracking_variances
 
@@ -121,7 +122,7 @@ class LooseFixSource(ScalarEpochSource):
             return ep.sol.week, ep.sol.sow
         return super().bdt_of(ep, clock_bias_m)
 
-    def measurement(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> Measurements:
+    def measurement(self, loop: LoopState, iv: Interval, ep: GnssEpoch) -> Measurements:
         sol = ep.sol
         if not (sol.valid and sol.velocity_valid and np.all(np.isfinite(sol.cov_v))):
             return Measurements(z=None, R=None, geometry=(),
@@ -143,7 +144,7 @@ class LooseFixSource(ScalarEpochSource):
         return Measurements(z=z, R=R, geometry=(iv.nav1.llh,),
                             used=self.used_mask(sol.prns))
 
-    def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+    def gate(self, loop: LoopState, iv: Interval, ep: GnssEpoch,
              m: Measurements) -> Measurements:
         """The whole fix out when its NIS ``y^T S^-1 y`` exceeds the 6-dof quantile."""
         assert m.z is not None                  # _gated calls it only with a measurement
@@ -153,7 +154,7 @@ class LooseFixSource(ScalarEpochSource):
         self.n_gated += 1
         return Measurements(z=None, R=None, geometry=(), used=np.zeros(self.n_channels, bool))
 
-    def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+    def feed_back(self, loop: LoopState, iv: Interval, x: np.ndarray) -> None:
         """The loop's clock follows the latest fix (module notes, clock columns)."""
         ep = self.last
         if ep is not None and ep.sol.valid and np.isfinite(ep.sol.clock_drift_mps):
