@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
@@ -133,11 +134,18 @@ class LoopState(Protocol):
         The INS, corrected by the feedback.
     clock_bias_m : float
         Receiver clock bias at the end of the last interval [m].
+    clock_drift_mps : float
+        Receiver clock drift [m/s] (loose and tight: read and reset by the source).
+    set_geometry : callable
+        The filter's measurement model at an epoch, from a ``Measurements.geometry``
+        (loose and tight: for the innovation gate's ``S``).
     """
 
     kf: Any
     ins: Any
     clock_bias_m: float
+    clock_drift_mps: float
+    set_geometry: Callable[..., None]
 
     def predict_filter(self, iv: Interval) -> None:
         """The filter's predict over ``iv`` (before its update)."""

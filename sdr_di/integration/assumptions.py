@@ -206,7 +206,8 @@ def parse_assumptions(raw: Mapping[str, Any], source: str = "assumptions") -> As
         fields = {"accel_bias_mg": "accel_bias_mg", "gyro_bias_deg_h": "gyro_bias_deg_h",
                   "accel_random_walk_mps_sqrth": "accel_random_walk",
                   "gyro_random_walk_deg_sqrth": "gyro_random_walk"}
-        vals = {field: _num(t[key], f"{w}.{key}") for key, field in fields.items() if key in t}
+        vals: dict[str, Any] = {field: _num(t[key], f"{w}.{key}")
+                                for key, field in fields.items() if key in t}
         kw["imu"] = dataclasses.replace(IMU_GRADES[grade], **vals)
         if "bias_time_s" in t:
             kw["bias_time_s"] = _num(t["bias_time_s"], f"{w}.bias_time_s", open_=True)

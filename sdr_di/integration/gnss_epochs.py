@@ -70,11 +70,13 @@ import time
 import numpy as np
 
 from ..constants import C_LIGHT, SECONDS_PER_WEEK
+from ..coupling.interval import LoopState
 from ..errors import SdrDiError
+from ..orbits.ephemeris import Klobuchar
 from ..receiver.loops import pll_rate_dynamic_error
 from ..receiver.observables import Observables
 from ..receiver.pvt import PvtEngine, PvtSolution, SatelliteStates, satellite_states
-from .loop import IntegrationLoop, Interval, Measurements
+from .loop import Interval, Measurements
 
 __all__ = ["GnssEpoch", "GnssEpochRecorder", "ScalarEpochSource"]
 
@@ -117,7 +119,7 @@ class GnssEpoch:
     sample: int
     obs: Observables
     sat: SatelliteStates | None
-    iono: object
+    iono: Klobuchar | None
     sol: PvtSolution
     nav: dict
 
@@ -138,7 +140,8 @@ class GnssEpochRecorder:
         Navigation data in force.
     """
 
-    def __init__(self, engine: PvtEngine, navdata) -> None:
+    def __init__(self, engine: PvtEngine | None, navdata) -> None:
+        # engine None: a replay's closed recorder (ScalarRecord.recorder), never recording
         self.engine, self.navdata = engine, navdata
         self.epochs: list[GnssEpoch] = []
         self.closed = False
@@ -179,8 +182,10 @@ class GnssEpochRecorder:
 
     def record(self, sample: int, channels: list) -> GnssEpoch:
         """PVT of the epoch at ``sample`` from the channel observations; kept and returned."""
+        assert self.engine is not None          # only a replay's recorder has none
         sol = self.engine.process(channels, sample)
         obs = self.engine.last_observables
+        assert obs is not None                  # set by process
         # the PVT's own satellite states (the engine's ephemerides are this navdata)
         sat = self.engine.last_satellites if self.engine.ephemerides is self.navdata else (
             satellite_states(obs, self.navdata) if obs.n else None)
@@ -252,7 +257,7 @@ class ScalarEpochSource:
         self._used = np.zeros(self.n_channels, bool)
         self._cn0 = np.full(self.n_channels, math.nan)
         self._nav_prev: dict = {}
-        self._iono_prev = None
+        self._iono_prev: Klobuchar | None = None
         self._flag = 0
         self.last: GnssEpoch | None = None
         self.min_cn0_dbhz = None if min_cn0_dbhz is None else float(min_cn0_dbhz)
@@ -288,7 +293,7 @@ class ScalarEpochSource:
         """BDT of the epoch: receiver time minus ``clock_bias_m`` / c."""
         return ep.obs.week, ep.obs.sow - clock_bias_m / C_LIGHT
 
-    def epoch_clock_bias(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> float:
+    def epoch_clock_bias(self, loop: LoopState, iv: Interval, ep: GnssEpoch) -> float:
         """The clock bias [m] used to time-tag ``ep`` (default: the filter's clock
         interpolated between the interval's ends)."""
         a = (ep.sample - iv.k0) / max(iv.k1 - iv.k0, 1)
@@ -300,6 +305,7 @@ class ScalarEpochSource:
         t0, t1 = self.imu_t[iv.i0], self.imu_t[iv.i1]
         a = min(max((t_imu - t0) / (t1 - t0), 0.0), 1.0)
         n0, n1 = iv.nav0, iv.nav1
+        assert n0 is not None and n1 is not None    # set by the loop's propagate_ins
         return n0.llh + a * (n1.llh - n0.llh), n0.v_n + a * (n1.v_n - n0.v_n)
 
     def loop_velocity(self, v_n: np.ndarray, t_imu: float, pll_bw_hz: float) -> np.ndarray:
@@ -318,7 +324,7 @@ class ScalarEpochSource:
         (_, j), *_ = np.linalg.lstsq(X, A, rcond=None)
         return v_n - k * j
 
-    def _take_epoch(self, loop: IntegrationLoop, iv: Interval) -> GnssEpoch | None:
+    def _take_epoch(self, loop: LoopState, iv: Interval) -> GnssEpoch | None:
         """The latest epoch whose BDT falls in the interval's IMU span; earlier ones are
         skipped (at most one per interval while ``gnss_rate_hz`` <= the filter rate)."""
         t1 = self.imu_t[iv.i1]
@@ -359,20 +365,20 @@ class ScalarEpochSource:
         """Chi-square quantile at ``1 - gate_alpha`` with ``dof`` degrees of freedom."""
         return _chi2_quantile(1.0 - self.gate_alpha, int(dof))
 
-    def innovation_covariance(self, loop: IntegrationLoop, m: Measurements) -> np.ndarray:
+    def innovation_covariance(self, loop: LoopState, m: Measurements) -> np.ndarray:
         """``S = H P H^T + R`` of ``m`` with the filter's current ``P`` (module notes)."""
         loop.set_geometry(*m.geometry)
         kf = loop.kf
         H = kf.measurement_model.H(kf.x)
         return H @ kf.P @ H.T + m.R
 
-    def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+    def gate(self, loop: LoopState, iv: Interval, ep: GnssEpoch,
              m: Measurements) -> Measurements:
         """``m`` less the measurements failing the innovation gate (subclasses); returns
         ``m`` unchanged by default."""
         return m
 
-    def _gated(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+    def _gated(self, loop: LoopState, iv: Interval, ep: GnssEpoch,
                m: Measurements) -> Measurements:
         """Innovation gate with the recovery rule (module notes)."""
         if m.z is None or not m.z.size or self.gate_alpha <= 0.0:
@@ -388,7 +394,7 @@ class ScalarEpochSource:
         return g
 
     # ---- MeasurementSource ------------------------------------------------------------
-    def measure(self, loop: IntegrationLoop, iv: Interval) -> Measurements:
+    def measure(self, loop: LoopState, iv: Interval) -> Measurements:
         """The interval's measurement (None ``z`` between epochs)."""
         ta = time.perf_counter()
         wait0 = self.profile.get("epoch_wait", 0.0)
@@ -413,7 +419,7 @@ class ScalarEpochSource:
                                     - (self.profile.get("epoch_wait", 0.0) - wait0))
         return m
 
-    def measurement(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> Measurements:
+    def measurement(self, loop: LoopState, iv: Interval, ep: GnssEpoch) -> Measurements:
         """``z``, ``R``, geometry and channels of epoch ``ep`` (subclasses)."""
         raise NotImplementedError
 
@@ -445,10 +451,10 @@ class ScalarEpochSource:
                 used[self.col[int(p)]] = True
         return used
 
-    def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+    def feed_back(self, loop: LoopState, iv: Interval, x: np.ndarray) -> None:
         """No NCOs to drive: the scalar loops run on their own."""
 
-    def take_up_navigation_data(self, loop: IntegrationLoop, iv: Interval) -> None:
+    def take_up_navigation_data(self, loop: LoopState, iv: Interval) -> None:
         """Nothing to switch: each epoch carries the navigation data in force at it."""
 
     def row(self) -> dict:

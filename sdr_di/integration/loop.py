@@ -226,7 +226,8 @@ class IntegrationLoop:
             self._close_ahead(iv, None, at_k1, source)
             return
 
-    def _close_ahead(self, iv: Interval, nxt: Interval | None, at_k1: tuple, source) -> None:
+    def _close_ahead(self, iv: Interval, nxt: Interval | None, at_k1: tuple | None,
+                     source) -> None:
         """Interval ``iv`` of :meth:`run_ahead`, the INS already propagated over ``nxt``
         (None: the last interval): pre-filters and measurements, predict (on the first
         interval) and update, pre-filter restarts, the solution row at ``iv.k1`` (``at_k1``:

@@ -52,10 +52,14 @@ import threading
 import time
 import warnings
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from ..errors import LoopProcessError  # noqa: F401  (defined in sdr_di.errors)
 from ..settings import loop_on_thread
 from .loop import BackgroundLoop, IntegrationLoop
+
+if TYPE_CHECKING:
+    from ..orbits.ephemeris import Klobuchar
 
 __all__ = ["LoopChild", "LoopProcess", "LoopProcessError", "start_loop_behind"]
 
@@ -184,6 +188,7 @@ class LoopProcess:
 
     def _write(self) -> None:
         fh = self._proc.stdin
+        assert fh is not None             # the child is started with stdin=PIPE
         try:
             while (data := self._q.get()) is not None:
                 _write_frame(fh, data)
@@ -195,6 +200,7 @@ class LoopProcess:
         """Wait for the loop to end; take back its objects; re-raise its exception here.
         Call it after the recorder is closed (a child that died is replaced by running the
         loop here over the recorded epochs)."""
+        assert self._proc.stdout is not None      # started with stdout=PIPE
         data = _read_frame(self._proc.stdout)
         self._proc.stdout.close()
         rc = self._proc.wait()
@@ -239,6 +245,7 @@ def _end(proc: subprocess.Popen, before_close: Callable[[], None] | None = None)
     if before_close is not None:
         before_close()
     for fh in (proc.stdin, proc.stdout):
+        assert fh is not None             # LoopChild starts it with both pipes
         try:
             fh.close()
         except OSError:
@@ -282,12 +289,12 @@ class _EpochStream:
         self.fh = fh
         self.epochs: list = []
         self.closed = False
-        self._iono: dict[int, object] = {}
+        self._iono: dict[int, Klobuchar] = {}
 
     def wait_for(self, i: int) -> bool:
         while i >= len(self.epochs) and not self.closed:
             data = _read_frame(self.fh)
-            msg = pickle.loads(data) if data is not None else ("close",)
+            msg: tuple = pickle.loads(data) if data is not None else ("close",)
             if msg[0] == "close":
                 self.closed = True
                 break

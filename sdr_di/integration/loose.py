@@ -416,6 +416,7 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
         z = loose_measurement(ins.llh, ins.v_n, g_llh, g_v)
         meas.set_epoch(ins.llh)
         kf.update(z)
+        assert kf.R_used is not None      # set by every update
         x = kf.x.copy()
         ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
         x[:15] = 0.0

@@ -48,7 +48,8 @@ from ..frames import C_e_n
 from ..receiver.pvt import PvtConfig, measurement_variances
 from ..receiver.tracking import TrackingConfig
 from .gnss_epochs import GnssEpoch, ScalarEpochSource
-from .loop import IntegrationLoop, Interval, Measurements
+from .loop import Interval, Measurements
+from ..coupling.interval import LoopState
 from ..coupling.measurements import loose_measurement
 from .tight_ranges import range_correlation_factor, tracking_variances
 
@@ -121,7 +122,7 @@ class LooseFixSource(ScalarEpochSource):
             return ep.sol.week, ep.sol.sow
         return super().bdt_of(ep, clock_bias_m)
 
-    def measurement(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> Measurements:
+    def measurement(self, loop: LoopState, iv: Interval, ep: GnssEpoch) -> Measurements:
         sol = ep.sol
         if not (sol.valid and sol.velocity_valid and np.all(np.isfinite(sol.cov_v))):
             return Measurements(z=None, R=None, geometry=(),
@@ -139,19 +140,21 @@ class LooseFixSource(ScalarEpochSource):
         col = {int(p): i for i, p in enumerate(ep.obs.prn)}
         cn0 = np.array([ep.obs.cn0_dbhz[col[int(p)]] for p in sol.prns], float)
         R = thermal_fix_covariance(sol, cn0, self.tracking_config, None, self.interval_s)
+        assert iv.nav1 is not None              # set by the loop's propagate_ins
         return Measurements(z=z, R=R, geometry=(iv.nav1.llh,),
                             used=self.used_mask(sol.prns))
 
-    def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+    def gate(self, loop: LoopState, iv: Interval, ep: GnssEpoch,
              m: Measurements) -> Measurements:
         """The whole fix out when its NIS ``y^T S^-1 y`` exceeds the 6-dof quantile."""
+        assert m.z is not None                  # _gated calls it only with a measurement
         S = self.innovation_covariance(loop, m)
         if float(m.z @ np.linalg.solve(S, m.z)) <= self.gate_limit(m.z.size):
             return m
         self.n_gated += 1
         return Measurements(z=None, R=None, geometry=(), used=np.zeros(self.n_channels, bool))
 
-    def feed_back(self, loop: IntegrationLoop, iv: Interval, x: np.ndarray) -> None:
+    def feed_back(self, loop: LoopState, iv: Interval, x: np.ndarray) -> None:
         """The loop's clock follows the latest fix (module notes, clock columns)."""
         ep = self.last
         if ep is not None and ep.sol.valid and np.isfinite(ep.sol.clock_drift_mps):

@@ -8,6 +8,7 @@ position error in metres (E, N, U). ``max`` is the largest ``||e||``.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -47,7 +48,7 @@ def summarize(t, att, vel, pos, t0: float | None = None, t1: float | None = None
     form of paper 000 Table 1) for ``q`` in ``att_deg``, ``vel_mps``, ``pos_m``; ``n`` epochs.
     """
     sel = time_window(t, t0, t1)
-    out = {"n": int(sel.sum())}
+    out: dict[str, Any] = {"n": int(sel.sum())}
     for name, e in (("att_deg", att), ("vel_mps", vel), ("pos_m", pos)):
         r, m = rmse_max(np.asarray(e)[sel])
         out[f"{name}_rmse"] = r

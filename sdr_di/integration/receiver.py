@@ -136,7 +136,7 @@ from ..filters import filter_record
 from ..integration.assumptions import FixedNoiseSource
 from ..integration.consistency import consistency_summary
 from ..integration.gnss_epochs import GnssEpochRecorder
-from ..integration.loop import BackgroundLoop, IntegrationLoop
+from ..integration.loop import BackgroundLoop, IntegrationLoop, MeasurementSource
 from ..integration.loop_process import LoopChild, LoopProcess, start_loop_behind
 from ..integration.loose_fixes import LooseFixSource
 from ..coupling.measurements import LooseMeasurementModel, RangeRateMeasurementModel
@@ -599,8 +599,10 @@ class IntegratedReceiver:
             output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
             progress=progress, profile=prof)
         adapt0 = kf.adaptation_time_s
-        src = tracking if cfg.noise_policy == "cn0" else FixedNoiseSource(
-            tracking, cfg.sigma_range_m, cfg.sigma_rate_mps)
+        src: MeasurementSource = tracking
+        if cfg.noise_policy != "cn0":    # "fixed": the config checked both sigmas are given
+            assert cfg.sigma_range_m is not None and cfg.sigma_rate_mps is not None
+            src = FixedNoiseSource(tracking, cfg.sigma_range_m, cfg.sigma_rate_mps)
         try:
             (loop.run_ahead if cfg.nco_latency else loop.run)(src)
         finally:
@@ -684,8 +686,10 @@ class IntegratedReceiver:
             output_every=max(1, round(cfg.filter_rate_hz / cfg.output_rate_hz)), truth=truth,
             profile=prof)
         adapt0 = kf.adaptation_time_s
-        run_src = src if loose or cfg.noise_policy == "cn0" else \
-            FixedNoiseSource(src, cfg.sigma_range_m, cfg.sigma_rate_mps)
+        run_src: MeasurementSource = src
+        if not (loose or cfg.noise_policy == "cn0"):  # "fixed": the config checked both sigmas
+            assert cfg.sigma_range_m is not None and cfg.sigma_rate_mps is not None
+            run_src = FixedNoiseSource(src, cfg.sigma_range_m, cfg.sigma_rate_mps)
         if behind:
             thread = start_loop_behind(loop, run_src, src, recorder, child=child)
         else:              # the epochs are all recorded: the loop runs on a thread at once

@@ -55,12 +55,13 @@ import numpy as np
 import math
 
 from ..constants import C_LIGHT, CHIP_RATE_B3I, LAMBDA_B3I, is_geo
+from ..coupling.interval import LoopState
 from ..frames import C_e_n, llh_to_ecef
 from ..receiver.loops import dll_code_noise_chips, pll_doppler_noise_hz
 from ..receiver.pvt import PvtConfig, modelled_observables
 from ..receiver.tracking import TrackingConfig
 from .gnss_epochs import GnssEpoch, ScalarEpochSource
-from .loop import IntegrationLoop, Interval, Measurements
+from .loop import Interval, Measurements
 
 __all__ = ["TightRangeSource", "range_correlation_factor", "tracking_variances"]
 
@@ -117,7 +118,7 @@ class TightRangeSource(ScalarEpochSource):
         self.tracking_config = tracking_config or TrackingConfig()
         self.interval_s = float(interval_s)
 
-    def measurement(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch) -> Measurements:
+    def measurement(self, loop: LoopState, iv: Interval, ep: GnssEpoch) -> Measurements:
         obs, sat, cfg = ep.obs, ep.sat, self.pvt_config
         none = Measurements(z=None, R=None, geometry=(), used=np.zeros(self.n_channels, bool))
         if sat is None:
@@ -145,15 +146,18 @@ class TightRangeSource(ScalarEpochSource):
         var_p, var_d = tracking_variances(obs.prn[idx], obs.cn0_dbhz[idx],
                                           self.tracking_config)
         z = np.r_[P - obs.pseudorange_m[idx], D - obs.pseudorange_rate_mps[idx]]
+        assert iv.nav1 is not None              # set by the loop's propagate_ins
         return Measurements(z=z, R=np.diag(np.r_[var_p, var_d]), geometry=(iv.nav1.llh, U),
                             used=self.used_mask(obs.prn[idx]), channels=obs.prn[idx],
                             columns=self.columns_of(obs.prn[idx]))
 
-    def gate(self, loop: IntegrationLoop, iv: Interval, ep: GnssEpoch,
+    def gate(self, loop: LoopState, iv: Interval, ep: GnssEpoch,
              m: Measurements) -> Measurements:
         """Drop each channel whose pseudorange or rate innovation fails the 1-dof test
         (module notes of :mod:`~sdr_di.integration.gnss_epochs`; the pseudoranges' ``S``
         with the correlation allowance of this module's notes)."""
+        # _gated calls it only with a measurement (z, and so R and channels, not None)
+        assert m.z is not None and m.R is not None
         S = self.innovation_covariance(loop, m)
         n = m.z.size // 2
         s_gate = np.diag(S).copy()

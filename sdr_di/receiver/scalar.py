@@ -78,6 +78,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -108,6 +109,9 @@ from .ifreader import IfSource
 from .lock import noise_values
 from .threads import KernelThreads
 from .tracking import ChannelObservation, ChannelState, TrackingConfig, TrackingLog
+
+if TYPE_CHECKING:
+    from .prediction import SignalPrediction
 
 __all__ = ["ScalarReceiver", "acquisition_upsampling"]
 
@@ -309,7 +313,7 @@ class ScalarReceiver:
         self.long_noncoherent = None if not long_noncoherent else int(long_noncoherent)
         #: ``predictor(prn, sample) -> SignalPrediction | None`` (module notes, step 4), e.g.
         #: a :class:`~sdr_di.receiver.prediction.FixPredictor`; set by the caller.
-        self.predictor = None
+        self.predictor: Callable[[int, int], SignalPrediction | None] | None = None
         self.assist_doppler_range_hz = float(assist_doppler_range_hz)
         self.channels: dict[int, Channel] = {}
         self.acquisition_results: list[AcquisitionResult] = []
