@@ -42,11 +42,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.special import gammaincc
 
 from ..constants import F_B3I
 from ._numba_discriminators import interval_discriminators
-from .prefilter import coherent_blocks, discriminator_variances
+from .prefilter import coherent_blocks, discriminator_variances, nis_test
 
 __all__ = ["DiscriminatorBank", "interval_discriminators_numpy"]
 
@@ -160,13 +159,7 @@ class DiscriminatorBank:
             np.ascontiguousarray(r_tau), np.ascontiguousarray(r_phi), self.var_f_none)
         o = self.out[i]
         o[0], o[1], o[2], o[3] = dtau, df, v_tau, v_f
-        dof = 2 * t.size - 3
-        if dof <= 0:
-            self.nis[i] = math.nan
-            self.nis_p[i] = 1.0
-        else:
-            self.nis[i] = nis / dof
-            self.nis_p[i] = float(gammaincc(0.5 * dof, 0.5 * nis))
+        self.nis[i], self.nis_p[i] = nis_test(nis, 2 * t.size - 3)
 
     def outputs(self, i: int) -> tuple[float, float, float, float]:
         """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])`` of channel ``i``'s

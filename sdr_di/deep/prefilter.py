@@ -100,7 +100,7 @@ from ..ins.imu import ImuErrorModel
 from ._numba_prefilter import prefilter_epochs
 
 __all__ = ["PreFilterBank", "ResetPreFilterBank", "coherent_blocks", "discriminator_variances",
-           "model_process_noise"]
+           "model_process_noise", "nis_test"]
 
 
 def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I
@@ -121,6 +121,15 @@ def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I
 
 #: Blocks up to which :func:`discriminator_variances` works on Python floats.
 _FEW_BLOCKS = 4
+
+
+def nis_test(nis: float, dof: int) -> tuple[float, float]:
+    """``(nis / dof, P)``: the NIS per degree of freedom and the chi-square tail probability
+    of ``nis`` with ``dof`` degrees of freedom (small: a false lock or a slip); ``(nan,
+    1.0)`` without a degree of freedom."""
+    if dof <= 0:
+        return math.nan, 1.0
+    return nis / dof, float(gammaincc(0.5 * dof, 0.5 * nis))
 
 
 def coherent_blocks(early, prompt, late, t_epoch: np.ndarray, block_start=None):
@@ -279,12 +288,12 @@ class PreFilterBank:
                                np.ascontiguousarray(late, np.complex128), t, self.spacing,
                                self.beta, r_tau, r_phi, self.q_tau, self.q_phi, self.s_f,
                                self.C[i], 0.0, self.q_phi_model, self.s_f_model)
-        self._set_nis(i, nis, t.size)
+        self._after_blocks(i, nis, t)
 
-    def _set_nis(self, i: int, nis: float, blocks: int) -> None:
-        """NIS per measurement and its chi-square tail probability (2 per block)."""
-        self.nis[i] = nis / (2.0 * blocks)
-        self.nis_p[i] = float(gammaincc(blocks, 0.5 * nis))  # chi-square sf, 2 per block
+    def _after_blocks(self, i: int, nis: float, t: np.ndarray) -> None:
+        """After the update over blocks of durations ``t`` [s]: NIS per measurement and its
+        chi-square tail probability (2 per block)."""
+        self.nis[i], self.nis_p[i] = nis_test(nis, 2 * t.size)
 
     def set_frequency(self, i: int, df_hz: float) -> None:
         """Channel ``i``'s frequency error estimate [Hz] (the loop's first interval: the
@@ -407,19 +416,12 @@ class ResetPreFilterBank(PreFilterBank):
         self.x_bar[i, 0] -= d_tau_chips
         self.x_bar[i, 2] -= d_f_hz
 
-    def process(self, i: int, early, prompt, late, t_epoch, cn0_hz: float,
-                block_start=None) -> None:
-        """:meth:`PreFilterBank.process`, and the window's prior propagated over the same
-        blocks with the noise model (``P_bar <- F P_bar F^T + diag(0, q_phi_m T,
-        s_f_m T)``, as ``C``)."""
-        t = np.ascontiguousarray(t_epoch, dtype=np.float64)
-        if t.size == 0:
-            return
-        super().process(i, early, prompt, late, t, cn0_hz, block_start)
-        if block_start is not None:
-            b = np.asarray(block_start, bool).copy()
-            b[0] = True
-            t = np.add.reduceat(t, b.nonzero()[0])
+    def _after_blocks(self, i: int, nis: float, t: np.ndarray) -> None:
+        """The window's prior propagated over the blocks of durations ``t`` [s] with the noise
+        model (``P_bar <- F P_bar F^T + diag(0, q_phi_m T, s_f_m T)``, as ``C``), and the NIS
+        per degree of freedom: ``2 m`` for ``m`` blocks less the states fitted without prior
+        information on the first blocks after a restart (no test without a degree of
+        freedom)."""
         xb, Pb = self.x_bar[i], self.P_bar[i]
         for T in t.tolist():
             F = np.array([[1.0, 0.0, self.beta * T], [0.0, 1.0, 2.0 * math.pi * T],
@@ -428,6 +430,9 @@ class ResetPreFilterBank(PreFilterBank):
             Pb[:] = F @ Pb @ F.T
             Pb[1, 1] += self.q_phi_model * T
             Pb[2, 2] += self.s_f_model * T
+        fitted = min(int(self.unfitted[i]), 2 * t.size)
+        self.unfitted[i] -= fitted
+        self.nis[i], self.nis_p[i] = nis_test(nis, 2 * t.size - fitted)
 
     def outputs(self, i: int) -> tuple[float, float, float, float]:
         """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])``: the window's
@@ -445,17 +450,3 @@ class ResetPreFilterBank(PreFilterBank):
                     self.sigma_reset[2] ** 2)
         z = R_eq @ (Y_post @ self.x[i] - Y_prior @ self.x_bar[i])
         return float(z[0]), float(z[2]), float(R_eq[0, 0]), float(R_eq[2, 2])
-
-    def _set_nis(self, i: int, nis: float, blocks: int) -> None:
-        """NIS per degree of freedom: ``2 m`` for ``m`` blocks less the states fitted
-        without prior information on the first blocks after a restart; no test without a
-        degree of freedom."""
-        fitted = min(int(self.unfitted[i]), 2 * blocks)
-        self.unfitted[i] -= fitted
-        dof = 2 * blocks - fitted
-        if dof <= 0:
-            self.nis[i] = math.nan
-            self.nis_p[i] = 1.0
-            return
-        self.nis[i] = nis / dof
-        self.nis_p[i] = float(gammaincc(0.5 * dof, 0.5 * nis))
