@@ -394,7 +394,7 @@ def _plugin_toy_run(params: dict, seed: int, out_dir) -> dict:
 def _plugin_tuning_spec(study_entry: str, grid_key: str) -> dict:
     return {"study": {"name": "plug-tune", "experiment": "test-plugin-tuning-toy", "runs": 2,
                       "filters": ["ekf", study_entry], "baseline": "ekf"},
-            "tuning": {"base_seed": 7, "runs": 1, "criterion": "mean_log_pos_rmse",
+            "tuning": {"base_seed": 7, "runs": 4, "criterion": "mean_log_pos_rmse",
                        "grid": {grid_key: {"scale": [0.5, 2.0, 8.0]}}}}
 
 

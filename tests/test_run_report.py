@@ -184,5 +184,5 @@ def test_study_summary_shows_nees_and_nis_beside_the_rmse(tmp_path):
     for q in ("pos", "vel", "att"):
         assert f"<th>{q} RMSE</th><th>{q} NEES</th>" in summary
     assert "<th>NIS code</th><th>NIS rate</th>" in summary and "NIS vel" not in summary
-    assert "3 [0.8, 1.25] <span class='v-reversed'>overconfident</span>" in summary
+    assert "3 [0.8, 1.25] <span class='v-reversed'>&#10007; overconfident</span>" in summary
     assert "<td>1.05</td>" in summary

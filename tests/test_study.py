@@ -306,11 +306,13 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
 
     monkeypatch.setattr(_deep, "shared_start", counted)
     res = run_study(spec, out, runs=2, workers=0)
-    assert res.n_run == 1 + 4           # the tuning task (baseline, training seed), then 4
+    assert res.n_run == 4 + 4           # the tuning tasks (baseline, 4 training seeds), then 4
     tuning = _csv(out / "tuning.csv")
     assert {r["options"] for r in tuning} == {"q_scale=1.0", "q_scale=4.0"}
-    assert {r["seed"] for r in tuning} == {"mean", str(run_seed(1000, 0))}
-    assert sum(r["chosen"] == "1" for r in tuning) == 2     # the chosen point's run + mean
+    assert {r["seed"] for r in tuning} == {"mean", *(str(run_seed(1000, i)) for i in range(4))}
+    assert sum(r["chosen"] == "1" for r in tuning) == 5     # the chosen point's runs + mean
+    # a two-value grid: the chosen point is on its edge whichever it is
+    assert {r["edge"] for r in tuning if r["chosen"] == "1"} == {"1"}
     ekf = res.tuning[(None, "ekf")].entry
     assert {(r["filter"], r["entry"]) for r in _csv(out / "runs.csv")} == {
         ("ekf", ekf), ("ff-aukf", "ff-aukf")}
@@ -338,16 +340,26 @@ def test_smoke_study_end_to_end(tmp_path, monkeypatch):
         assert math.isnan(float(bad[0][k]))
         assert float(cells[("baseline", "ekf")][k]) > 0, k
     assert all(math.isnan(float(r["nis_pos"])) for r in runs)
+    # the ensemble (issue 46 item 5): the ok runs, the deep blocks' bands from their size
+    assert all(float(r["nis_dof"]) >= 4 for r in ok)
+    for (cell, f), n in ((("baseline", "ekf"), 2), (("imu-noise-10x", "ff-aukf"), 1)):
+        row = cells[(cell, f)]
+        assert row["n_ensemble"] == str(n)
+        for k in ("anees_pos", "anees_vel", "anees_att", "anis_code", "anis_rate"):
+            assert float(row[f"{k}_lo"]) < 1 < float(row[f"{k}_hi"]), k
+            assert float(row[k]) == pytest.approx(np.mean(
+                [float(r[k[1:]]) for r in ok if (r["cell"], r["filter"]) == (cell, f)]))
+        assert math.isnan(float(row["anis_range"])) and math.isnan(float(row["anis_pos_hi"]))
     assert math.isfinite(float(cells[("baseline", "ff-aukf")]["d_pos_ci_low"]))
-    # both cells of a seed ran on one IF file (2 evaluation seeds, 1 training seed), and the
-    # second cell's task continued from the first's deep start-up (the tuning task and the
+    # both cells of a seed ran on one IF file (2 evaluation seeds, 4 training seeds), and the
+    # second cell's task continued from the first's deep start-up (the tuning tasks and the
     # first cell of each seed ran their own)
-    assert len(set(shared)) == 3
-    assert [h is not None for h in hits] == [False, False, True, False, True]
+    assert len(set(shared)) == 6
+    assert [h is not None for h in hits] == [False] * 4 + [False, True, False, True]
     assert not (out / "cache").exists()
     assert "injected" in (out / "report.html").read_text()
     again = run_study(spec, out, runs=2, workers=0)
-    assert again.n_run == 0 and again.n_skipped == 5
+    assert again.n_run == 0 and again.n_skipped == 8
 
 
 # ---- command line ----------------------------------------------------------------------------

@@ -51,7 +51,7 @@ def _spec(**tuning) -> dict:
             "cells": [{"name": "a", "cell": "a"}, {"name": "b", "cell": "b"}],
             "claims": [{"text": "ukf beats ekf", "filter": "ukf", "quantities": ["pos"],
                         "min_wins": 2}],
-            "tuning": {"base_seed": 7, "runs": 2, "criterion": "mean_log_pos_rmse",
+            "tuning": {"base_seed": 7, "runs": 4, "criterion": "mean_log_pos_rmse",
                        "grid": {"ekf": {"q_scale": [0.5, 2.0, 8], "r_scale": [1.0, 8]}},
                        **tuning}}
 
@@ -123,14 +123,14 @@ def test_tuning_picks_the_optimal_grid_point_then_evaluates_it(tmp_path):
         {k: v for k, v in _spec().items() if k != "tuning"}).hash
     out = tmp_path / "toy"
     res = run_study(spec, out, workers=0)
-    # 2 cells x 2 training seeds + 2 cells x 3 evaluation seeds
-    assert res.n_run == 4 + 6 and res.n_skipped == 0
+    # 2 cells x 4 training seeds + 2 cells x 3 evaluation seeds
+    assert res.n_run == 8 + 6 and res.n_skipped == 0
     assert res.tuning[(None, "ekf")].entry == "ekf:q_scale=2:r_scale=1"
     tab = _csv(out / "tuning.csv")
-    train = {run_seed(7, i) for i in range(2)}
+    train = {run_seed(7, i) for i in range(4)}
     per_run = [r for r in tab if r["seed"] != "mean"]
     assert {int(r["seed"]) for r in per_run} == train
-    assert len(per_run) == 2 * 2 * 6 and sum(r["seed"] == "mean" for r in tab) == 6
+    assert len(per_run) == 2 * 4 * 6 and sum(r["seed"] == "mean" for r in tab) == 6
     chosen = {r["options"] for r in tab if r["chosen"] == "1"}
     assert chosen == {"q_scale=2.0 r_scale=1.0"}
     means = {r["options"]: float(r["score"]) for r in tab if r["seed"] == "mean"}
@@ -153,7 +153,7 @@ def test_tuning_picks_the_optimal_grid_point_then_evaluates_it(tmp_path):
     assert f"<td>{run_seed(0, 2)}</td>" in html and f"<td>{run_seed(7, 1)}</td>" in html
     # resumable: nothing runs again
     again = run_study(parse_study(_spec()), out, workers=0)
-    assert again.n_run == 0 and again.n_skipped == 10
+    assert again.n_run == 0 and again.n_skipped == 14
 
 
 def test_nis_band_restricts_the_choice(tmp_path):
@@ -186,7 +186,7 @@ def test_overlapping_seeds_are_a_one_line_cli_error_before_any_work(tmp_path):
 
     spec = tmp_path / "overlap.toml"
     spec.write_text('[study]\nfilters = ["ekf", "ukf"]\nruns = 2\nbase_seed = 3\n'
-                    '[tuning]\nbase_seed = 3\nruns = 1\ncriterion = "mean_log_pos_rmse"\n'
+                    '[tuning]\nbase_seed = 3\nruns = 4\ncriterion = "mean_log_pos_rmse"\n'
                     '[tuning.grid.ekf]\nq_scale = [1.0, 2.0]\n')
     out = tmp_path / "o"
     proc = subprocess.run([sys.executable, "-m", "sdr_di.cli", "study", str(spec), "--out",
@@ -197,12 +197,12 @@ def test_overlapping_seeds_are_a_one_line_cli_error_before_any_work(tmp_path):
     assert not out.exists()
 
 
-def test_the_smoke_spec_tunes_one_option_on_one_training_seed():
+def test_the_smoke_spec_tunes_one_option_on_four_training_seeds():
     from sdr_di.studies.spec import load_study
 
     spec = load_study(Path(__file__).resolve().parents[1] / "studies" / "smoke.toml")
     t = spec.tuning
-    assert t.runs == 1 and t.cells == ("baseline",)
+    assert t.runs == 4 and t.cells == ("baseline",)
     assert t.grids == {"ekf": ((("q_scale", 1.0),), (("q_scale", 4.0),))}
 
 

@@ -528,10 +528,16 @@ def record_run(fig: dict, name: str, dr: DeepRun) -> Any:
 def consistency_figures(res: Any, t0: float | None, t1: float | None, prefix: str) -> dict:
     """``{prefix}nis_<block>`` and ``{prefix}nees_<q>`` of a result over ``t0 <= t <= t1``:
     the means of its :meth:`~sdr_di.integration.receiver.IntegrationResult.consistency` entry (NaN
-    without samples)."""
+    without samples), and ``{prefix}nis_dof``: the degrees of freedom of one NIS sample of a
+    block (the median block size over the window; NaN without updates), which a study needs
+    for the chi-square band of its ensemble average (:mod:`sdr_di.studies.ensemble`)."""
     from ..integration.consistency import flat
 
-    return {f"{prefix}{k}": v for k, v in flat(res.consistency(t0, t1)).items()}
+    c = res.consistency(t0, t1)
+    out = {f"{prefix}{k}": v for k, v in flat(c).items()}
+    nis = [v for k, v in c.items() if k.startswith("nis_") and isinstance(v, dict) and v["n"]]
+    out[f"{prefix}nis_dof"] = float(nis[0]["dof"]) if nis else math.nan
+    return out
 
 
 def segment_metrics(res: Any, t0: float | None, t1: float | None, prefix: str) -> dict:

@@ -10,8 +10,9 @@ latest hand-over of the run plus ``settle_s`` to the end, so their figures pair.
 
 Figures (per variant ``f``): ``f.completed``, ``f.error`` (when it failed), ``f.handover_s``,
 ``f.acq_after_handover``, ``f.{att_deg,vel_mps,pos_m}_{rmse,max}`` over the window (NaN when
-the variant failed), ``f.nis_<block>`` and ``f.nees_{pos,vel,att}`` over the window (the
-run's consistency, :func:`~._deep.consistency_figures`; absent when the variant failed);
+the variant failed), ``f.nis_<block>``, ``f.nis_dof`` (one block's size) and
+``f.nees_{pos,vel,att}`` over the window (the run's consistency,
+:func:`~._deep.consistency_figures`; absent when the variant failed);
 ``t_eval_s`` (window start), ``sampling_rate_hz``. Files:
 ``errors_<f>.csv`` and ``error_norms.png``.
 """

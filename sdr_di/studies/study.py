@@ -45,6 +45,7 @@ from ..integration.consistency import CONSISTENCY_KEYS
 from ..io.atomic import ensure_output_dir
 from ..experiments._deep import FILE_CACHE
 from .campaign import _client, _quiet_on_sigint, run_seed
+from .ensemble import ensemble_consistency
 from .execute import (
     execute_run,
     read_json,
@@ -349,6 +350,8 @@ def _run_rows(spec: StudySpec, records: dict, runs: int) -> list[dict]:
                     v = figs.get(f"{lab}.{k}", math.nan)
                     row[k] = float(v) if isinstance(v, (int, float)) and \
                         row["status"] == "ok" else math.nan
+                v = figs.get(f"{lab}.nis_dof", math.nan)     # one NIS block's size
+                row["nis_dof"] = float(v) if isinstance(v, (int, float)) else math.nan
                 rows.append(row)
     for row in rows:                     # a diverged quantity makes the whole run a loss
         if row["status"] != "ok":
@@ -435,6 +438,8 @@ def summarize_study(spec: StudySpec, records: dict, runs: int, out: Path) -> Stu
                               and r["filter"] == f], float)
                 row[k] = float(np.mean(x[np.isfinite(x)])) if np.isfinite(x).any() \
                     else math.nan
+            row.update(ensemble_consistency(      # ANEES, ANIS with their chi-square band
+                [r for r in rows if r["cell"] == cell.name and r["filter"] == f]))
             cell_rows.append(row)
     write_table(out, "runs", rows)
     write_table(out, "comparisons", [

@@ -2,8 +2,9 @@
 
 1. The question and the design in two lines (cells, filters, baseline, seeds, correction).
 2. The verdict of every claim per cell, with the numbers behind it.
-3. Per cell, each filter's mean RMSE with its NEES beside it (ANEES with band and verdict
-   when cells.csv has them), its paired ratio to the baseline with the corrected interval,
+3. Per cell, each filter's mean RMSE with its NEES beside it (ANEES with band and an
+   in/out-of-band mark when cells.csv has them, and the number of runs averaged), its paired
+   ratio to the baseline with the corrected interval,
    win count and Holm p (3 significant digits; the best mean per quantity in bold), and the
    NIS per measurement block.
 4. Plots: paired ratios per cell (the factor levels) with their corrected intervals, on a
@@ -63,21 +64,28 @@ def _interval(lo, hi, n=None) -> str:
     return f"[{sig(lo)}, {sig(hi)}]" if math.isfinite(lo) and math.isfinite(hi) else ""
 
 
+#: The mark of an ensemble average against its band, by its verdict: inside (check mark),
+#: outside (cross).
+BAND_MARK = {"consistent": "&#10003;", "overconfident": "&#10007;",
+             "pessimistic": "&#10007;"}
+
 #: NIS columns of cells.csv (every mode's blocks; a mode fills its own).
 _NIS_KEYS = tuple(k for k in CONSISTENCY_KEYS if k.startswith("nis_"))
 
 
 def _consistency_cell(row: dict, key: str) -> str:
     """A cell's NEES or NIS per degree of freedom: ``anees_*``/``anis_*`` with its band
-    (``_lo``, ``_hi``) and verdict where cells.csv has them (ensemble statistics), else the
-    mean of the runs' own (``nees_*``, ``nis_*``)."""
+    (``_lo``, ``_hi``) and its mark (:data:`BAND_MARK`: in the band, or out of it and
+    which way) where cells.csv has them (ensemble statistics,
+    :mod:`.ensemble`), else the mean of the runs' own (``nees_*``, ``nis_*``)."""
     a = "a" + key
     if math.isfinite(_num(row.get(a))):
         v, lo, hi = _num(row[a]), _num(row.get(f"{a}_lo")), _num(row.get(f"{a}_hi"))
         if math.isfinite(lo) and math.isfinite(hi):
             vd = verdict(v, (lo, hi))
             cls = "v-holds" if vd == "consistent" else "v-reversed"
-            return f"{sig(v)} [{sig(lo)}, {sig(hi)}] <span class='{cls}'>{vd}</span>"
+            return (f"{sig(v)} [{sig(lo)}, {sig(hi)}] <span class='{cls}'>{BAND_MARK[vd]} "
+                    f"{vd}</span>")
         return sig(v)
     v = _num(row.get(key))
     return sig(v) if math.isfinite(v) else ""
@@ -204,9 +212,12 @@ def render_study_report(folder: str | Path) -> Path:
 
     parts.append("<h2>Summary per cell</h2><p>Mean RMSE over the seeds (position m, velocity "
                  "m/s, attitude deg) and beside it the filter's NEES per degree of freedom "
-                 "(ANEES with its ensemble band and verdict where the study wrote them, else the "
-                 "mean over the seeds of each run's NEES; expected 1, below: pessimistic, "
-                 "above: overconfident); for each other filter the paired ratio to the baseline "
+                 "(ANEES, the mean over the N runs of each run's time-mean NEES, with the "
+                 "two-sided 95 % chi-square band of an N-run ensemble average at one epoch "
+                 "and its mark: &#10003; inside, &#10007; outside; where the study wrote no "
+                 "ANEES, the mean over the seeds of each run's NEES; expected 1, below: "
+                 "pessimistic, above: overconfident); for each other filter the paired ratio "
+                 "to the baseline "
                  "with its corrected interval, wins/seeds and the Holm-adjusted sign-test p; "
                  "last, the NIS per measurement block the same way. "
                  "Bold: the best mean of the cell.</p>")
@@ -218,7 +229,8 @@ def render_study_report(folder: str | Path) -> Path:
         parts.append(f"<h3>{html.escape(cn)}</h3>"
                      + (f"<p><code>{html.escape(json.dumps(facs))}</code></p>" if facs else ""))
         nis_cols = [k for k in _NIS_KEYS if any(math.isfinite(_num(r.get(k))) for r in rows)]
-        head = ["filter", "ok/n"]
+        ens = any(r.get("n_ensemble", "") != "" for r in rows)
+        head = ["filter", "ok/n"] + (["N (ensemble)"] if ens else [])
         for q in qs:
             head += [f"{q} RMSE", f"{q} NEES", f"{q} ratio [interval]", f"{q} wins",
                      f"{q} p (Holm)"]
@@ -227,6 +239,8 @@ def render_study_report(folder: str | Path) -> Path:
                + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"]
         for r in rows:
             tds = [html.escape(r["filter"]), f"{r['n_ok']}/{r['n_runs']}"]
+            if ens:
+                tds.append(html.escape(r.get("n_ensemble", "")))
             for q in qs:
                 col = next(k for k in r if k.startswith(f"{q}_rmse_") and k != f"{q}_rmse_sd")
                 val = sig(_num(r[col]))

@@ -13,7 +13,9 @@ resumable):
    point does, the best point is chosen and ``constraint_met`` says so). Ties go to the
    first point in grid order. ``DIR/tuning.csv`` holds one row per (cell, filter, options,
    seed) and one ``mean`` row per (cell group, filter, options); ``chosen`` marks the chosen
-   point's rows.
+   point's rows, and on them ``edge`` is 1 when the chosen point lies on an edge of its grid
+   (:func:`grid_edges`: some numeric option at the lowest or highest value its grid gives
+   it, so the optimum may lie beyond the grid) and ``edge_options`` names those options.
 3. **Evaluation** (``DIR``): the study as written, each cell running the chosen entry of
    every tuned filter (:attr:`~.spec.Cell.entries`; ``runs.csv`` keeps the study's
    filter names and gives the entry run in ``entry``; claims and statistics are unchanged),
@@ -36,14 +38,16 @@ from .spec import StudySpec, parse_study
 from .tables import write_table
 from .tuning_spec import CRITERIA, TuningSpec, grid_entry, training_seeds
 
-__all__ = ["Choice", "choose", "run_tuned_study", "training_spec", "tuned_spec"]
+__all__ = ["Choice", "choose", "grid_edges", "run_tuned_study", "training_spec",
+           "tuned_spec"]
 
 
 @dataclasses.dataclass(frozen=True)
 class Choice:
     """The outcome for one study filter (in one cell with ``per_cell``, else ``cell`` is
     ``None``): its chosen entry and options, the chosen point's score, and whether it met the
-    NIS band (``None`` without a band)."""
+    NIS band (``None`` without a band), and the options at an edge of the grid
+    (:func:`grid_edges`; empty when the point is inside the grid)."""
 
     cell: str | None
     filter: str
@@ -51,6 +55,45 @@ class Choice:
     options: dict
     score: float
     constraint_met: bool | None
+    edge: tuple[str, ...] = ()
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def grid_edges(point, points) -> tuple[str, ...]:
+    """The options of ``point`` that lie on an edge of the grid ``points``.
+
+    An option is on an edge when it is numeric (an integer or a float, not a boolean), the
+    grid gives it at least two values, and the point's value is the lowest or the highest of
+    them (by value, whatever the order they were written in). An option with one value is
+    fixed, not tuned; a boolean or text option has no beyond. With two values every point
+    is on that option's edge.
+
+    Parameters
+    ----------
+    point : tuple of (str, value)
+        A grid point (``TuningSpec.grids[f][k]``).
+    points : sequence of such tuples
+        The filter's whole grid.
+
+    Returns
+    -------
+    tuple of str
+        ``"option (lowest)"`` or ``"option (highest)"`` per option on an edge, in the
+        point's option order.
+    """
+    out = []
+    for opt, v in point:
+        vals = {dict(p)[opt] for p in points}
+        if not _is_number(v) or len(vals) < 2 or not all(map(_is_number, vals)):
+            continue
+        if v == min(vals):
+            out.append(f"{opt} (lowest)")
+        elif v == max(vals):
+            out.append(f"{opt} (highest)")
+    return tuple(out)
 
 
 def _raw_without_tuning(spec: StudySpec) -> dict:
@@ -143,11 +186,13 @@ def choose(t: TuningSpec, rows: list[dict]) -> tuple[dict, list[dict]]:
             scored = [_score_point(t, f, p, by_entry, quantity, log) for p in points]
             eligible = [sc for sc in scored if sc["ok"] is not False] or scored
             best = min(eligible, key=lambda sc: sc["mean"])        # first of equals
+            edge = grid_edges(best["point"], points)
             choices[(group, f)] = Choice(group, f, best["entry"], dict(best["point"]),
                                          best["mean"],
-                                         None if t.nis_band is None else bool(best["ok"]))
+                                         None if t.nis_band is None else bool(best["ok"]),
+                                         edge)
             for sc in scored:
-                table += _table_rows(t, f, sc, label, sc is best)
+                table += _table_rows(t, f, sc, label, edge if sc is best else None)
     return choices, table
 
 
@@ -173,18 +218,23 @@ def _score_point(t: TuningSpec, f: str, point, by_entry: dict, quantity: str,
             "ok": ok}
 
 
-def _table_rows(t: TuningSpec, f: str, sc: dict, label: str, chosen: bool) -> list[dict]:
-    """``tuning.csv`` rows of one grid point: one per training run, then its ``mean``."""
+def _table_rows(t: TuningSpec, f: str, sc: dict, label: str,
+                edge: tuple[str, ...] | None) -> list[dict]:
+    """``tuning.csv`` rows of one grid point: one per training run, then its ``mean``;
+    ``edge`` is the chosen point's :func:`grid_edges`, None for a point not chosen."""
     opts = " ".join(f"{k}={v}" for k, v in sc["point"])
     band = t.nis_band is not None
+    chosen = edge is not None
     extra = {"nis_ok": "" if sc["ok"] is None else int(sc["ok"])} if band else {}
+    extra.update(chosen=int(chosen), edge=int(bool(edge)) if chosen else "",
+                 edge_options=", ".join(edge) if edge else "")
     out = [{"cell": r["cell"], "filter": f, "options": opts, "seed_index": r["seed_index"],
             "seed": r["seed"], "score": s,
-            **({c: r.get(c, "") for c in t.nis_column or ()} if band else {}), **extra,
-            "chosen": int(chosen)} for r, s in zip(sc["runs"], sc["scores"])]
+            **({c: r.get(c, "") for c in t.nis_column or ()} if band else {}), **extra}
+           for r, s in zip(sc["runs"], sc["scores"])]
     out.append({"cell": label, "filter": f, "options": opts, "seed_index": "", "seed": "mean",
                 "score": sc["mean"], **(dict.fromkeys(t.nis_column or (), "") if band else {}),
-                **extra, "chosen": int(chosen)})
+                **extra})
     return out
 
 

@@ -12,8 +12,9 @@ __all__ = ["tuning_html"]
 
 
 def tuning_html(path: Path) -> str:
-    """``<h2>Tuning</h2>``: per filter the chosen options, then the criterion over the grid
-    (mean over the tuning cells and training seeds; the chosen point in bold)."""
+    """``<h2>Tuning</h2>``: per filter the chosen options (flagged when the point lies on an
+    edge of its grid: ``edge`` in tuning.csv), then the criterion over the grid (mean over
+    the tuning cells and training seeds; the chosen point in bold)."""
     head, table = read_csv_table(path)
     rows = [dict(zip(head, r)) for r in table]
     means = [r for r in rows if r["seed"] == "mean"]
@@ -30,9 +31,14 @@ def tuning_html(path: Path) -> str:
     for r in means:
         if r["chosen"] == "1":
             where = f" in {r['cell']}" if groups > 1 else ""
+            flag = ""
+            if r.get("edge") == "1":
+                flag = (" <span class='v-reversed'>&#9888; on the grid's edge: "
+                        f"{html.escape(r.get('edge_options', ''))}; the best value may lie "
+                        "beyond the grid</span>")
             parts.append(f"<li><b>{html.escape(r['filter'])}</b>{html.escape(where)}: "
                          f"<code>{html.escape(r['options'])}</code> (score "
-                         f"{sig(float(r['score']))})</li>")
+                         f"{sig(float(r['score']))}){flag}</li>")
     parts.append("</ul><table><tr><th>cells</th><th>filter</th><th>options</th><th>score</th>"
                  + ("<th>NIS in band</th>" if "nis_ok" in head else "") + "</tr>")
     for r in means:

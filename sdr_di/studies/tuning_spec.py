@@ -4,7 +4,8 @@ Format (``docs/studies.md``)::
 
     [tuning]
     base_seed = 1000                 # training seed i = run_seed(base_seed, i), i < runs;
-    runs = 2                         # refused if any equals an evaluation seed
+    runs = 4                         # at least 4 (the default); refused if any training
+                                     # seed equals an evaluation seed
     criterion = "mean_log_pos_rmse"  # or mean_log_{vel,att}_rmse, mean_{pos,vel,att}_rmse
     cells = ["baseline"]             # cells the scores are pooled over (default: all)
     per_cell = false                 # true: one choice per cell and filter (all cells tuned)
@@ -45,13 +46,18 @@ from ..filters.spec import (
 )
 from .seeds import run_seed
 
-__all__ = ["CRITERIA", "TuningSpec", "check_option_value", "grid_entry", "parse_tuning",
+__all__ = ["CRITERIA", "MIN_TRAINING_SEEDS", "TuningSpec", "check_option_value", "grid_entry", "parse_tuning",
            "study_filter_of", "training_seeds"]
 
 #: criterion name -> (quantity, take the log of each run's RMSE)
 CRITERIA: dict[str, tuple[str, bool]] = {
     **{f"mean_log_{q}_rmse": (q, True) for q in ("pos", "vel", "att")},
     **{f"mean_{q}_rmse": (q, False) for q in ("pos", "vel", "att")}}
+
+#: Fewest training seeds a ``[tuning]`` table may ask for, and its default (issue 46): the
+#: choice ranks grid points by a mean over the training runs, and on one or two seeds that
+#: ranking follows those seeds' draws as much as the points.
+MIN_TRAINING_SEEDS = 4
 
 _KEYS = {"base_seed", "runs", "criterion", "cells", "per_cell", "nis_column", "nis_band",
          "grid"}
@@ -193,8 +199,9 @@ def parse_tuning(raw, *, where: str, filters, cells, base_seed: int, runs: int
     Raises
     ------
     StudyError
-        Unknown key, bad type, an unknown filter or option, a grid value of the wrong type,
-        an unknown criterion or cell, or training seeds that overlap the evaluation seeds.
+        Unknown key, bad type, fewer than :data:`MIN_TRAINING_SEEDS` training seeds, an
+        unknown filter or option, a grid value of the wrong type, an unknown criterion or
+        cell, or training seeds that overlap the evaluation seeds.
     """
     if raw is None:
         return None
@@ -207,9 +214,10 @@ def parse_tuning(raw, *, where: str, filters, cells, base_seed: int, runs: int
     tb = raw.get("base_seed")
     if isinstance(tb, bool) or not isinstance(tb, int) or tb < 0:
         raise StudyError(f"{w} base_seed must be an integer >= 0, got {tb!r}")
-    tr = raw.get("runs", 2)
-    if isinstance(tr, bool) or not isinstance(tr, int) or tr < 1:
-        raise StudyError(f"{w} runs must be an integer >= 1, got {tr!r}")
+    tr = raw.get("runs", MIN_TRAINING_SEEDS)
+    if isinstance(tr, bool) or not isinstance(tr, int) or tr < MIN_TRAINING_SEEDS:
+        raise StudyError(f"{w} runs must be an integer >= {MIN_TRAINING_SEEDS} (training "
+                         f"seeds: a choice on fewer follows the seeds' noise), got {tr!r}")
     crit = raw.get("criterion")
     if crit not in CRITERIA:
         raise StudyError(f"{w} criterion must be one of {', '.join(CRITERIA)}, got {crit!r}")
