@@ -317,3 +317,30 @@ def test_scale_factor_estimated_within_3_sigma_in_a_turning_run():
     # (measured: 0.210 deg RMSE against 0.127 deg)
     plain = run_loose(tr, imu, unit, st.replace(filter="ekf"), seed=sc.seed)
     assert res.metrics()["att_deg_rmse"] < 0.8 * plain.metrics()["att_deg_rmse"]
+
+
+def test_integration_filter_takes_the_assumed_grade():
+    """The run's filter set-up: ``P0`` of the scale-factor states from the assumed IMU (an
+    assumptions file's ``[imu]`` keys over its grade), ``Q`` of the Gauss-Markov biases from
+    its correlation times, every coupling's measurement model of the layout's width."""
+    from types import SimpleNamespace
+
+    from sdr_di.coupling.config import IntegrationConfig
+    from sdr_di.integration.assumptions import parse_assumptions
+    from sdr_di.integration.filter_setup import make_integration_filter
+
+    a = parse_assumptions({"imu": {"grade": "tactical", "gyro_scale_factor_ppm": 2000.0,
+                                   "accel_bias_tau_s": 120.0}}, "a.toml")
+    sol = SimpleNamespace(cov=np.eye(4) * 4.0)
+    llh, att_sig = np.array([0.7, 2.0, 100.0]), np.full(3, 1e-3)
+    for es, n in (("none", 17), ("sf", 23), ("sf+gm", 23)):
+        cfg = IntegrationConfig(filter="ukf", imu=a.imu, filter_options={"error_states": es})
+        kf, process, meas = make_integration_filter(cfg, 0.02, sol, llh, att_sig)
+        assert kf.x.size == n and process.layout.n == n and meas.n_states == n
+        if es != "none":
+            p0 = np.diag(kf.P)
+            assert np.allclose(p0[17:20], 2000e-6**2) and np.allclose(p0[20:23], 300e-6**2)
+        q = np.diag(kf.Q)
+        s_a2 = a.imu.accel_bias_si**2 + a.imu.accel_bias_instability_si**2
+        gm_q = s_a2 * -math.expm1(-0.04 / 120.0)
+        assert np.isclose(q[12], gm_q) == (es == "sf+gm")
