@@ -480,15 +480,19 @@ def _print_plots(out) -> None:
 
 
 def _probe_filter(name: str, options: dict, dt: float) -> None:
-    """Build the integration filter once on the 17-state models (FilterError: one line)."""
+    """Build the integration filter once on the models of its ``error_states`` layout
+    (FilterError: one line)."""
     import numpy as np
 
     from .filters import make_filter
+    from .filters.state import layout_of_options
     from .ins.error_model import InsErrorModel
     from .coupling.measurements import RangeRateMeasurementModel
 
-    make_filter(name, InsErrorModel(), RangeRateMeasurementModel(), np.zeros(17), np.eye(17),
-                np.eye(17), None, dt=dt, **options)
+    layout = layout_of_options(options)
+    n = layout.n
+    make_filter(name, InsErrorModel(layout=layout), RangeRateMeasurementModel(n_states=n),
+                np.zeros(n), np.eye(n), np.eye(n), None, dt=dt, **options)
 
 
 def _add_lc(sub) -> None:
@@ -653,6 +657,8 @@ def _cmd_filters(args: argparse.Namespace) -> int:
                   f"({o['target']})")
         if row["open"]:
             print("    (takes further options)")
+    print("error_states (model, every filter): none (17 states), sf (+ gyro and accel scale "
+          "factors, 23), gm (Gauss-Markov biases), sf+gm (docs/filters.md, Error states)")
     print("entry: NAME[:OPT=VALUE...]; an import path package.module:Name is a plugin "
           "(docs/filters.md)")
     return 0

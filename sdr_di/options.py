@@ -379,7 +379,7 @@ class RunOptions:
             output_rate_hz=self.rate_hz, **{k: v for k, v in fields.items() if v is not None})
 
     def check_integrated_inputs(self, source, cfg) -> None:
-        """Before the start-up: the filter built on the 17-state models (a plugin's import and
+        """Before the start-up: the filter built on the models of its layout (a plugin's import and
         interface), and a given filter rate that divides the IMU file's rate.
 
         Raises

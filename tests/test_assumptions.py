@@ -85,9 +85,9 @@ def test_apply_to_lc_overrides_lc_keys():
 
 @pytest.mark.parametrize(("raw", "match"), [
     ({"imu": {"grade": "gimbal"}}, r"a\.toml \[imu\]\.grade: unknown IMU grade 'gimbal'"),
-    ({"imu": {"accel_scale_factor_ppm": 50}}, (r"\[imu\]\.accel_scale_factor_ppm: not an "
-                                              r"assumption \(the 17-state filter has no "
-                                              r"scale-factor states")),
+    ({"imu": {"gyro_misalignment_mrad": 1}}, (r"\[imu\]\.gyro_misalignment_mrad: not an "
+                                             r"assumption \(the filter has no state for it")),
+    ({"imu": {"gyro_bias_tau_s": 0}}, r"\[imu\]\.gyro_bias_tau_s: must be > 0"),
     ({"oscillator": {"preset": "rubidium"}}, (r"\[oscillator\]\.preset: unknown oscillator "
                                              r"preset 'rubidium'")),
     ({"oscillator": {"preset": "tcxo", "h_2": -1e-20}}, (r"\[oscillator\]\.h_2: h-parameters "

@@ -1,5 +1,9 @@
 """Measurement models of the integration filter (17-state layout, errors = computed - true).
 
+Both models take ``n_states`` (default 17): with scale-factor states (``error_states=sf``,
+:mod:`sdr_di.filters.state`) the filter has 23 states, appended after the clock, which no
+measurement sees: ``H`` gets zero columns for them and every column below keeps its index.
+
 Deep / tight coupling (paper 004 eq 6-12): :class:`RangeRateMeasurementModel`
     ``z = [drho_1..N, drho_dot_1..N]`` (eq 7) with ``drho_i = rho^_INS,i - rho_i`` the
     pseudorange error [m] (``c / f_code * dtau_i``, eq 8, in deep mode; INS-predicted minus
@@ -30,6 +34,7 @@ import math
 import numpy as np
 
 from ..filters.models import LinearMeasurementModel
+from ..filters.state import CLOCK_BIAS, CLOCK_DRIFT, N_STATES, POS, VEL
 from ..frames import C_e_n, llh_to_ecef, radii_of_curvature
 
 __all__ = [
@@ -109,10 +114,14 @@ class RangeRateMeasurementModel(LinearMeasurementModel):
     ----------
     llh, v_n, sat_pos_e, sat_vel_e
         As :meth:`set_epoch` (optional at construction).
+    n_states : int
+        Columns of ``H``: the filter's state dimension (module notes).
     """
 
-    def __init__(self, llh=None, v_n=None, sat_pos_e=None, sat_vel_e=None) -> None:
-        super().__init__(np.zeros((0, 17)))
+    def __init__(self, llh=None, v_n=None, sat_pos_e=None, sat_vel_e=None, *,
+                 n_states: int = N_STATES) -> None:
+        self.n_states = int(n_states)
+        super().__init__(np.zeros((0, self.n_states)))
         self.U = np.zeros((0, 3))
         self.rho_pred = np.zeros(0)
         self.rate_pred = np.zeros(0)
@@ -138,11 +147,11 @@ class RangeRateMeasurementModel(LinearMeasurementModel):
         self.U = U
         N = U.shape[0]
         C1, C2 = _position_matrices(llh)
-        H = np.zeros((2 * N, 17))
-        H[:N, 6:9] = -U @ C1          # H_rho1 (eq 11)
-        H[:N, 15] = 1.0               # H_rho2 = [1 0]
-        H[N:, 3:6] = -U @ C2          # H_rhodot1 (eq 12)
-        H[N:, 16] = 1.0               # H_rhodot2 = [0 1]
+        H = np.zeros((2 * N, self.n_states))
+        H[:N, POS] = -U @ C1          # H_rho1 (eq 11)
+        H[:N, CLOCK_BIAS] = 1.0       # H_rho2 = [1 0]
+        H[N:, VEL] = -U @ C2          # H_rhodot1 (eq 12)
+        H[N:, CLOCK_DRIFT] = 1.0      # H_rhodot2 = [0 1]
         self.matrix = H
 
     def measurement(self, rho_meas, rate_meas) -> np.ndarray:
@@ -151,26 +160,29 @@ class RangeRateMeasurementModel(LinearMeasurementModel):
                                self.rate_pred - np.asarray(rate_meas, float)])
 
 
-def _loose_H(llh) -> np.ndarray:
+def _loose_H(llh, n_states: int = N_STATES) -> np.ndarray:
     lat, h = float(llh[0]), float(llh[2])
     R_M, R_N = (float(r) for r in radii_of_curvature(lat))
-    H = np.zeros((6, 17))
-    H[0:3, 3:6] = np.eye(3)
-    H[3, 6] = R_M + h
-    H[4, 7] = (R_N + h) * math.cos(lat)
-    H[5, 8] = 1.0
+    H = np.zeros((6, n_states))
+    H[0:3, VEL] = np.eye(3)
+    H[3, POS.start] = R_M + h
+    H[4, POS.start + 1] = (R_N + h) * math.cos(lat)
+    H[5, POS.start + 2] = 1.0
     return H
 
 
 class LooseMeasurementModel(LinearMeasurementModel):
-    """Papers 000/003 eq 13-14 (velocity then N/E/U position differences, metres)."""
+    """Papers 000/003 eq 13-14 (velocity then N/E/U position differences, metres);
+    ``n_states`` columns (module notes)."""
 
-    def __init__(self, llh=None) -> None:
-        super().__init__(np.zeros((6, 17)) if llh is None else _loose_H(llh))
+    def __init__(self, llh=None, *, n_states: int = N_STATES) -> None:
+        self.n_states = int(n_states)
+        super().__init__(np.zeros((6, self.n_states)) if llh is None
+                         else _loose_H(llh, self.n_states))
 
     def set_epoch(self, llh) -> None:
         """Scale of the position rows at the INS position of this epoch."""
-        self.matrix = _loose_H(llh)
+        self.matrix = _loose_H(llh, self.n_states)
 
 
 def loose_measurement(ins_llh, ins_v_n, gnss_llh, gnss_v_n) -> np.ndarray:

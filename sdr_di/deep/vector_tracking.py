@@ -29,6 +29,7 @@ from ..coupling.config import IntegrationConfig
 from ..coupling.interval import Interval, LoopState, Measurements
 from ..coupling.measurements import RangeRateMeasurementModel
 from ..errors import SdrDiError
+from ..filters.state import CLOCK_BIAS, POS, layout_of_options
 from ..frames import llh_to_ecef
 from ..receiver.correlator import (  # the kernel: receiver._numba_correlate_bits
     CODE_PAD,
@@ -194,7 +195,9 @@ class VectorTracking:
         self.nh20 = NH20.astype(np.float64)
         self.kthreads = KernelThreads()
         self.threads_before = numba.get_num_threads()
-        self.meas_all = RangeRateMeasurementModel()     # every channel: the feedback's H
+        # every channel: the feedback's H (as many columns as the filter's states)
+        self.meas_all = RangeRateMeasurementModel(
+            n_states=layout_of_options(cfg.filter_options).n)
         # sample buffer
         self.x_buf = np.empty(0, dtype=np.int8)
         self.n_comp = 2
@@ -651,7 +654,7 @@ class _ModelStep:
     dP: np.ndarray          # predicted code range change of every channel [m]
     dPc: np.ndarray         # predicted carrier phase-range change [m]
     Hx_rho: np.ndarray      # range change of the state step [m]
-    x: np.ndarray           # state step (17,)
+    x: np.ndarray           # state step (n,)
     clock_bias_m: float     # clock bias after the step [m]
     d_tau: np.ndarray       # pre-filter step (PreFilterBank.shift): code [chips]
     d_f: np.ndarray         # and frequency [Hz] of each channel
@@ -680,17 +683,18 @@ def _take_up_model_change(ephs_old, ephs_new, iono_old, iono_new, week: int, sow
     n = dP.size
     meas_all.set_geometry(ins.llh, new.U[:, 0])
     H = meas_all.matrix
-    x = np.zeros(17)
-    cols = [6, 7, 8, 15]
+    x = np.zeros(H.shape[1])
+    cols = [POS.start, POS.start + 1, POS.start + 2, CLOCK_BIAS]
     if int(np.count_nonzero(used)) >= 4:
         x[cols] = np.linalg.lstsq(H[:n][used][:, cols], dP[used], rcond=None)[0]
         kf.P[cols, cols] += (0.5 * x[cols]) ** 2
     else:
-        kf.P[15, 15] += float(np.max(dP ** 2))
+        kf.P[CLOCK_BIAS, CLOCK_BIAS] += float(np.max(dP ** 2))
     Hx = H @ x
     z3 = np.zeros(3)
-    ins.correct(z3, z3, x[6:9], z3, z3)
-    return _ModelStep(dP=dP, dPc=dPc, Hx_rho=Hx[:n], x=x, clock_bias_m=clock_bias_m - x[15],
+    ins.correct(z3, z3, x[POS], z3, z3)
+    return _ModelStep(dP=dP, dPc=dPc, Hx_rho=Hx[:n], x=x,
+                      clock_bias_m=clock_bias_m - x[CLOCK_BIAS],
                       d_tau=-CHIP_RATE_B3I / C_LIGHT * (dP - Hx[:n]),
                       d_f=Hx[n:] / LAMBDA_B3I)
 
@@ -749,7 +753,7 @@ class _NavLog:
             self._iono_entry(t_s, iono_new)
         self.steps.append({"t_s": round(t_s, 3),
                            "max_range_step_m": float(np.max(np.abs(step.dP))),
-                           "clock_step_m": float(step.x[15]),
+                           "clock_step_m": float(step.x[CLOCK_BIAS]),
                            "height_step_m": float(step.x[8])})
 
     def _eph_entry(self, t_s, prn, e, src) -> None:

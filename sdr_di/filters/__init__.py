@@ -28,7 +28,8 @@ Modules
 ``registry``      :func:`make_filter`, :func:`filter_table`
 ``spec``          :func:`parse_filter_spec`: ``NAME[:opt=value...]`` with typed options
 ``plugins``       :func:`register_filter`, entry points ``sdr_di.filters``, import paths
-``state``         17-state layout indices and measurement blocks
+``state``         state layouts (the 17 states; ``error_states=`` :func:`state_layout`) and
+                  measurement blocks
 ``errors``        :class:`FilterError`, :class:`CovarianceError`
 """
 
@@ -56,6 +57,7 @@ from .models import (
 from .plugins import register_filter, unregister_filter
 from .registry import FILTER_NAMES, filter_options, filter_record, filter_table, make_filter
 from .spec import FilterSpec, parse_filter_spec
+from .state import StateLayout, state_layout
 from .sigma_filter import CKF, UKF, SigmaPointFilter
 from .sigma_points import CubaturePoints, MerweScaledSigmaPoints, SigmaPoints
 
@@ -86,6 +88,7 @@ __all__ = [
                        "SageWindowAUKF",
                        "SigmaPointFilter",
                        "SigmaPoints",
+                       "StateLayout",
                        "filter_options",
                        "filter_record",
                        "filter_table",
@@ -93,5 +96,6 @@ __all__ = [
                        "numerical_jacobian",
                        "parse_filter_spec",
                        "register_filter",
+                       "state_layout",
                        "unregister_filter",
 ]

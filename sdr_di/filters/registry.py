@@ -18,7 +18,12 @@ name               core    adaptive rule
 Options are routed by name: ``dt``, ``psd_fallback``, ``q_scale``, ``r_scale`` (all cores),
 ``alpha``, ``beta``, ``kappa`` (UKF cores) go to the core filter, the others to the rule's
 constructor (see each rule); an unknown option raises :class:`~.errors.FilterError` listing
-the accepted ones.
+the accepted ones. ``error_states`` (:data:`MODEL_OPTIONS`) is an option of every name,
+built-in or plugin, that goes to neither: it chooses the *models* (the error states of
+:func:`~.state.state_layout`), which the caller builds before ``make_filter``
+(:func:`sdr_di.integration.filter_setup.make_integration_filter`); ``make_filter`` checks its
+value and that the process model's ``layout`` agrees, and never passes it on, so a filter
+(a plugin too) sees only the layout it is given (``x0.size``, ``process_model.layout``).
 
 Any other name is a plugin (:mod:`.plugins`): one added by :func:`~.plugins.register_filter`
 or an installed package's entry point, or an import path ``package.module:Name``; its factory
@@ -47,8 +52,10 @@ from .base import KalmanFilterBase
 from .ekf import EKF
 from .models import MeasurementModel, ProcessModel
 from .sigma_filter import CKF, UKF
+from .state import state_layout
 
-__all__ = ["FILTER_NAMES", "filter_options", "filter_record", "filter_table", "make_filter"]
+__all__ = ["FILTER_NAMES", "MODEL_OPTIONS", "filter_options", "filter_record", "filter_table",
+           "make_filter"]
 
 _REGISTRY = {
     "ekf": (EKF, None),
@@ -82,6 +89,26 @@ _EQUATIONS = {
 FILTER_NAMES: tuple[str, ...] = tuple(_REGISTRY)
 
 _BASE_OPTIONS = ("dt", "psd_fallback", "q_scale", "r_scale")
+#: Options of every filter name that choose the models, not the filter (module notes):
+#: name -> (type text, default).
+MODEL_OPTIONS: dict[str, tuple[str, str]] = {"error_states": ("str", "none")}
+
+
+def _take_model_options(who: str, process_model, options: dict) -> dict:
+    """``options`` without :data:`MODEL_OPTIONS`, after checking them: a valid
+    ``error_states`` that agrees with ``process_model.layout`` where the model has one."""
+    if "error_states" not in options:
+        return options
+    try:
+        layout = state_layout(options["error_states"])
+    except FilterError as exc:
+        raise FilterError(f"{who}: {exc}") from None
+    have = getattr(process_model, "layout", None)
+    if have is not None and getattr(have, "error_states", None) != layout.error_states:
+        raise FilterError(f"{who}: error_states={layout.error_states} but the process model "
+                          f"has the layout of error_states={have.error_states}; build the "
+                          "models for the option (sdr_di.integration.filter_setup)")
+    return {k: v for k, v in options.items() if k not in MODEL_OPTIONS}
 _CORE_OPTIONS: dict[type, tuple[str, ...]] = {
     EKF: _BASE_OPTIONS, CKF: _BASE_OPTIONS, UKF: _BASE_OPTIONS + ("alpha", "beta", "kappa")}
 
@@ -94,7 +121,8 @@ def _rule_options(rule_cls) -> tuple[str, ...]:
 
 
 def filter_options(name: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
-    """Accepted ``(core options, rule options)`` of a registry name."""
+    """Accepted ``(core options, rule options)`` of a registry name (the model options,
+    :data:`MODEL_OPTIONS`, are accepted by every name besides these)."""
     core_cls, rule_cls = _lookup(name)
     return _CORE_OPTIONS[core_cls], _rule_options(rule_cls)
 
@@ -133,8 +161,9 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
         Measurement noise covariance; None when ``R`` is given to every update.
     **options
         Core options (``dt``, ``psd_fallback``, ``q_scale``, ``r_scale``; ``alpha``, ``beta``,
-        ``kappa`` for the UKF cores) and rule options (e.g. ``window``, ``d`` for
-        ``ff-aukf``).
+        ``kappa`` for the UKF cores), rule options (e.g. ``window``, ``d`` for
+        ``ff-aukf``) and ``error_states`` (checked against ``process_model.layout``, not
+        passed on: module notes).
 
     Returns
     -------
@@ -148,6 +177,9 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
         Unknown name (the message lists the valid names), unknown option, invalid input, a
         plugin that fails to import or lacks the interface.
     """
+    who = str(name).strip() if isinstance(name, str) and ":" in name else \
+        str(name).strip().lower()
+    options = _take_model_options(who, process_model, options)
     if isinstance(name, str) and name.strip().lower() not in _REGISTRY:
         return _make_plugin(name, process_model, measurement_model, x0, P0, Q0, R0, options)
     core_cls, rule_cls = _lookup(name)
@@ -157,7 +189,7 @@ def make_filter(name: str, process_model: ProcessModel, measurement_model: Measu
     unknown = sorted(set(options) - set(core_names) - set(rule_names))
     if unknown:
         raise FilterError(f"{key}: unknown option(s) {', '.join(unknown)}; accepted: "
-                          f"{', '.join(core_names + rule_names)}")
+                          f"{', '.join(core_names + rule_names + tuple(MODEL_OPTIONS))}")
     core_opts = {k: v for k, v in options.items() if k in core_names}
     rule_opts = {k: v for k, v in options.items() if k in rule_names}
     filt = core_cls(process_model, measurement_model, x0, P0, Q0, R0, name=key, **core_opts)

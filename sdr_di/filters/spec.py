@@ -26,6 +26,9 @@ signature): from its annotation, else from its default.
 =========  ===================================================================
 
 Options whose type text cannot express (tuples, arrays) are refused with the option named.
+``error_states`` (``none``, ``sf``, ``gm``, ``sf+gm``) is accepted by every name, plugins
+included: it chooses the error states the models carry (:mod:`sdr_di.filters.state`), and
+its value is checked here.
 ``dt`` is never an option: the receiver sets it (``--filter-rate``). A built-in entry is
 checked by building it on a 2-state model, so that a bad choice (``q_states=some``) is a
 :class:`~sdr_di.errors.FilterError` before any work.
@@ -223,6 +226,9 @@ def filter_option_info(name: str) -> tuple[list[OptionInfo], bool]:
     """
     from .registry import _CORE_OPTIONS, _REGISTRY
 
+    from .registry import MODEL_OPTIONS
+
+    model = [OptionInfo(k, t, d, "model") for k, (t, d) in MODEL_OPTIONS.items()]
     key = str(name).strip() if is_import_path(name) else str(name).strip().lower()
     if key in _REGISTRY:
         core_cls, rule_cls = _REGISTRY[key]
@@ -231,7 +237,7 @@ def filter_option_info(name: str) -> tuple[list[OptionInfo], bool]:
         if rule_cls is not None:
             rule, _ = _factory_params(rule_cls, skip_inputs=False)
             infos += [_info(p, "rule") for p in rule]
-        return infos, False
+        return infos + model, False
     factory = resolve_plugin(key)
     if factory is None:
         from .plugins import plugin_names
@@ -241,7 +247,7 @@ def filter_option_info(name: str) -> tuple[list[OptionInfo], bool]:
                           f"{', '.join(FILTER_NAMES + plugin_names())} or an import path "
                           "package.module:Name")
     ps, var_kw = _factory_params(factory)
-    return [_info(p, "plugin") for p in ps], var_kw
+    return [_info(p, "plugin") for p in ps if p.name not in MODEL_OPTIONS] + model, var_kw
 
 
 def _convert(where: str, key: str, raw: str, type_text: str):
@@ -328,6 +334,13 @@ def parse_filter_spec(text: str) -> FilterSpec:
             raise FilterError(f"{where}: unknown option {key!r}; accepted: "
                               f"{', '.join(by_name) or '(none)'}")
         options[key] = _convert(where, key, raw, info.type if info else "any")
+        if info is not None and info.target == "model":
+            from .state import state_layout
+
+            try:
+                options[key] = state_layout(options[key]).error_states
+            except FilterError as exc:
+                raise FilterError(f"{where}: {exc}") from None
     if not is_import_path(name) and name in _builtin():
         _try_build(where, name, options)
     return FilterSpec(name, options)

@@ -38,7 +38,18 @@ navigation state ``(L^, lambda^, h^, v^, C_b^n')`` and the true one ``= computed
   v_E/((R_N(L)+h) cos L)``, ``dh' = dv_U``; likewise ``dw_ie``, ``dw_en`` are exact
   differences of the rates at the computed and true states. The first-order expansion of these
   differences is eq 2 exactly.
-* sensor biases: random constants (eq 3), ``eps' = 0``, ``nabla' = 0``.
+* sensor biases: random constants (eq 3), ``eps' = 0``, ``nabla' = 0``; with
+  ``error_states=gm`` first-order Gauss-Markov, ``eps' = -eps / tau_g``,
+  ``nabla' = -nabla / tau_a`` (the assumed grade's correlation times).
+* scale factors (``error_states=sf``, states 17-22, :mod:`sdr_di.filters.state`): random
+  constants ``ds_g' = 0``, ``ds_a' = 0``. The INS compensates ``y^ = (y - b^) / (1 + s^)``
+  (:meth:`~sdr_di.ins.mechanization.StrapdownINS.compensate`), so with the truth
+  ``y = (1 + s) x + b`` the compensated measurement's error is, to first order,
+  ``y^ - x = diag(x) ds + db`` with ``ds = s - s^`` (measured minus true, as the biases):
+  the scale factors enter exactly where the biases do, through an effective bias
+  ``eps + diag(w^_ib_b) ds_g`` in the attitude line and ``nabla + diag(f^) ds_a`` in the
+  velocity line (``w^_ib_b``, ``f^`` the interval's compensated IMU averages). Linearized:
+  ``phi' += -C_b^n diag(w_ib_b) ds_g``, ``dv' += C_b^n diag(f_b) ds_a``.
 * clock (eq 4): ``db' = dd + w_b``, ``dd' = -dd / tau_clk + w_d``.
 
 Discretization (eq 5): improved Euler (Heun; paper 000 Remark 1) over the filter interval
@@ -57,7 +68,12 @@ Process noise (:func:`process_noise`, discrete, per interval ``h``), decisions d
 * position: 0;
 * gyro / accel bias: eq 3 models random constants; a small random walk reaching the 1-sigma
   bias spec in ``bias_time_s`` (default 3600 s) is added so the bias covariance does not
-  collapse: ``q = b_spec^2 h / bias_time_s``;
+  collapse: ``q = b_spec^2 h / bias_time_s``; with ``gm`` the exact discrete Gauss-Markov
+  noise ``q = sigma^2 (1 - exp(-2 h / tau))``, stationary ``sigma^2 = b_spec^2 + b_in^2``
+  (turn-on spec and in-run instability of the assumed grade: the bias a unit shows at any
+  time), so that with no measurement the bias covariance stays at the grade's level;
+* scale factors (``sf``): the bias rule, ``q = s_spec^2 h / bias_time_s`` (0 without
+  ``bias_time_s``: the truth's scale factors are constants);
 * clock (eq 4): oscillator of Allan-variance coefficients ``h0``, ``h_-2`` (default TCXO
   ``h0 = 2e-19``, ``h_-2 = 2e-20``; Brown and Hwang; an oscillator with flicker noise
   ``h_-1`` is mapped into these two by :meth:`ClockModel.from_oscillator`),
@@ -76,6 +92,7 @@ import numpy as np
 
 from ..constants import OMEGA_E
 from ..filters.models import ProcessModel, numerical_jacobian
+from ..filters.state import StateLayout
 from ..frames import radii_of_curvature, skew
 from ..oscillator import two_state_coefficients
 from .gravity import normal_gravity
@@ -86,7 +103,9 @@ __all__ = [
     "ClockModel",
     "InsErrorModel",
     "NavState",
+    "correct_ins",
     "dcm_to_rotvec",
+    "jacobian_steps",
     "linear_error_matrix",
     "process_noise",
     "rotvec_to_dcm",
@@ -101,6 +120,15 @@ _I3.setflags(write=False)
 #: Central-difference steps per state for the numerical Jacobian (state units).
 JACOBIAN_STEPS = np.array([1e-6] * 3 + [1e-4] * 3 + [1e-9, 1e-9, 1e-3] + [1e-7] * 3
                           + [1e-5] * 3 + [1e-2, 1e-3])
+#: Steps of the scale-factor states (gyro, accel) [-]: 100 ppm, the error of a MEMS unit.
+_SCALE_STEPS = np.full(6, 1e-4)
+
+_NONE = StateLayout()
+
+
+def jacobian_steps(layout: StateLayout = _NONE) -> np.ndarray:
+    """Central-difference steps of every state of ``layout`` (state units)."""
+    return np.r_[JACOBIAN_STEPS, _SCALE_STEPS] if layout.scale_factors else JACOBIAN_STEPS
 
 
 @dataclasses.dataclass
@@ -234,15 +262,24 @@ def _rates(lat, h, v):
 
 
 def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.ndarray,
-                     clock: ClockModel) -> np.ndarray:
-    """Continuous error dynamics ``xdot = fbar(x)`` (eq 2-4) for rows of ``X`` (p, 17).
+                     clock: ClockModel, layout: StateLayout = _NONE,
+                     bias_tau_s: tuple[float, float] = (3600.0, 3600.0)) -> np.ndarray:
+    """Continuous error dynamics ``xdot = fbar(x)`` (eq 2-4) for rows of ``X`` (p, n).
 
-    ``f_b`` is the compensated specific force [m/s^2] the INS integrates (``w_ib_b`` does not
-    enter: the attitude error equation only needs ``C_b^n'`` and the nav-frame rates).
+    ``f_b``, ``w_ib_b`` are the compensated specific force [m/s^2] and angular rate [rad/s]
+    the INS integrates (``w_ib_b`` enters only through the gyro scale factors: the attitude
+    error equation otherwise needs only ``C_b^n'`` and the nav-frame rates). ``layout``: the
+    states (:mod:`sdr_di.filters.state`); ``bias_tau_s``: the gyro and accelerometer
+    Gauss-Markov correlation times [s] when ``layout.gauss_markov``.
     """
     X = np.atleast_2d(X)
-    phi, dv, dp = X[:, 0:3], X[:, 3:6], X[:, 6:9]
-    eps, nab = X[:, 9:12], X[:, 12:15]
+    L = layout
+    phi, dv, dp = X[:, L.att], X[:, L.vel], X[:, L.pos]
+    eps, nab = X[:, L.gyro_bias], X[:, L.accel_bias]
+    if L.scale_factors:
+        # effective residual biases of the compensated IMU (module notes)
+        eps = eps + X[:, L.gyro_scale] * np.asarray(w_ib_b, float)
+        nab = nab + X[:, L.accel_scale] * np.asarray(f_b, float)
     Cb = nav.C_b_n
     lat_c, h_c = nav.llh[0], nav.llh[2]
     v_c = nav.v_n
@@ -282,14 +319,18 @@ def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.n
     out[:, 6] = -d_wen[:, 0]
     out[:, 7] = v_c[0] / (RNh_c * math.cos(lat_c)) - v_t[:, 0] / (RNh_t * cl_t)
     out[:, 8] = dv[:, 2]
-    # clock (eq 4)
-    out[:, 15] = X[:, 16]
-    out[:, 16] = -X[:, 16] / clock.tau_s
+    if L.gauss_markov:
+        out[:, L.gyro_bias] = -X[:, L.gyro_bias] / bias_tau_s[0]
+        out[:, L.accel_bias] = -X[:, L.accel_bias] / bias_tau_s[1]
+    # clock (eq 4); the scale factors are constants (zero rows)
+    out[:, L.clock_bias] = X[:, L.clock_drift]
+    out[:, L.clock_drift] = -X[:, L.clock_drift] / clock.tau_s
     return out
 
 
 class InsErrorModel(ProcessModel):
-    """Discrete nonlinear 17-state error model (eq 5) for one filter interval.
+    """Discrete nonlinear error model (eq 5) for one filter interval: 17 states, or the
+    layout of an ``error_states`` option.
 
     Call :meth:`set_interval` before each ``predict`` with the INS state at the start and the
     end of the interval and the IMU averages over it; then ``f(x, dt)`` is the improved-Euler
@@ -299,12 +340,27 @@ class InsErrorModel(ProcessModel):
     ----------
     clock : ClockModel, optional
         Clock model of eq 4 (default :class:`ClockModel`).
+    layout : StateLayout, optional
+        The states (:func:`~sdr_di.filters.state.state_layout`; default the 17 of paper
+        004). A filter, a plugin included, learns the layout from this attribute.
+    bias_tau_s : (float, float)
+        Gyro and accelerometer bias correlation times [s] (used with ``gm``).
+
+    Attributes
+    ----------
+    dim_x : int
+        ``layout.n``.
     """
 
     dim_x = N_STATES
 
-    def __init__(self, clock: ClockModel | None = None) -> None:
+    def __init__(self, clock: ClockModel | None = None, layout: StateLayout | None = None,
+                 bias_tau_s: tuple[float, float] = (3600.0, 3600.0)) -> None:
         self.clock = clock or ClockModel()
+        self.layout = layout if layout is not None else _NONE
+        self.dim_x = self.layout.n
+        self.bias_tau_s = (float(bias_tau_s[0]), float(bias_tau_s[1]))
+        self._steps = jacobian_steps(self.layout)
         self.nav0: NavState | None = None
         self.nav1: NavState | None = None
         self.f_b = np.zeros(3)
@@ -320,8 +376,9 @@ class InsErrorModel(ProcessModel):
         if self.nav0 is None:
             raise RuntimeError("InsErrorModel: call set_interval() before propagating")
         X = np.atleast_2d(np.asarray(X, float))
-        g0 = error_derivative(X, self.nav0, self.f_b, self.w_ib_b, self.clock)
-        g1 = error_derivative(X + dt * g0, self.nav1, self.f_b, self.w_ib_b, self.clock)
+        args = (self.f_b, self.w_ib_b, self.clock, self.layout, self.bias_tau_s)
+        g0 = error_derivative(X, self.nav0, *args)
+        g1 = error_derivative(X + dt * g0, self.nav1, *args)
         return X + 0.5 * dt * (g0 + g1)
 
     def f(self, x: np.ndarray, dt: float) -> np.ndarray:
@@ -339,23 +396,41 @@ class InsErrorModel(ProcessModel):
         batch of its own gives, bit for bit (tested)."""
         x = np.asarray(x, float)
         n = x.size
-        E = np.diag(JACOBIAN_STEPS)
+        steps = self._steps
+        E = np.diag(steps)
         Y = self.f_batch(np.vstack([x + E, x - E, x[None, :]]), dt)
-        return Y[2 * n], ((Y[:n] - Y[n:2 * n]) / (2.0 * JACOBIAN_STEPS[:, None])).T
+        return Y[2 * n], ((Y[:n] - Y[n:2 * n]) / (2.0 * steps[:, None])).T
 
     def F_numerical(self, x: np.ndarray, dt: float, scale: float = 1.0) -> np.ndarray:
         """Reference Jacobian with :func:`numerical_jacobian` (steps scaled by ``scale``)."""
-        return numerical_jacobian(lambda v: self.f(v, dt), x, step=JACOBIAN_STEPS * scale)
+        return numerical_jacobian(lambda v: self.f(v, dt), x, step=self._steps * scale)
 
 
-def linear_error_matrix(nav: NavState, f_b, clock: ClockModel | None = None) -> np.ndarray:
+def correct_ins(ins, x: np.ndarray, layout: StateLayout = _NONE) -> None:
+    """Closed-loop feedback of the INS part of an error state ``x`` (the clock is the
+    caller's): attitude, velocity, position, IMU biases and, with ``sf``, scale factors
+    (:meth:`~sdr_di.ins.mechanization.StrapdownINS.correct`)."""
+    L = layout
+    if L.scale_factors:
+        ins.correct(x[L.att], x[L.vel], x[L.pos], x[L.gyro_bias], x[L.accel_bias],
+                    d_gyro_scale=x[L.gyro_scale], d_accel_scale=x[L.accel_scale])
+    else:
+        ins.correct(x[L.att], x[L.vel], x[L.pos], x[L.gyro_bias], x[L.accel_bias])
+
+
+def linear_error_matrix(nav: NavState, f_b, clock: ClockModel | None = None,
+                        layout: StateLayout = _NONE, w_ib_b=None,
+                        bias_tau_s: tuple[float, float] = (3600.0, 3600.0)) -> np.ndarray:
     """Analytic small-error Jacobian ``d fbar / d x`` at ``x = 0`` (classical psi model).
 
     ``phi' = -w_in x phi + dw_in(dv, dp) - C eps``,
     ``dv' = (C f) x phi + C nabla + v x (2 dw_ie + dw_en) - (2 w_ie + w_en) x dv + dg``,
-    position rows of eq 2; ``dg = 2 g / R * dh`` (Up; R = sqrt(R_M R_N)).
+    position rows of eq 2; ``dg = 2 g / R * dh`` (Up; R = sqrt(R_M R_N)). With the
+    ``layout``'s scale factors ``phi' += -C diag(w_ib_b) ds_g``, ``dv' += C diag(f_b) ds_a``;
+    with Gauss-Markov biases ``eps' = -eps / tau_g``, ``nabla' = -nabla / tau_a``.
     """
     clock = clock or ClockModel()
+    L = layout
     lat, h = float(nav.llh[0]), float(nav.llh[2])
     vE, vN, _ = nav.v_n
     C = nav.C_b_n
@@ -372,7 +447,7 @@ def linear_error_matrix(nav: NavState, f_b, clock: ClockModel | None = None) -> 
     Men_v = np.array([[0, -1 / RMh, 0], [1 / RNh, 0, 0], [tl / RNh, 0, 0]])
     Men_p = np.array([[0, 0, vN / RMh**2], [0, 0, -vE / RNh**2],
                       [vE / (cl * cl * RNh), 0, -vE * tl / RNh**2]])
-    F = np.zeros((N_STATES, N_STATES))
+    F = np.zeros((L.n, L.n))
     F[0:3, 0:3] = -skew(w_ie + w_en)
     F[0:3, 3:6] = Men_v
     F[0:3, 6:9] = Mie_p + Men_p
@@ -393,14 +468,24 @@ def linear_error_matrix(nav: NavState, f_b, clock: ClockModel | None = None) -> 
     F[8, 5] = 1.0
     F[15, 16] = 1.0
     F[16, 16] = -1.0 / clock.tau_s
+    if L.scale_factors:
+        w = np.zeros(3) if w_ib_b is None else np.asarray(w_ib_b, float)
+        F[L.att, L.gyro_scale] = -C * w            # -C diag(w): column j scaled by w_j
+        F[L.vel, L.accel_scale] = C * np.asarray(f_b, float)
+    if L.gauss_markov:
+        F[L.gyro_bias, L.gyro_bias] = -np.eye(3) / bias_tau_s[0]
+        F[L.accel_bias, L.accel_bias] = -np.eye(3) / bias_tau_s[1]
     return F
 
 
 def process_noise(dt: float, *, gyro_random_walk_si: float, accel_random_walk_si: float,
                   gyro_bias_si: float = 0.0, accel_bias_si: float = 0.0,
                   bias_time_s: float | None = 3600.0, clock: ClockModel | None = None,
-                  with_clock: bool = True) -> np.ndarray:
-    """Discrete process-noise covariance (17, 17) over ``dt`` [s] (module docstring).
+                  with_clock: bool = True, layout: StateLayout = _NONE,
+                  gyro_scale: float = 0.0, accel_scale: float = 0.0,
+                  bias_tau_s: tuple[float, float] = (3600.0, 3600.0),
+                  bias_instability_si: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """Discrete process-noise covariance (n, n) over ``dt`` [s] (module docstring).
 
     Parameters
     ----------
@@ -416,13 +501,32 @@ def process_noise(dt: float, *, gyro_random_walk_si: float, accel_random_walk_si
     with_clock : bool
         False leaves the clock block at a tiny value (loosely coupled runs have no clock
         measurement; keeps ``Q`` positive semi-definite and ``P`` bounded).
+    layout : StateLayout
+        The states (default the 17 of paper 004).
+    gyro_scale, accel_scale : float
+        1-sigma scale-factor specs [-] (``sf``: their random walk).
+    bias_tau_s : (float, float)
+        Gyro, accelerometer bias correlation times [s] (``gm``).
+    bias_instability_si : (float, float)
+        Gyro [rad/s], accelerometer [m/s^2] in-run bias instability (``gm``: added to the
+        turn-on spec in the stationary variance).
     """
-    q = np.zeros(N_STATES)
+    L = layout
+    q = np.zeros(L.n)
     q[0:3] = gyro_random_walk_si**2 * dt
     q[3:6] = accel_random_walk_si**2 * dt
-    if bias_time_s:
+    if L.gauss_markov:
+        for blk, b_on, b_in, tau in ((L.gyro_bias, gyro_bias_si, bias_instability_si[0],
+                                      bias_tau_s[0]),
+                                     (L.accel_bias, accel_bias_si, bias_instability_si[1],
+                                      bias_tau_s[1])):
+            q[blk] = (b_on**2 + b_in**2) * -math.expm1(-2.0 * dt / tau)
+    elif bias_time_s:
         q[9:12] = gyro_bias_si**2 * dt / bias_time_s
         q[12:15] = accel_bias_si**2 * dt / bias_time_s
+    if L.scale_factors and bias_time_s:
+        q[L.gyro_scale] = gyro_scale**2 * dt / bias_time_s
+        q[L.accel_scale] = accel_scale**2 * dt / bias_time_s
     Q = np.diag(q)
     clock = clock or ClockModel()
     Q[15:17, 15:17] = clock.Q(dt) if with_clock else np.diag([1e-6, 1e-8]) * dt

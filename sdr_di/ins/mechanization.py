@@ -12,7 +12,11 @@ IMU input
 [rad/s] over the interval ``(t_{k-1}, t_k]`` of length ``dt`` [s] (the convention of
 :mod:`sdr_di.sim.trajectory` and of an integrating IMU), i.e. the increments
 ``dv_k = f_b dt``, ``dtheta_k = w_ib_b dt``. Estimated sensor biases ``gyro_bias`` [rad/s]
-and ``accel_bias`` [m/s^2] held by the object are subtracted first.
+and ``accel_bias`` [m/s^2] held by the object are subtracted first, and, once a filter with
+scale-factor states has fed back (:meth:`StrapdownINS.correct`), the estimated scale-factor
+errors ``gyro_scale``, ``accel_scale`` [-] divided out: ``y^ = (y - b^) / (1 + s^)``
+(:meth:`StrapdownINS.compensate`; the IMU model ``y = (1 + s) x + b`` of
+:mod:`sdr_di.ins.imu`).
 
 Algorithm (one update per IMU sample; Savage, *Strapdown Analytics*; Yan Gongmin's PSINS)
 -----------------------------------------------------------------------------------------
@@ -124,6 +128,9 @@ class StrapdownINS:
     gyro_bias, accel_bias : (3,) arrays
         Sensor bias estimates [rad/s], [m/s^2] subtracted from every sample (start at zero;
         updated by :meth:`correct`).
+    gyro_scale, accel_scale : (3,) arrays
+        Scale-factor error estimates [-] divided out of every sample after the bias (start
+        at zero; updated by :meth:`correct`).
     """
 
     def __init__(self, llh, v_n, att=None, C_b_n=None, t: float = 0.0):
@@ -137,6 +144,9 @@ class StrapdownINS:
         self.t = float(t)
         self.gyro_bias = np.zeros(3)
         self.accel_bias = np.zeros(3)
+        self.gyro_scale = np.zeros(3)
+        self.accel_scale = np.zeros(3)
+        self._scaled = False    # no scale factor fed back yet: the bias-only arithmetic
         self._dth_prev: np.ndarray | None = None
         self._dv_prev: np.ndarray | None = None
         self._v_prev: np.ndarray | None = None  # state one step back, for extrapolation
@@ -159,8 +169,25 @@ class StrapdownINS:
 
         Parameters as :meth:`step`; biases are compensated the same way.
         """
-        self._dth_prev = (np.asarray(w_ib_b, float) - self.gyro_bias) * dt
-        self._dv_prev = (np.asarray(f_b, float) - self.accel_bias) * dt
+        f, w = self.compensate(f_b, w_ib_b)
+        self._dth_prev = w * dt
+        self._dv_prev = f * dt
+
+    def compensate(self, f_b, w_ib_b) -> tuple[np.ndarray, np.ndarray]:
+        """Specific force [m/s^2] and angular rate [rad/s] corrected with the estimates held:
+        ``(y - b^) / (1 + s^)`` (just ``y - b^`` before any scale factor is fed back).
+
+        Parameters
+        ----------
+        f_b, w_ib_b : array_like (3,)
+            Measured specific force and angular rate, body axes.
+        """
+        f = np.asarray(f_b, float) - self.accel_bias
+        w = np.asarray(w_ib_b, float) - self.gyro_bias
+        if self._scaled:
+            f = f / (1.0 + self.accel_scale)
+            w = w / (1.0 + self.gyro_scale)
+        return f, w
 
     # --- propagation ---------------------------------------------------------------------
     def step(self, f_b, w_ib_b, dt: float) -> None:
@@ -178,8 +205,12 @@ class StrapdownINS:
         # Components as Python floats (the same IEEE operations as on numpy scalars, at a
         # fraction of the cost per operation); the matrix-vector and dot products stay numpy
         # calls so their (BLAS) summation is unchanged.
-        dth = (np.asarray(w_ib_b, float) - self.gyro_bias) * dt
-        dv = (np.asarray(f_b, float) - self.accel_bias) * dt
+        if self._scaled:
+            f, w = self.compensate(f_b, w_ib_b)
+            dth, dv = w * dt, f * dt
+        else:
+            dth = (np.asarray(w_ib_b, float) - self.gyro_bias) * dt
+            dv = (np.asarray(f_b, float) - self.accel_bias) * dt
         dth_p = dth if self._dth_prev is None else self._dth_prev
         dv_p = dv if self._dv_prev is None else self._dv_prev
         a0, a1, a2_ = dth.tolist()
@@ -259,7 +290,8 @@ class StrapdownINS:
         self.t += dt
 
     # --- closed-loop feedback ------------------------------------------------------------
-    def correct(self, d_att, d_v_n, d_llh, d_gyro_bias=None, d_accel_bias=None) -> None:
+    def correct(self, d_att, d_v_n, d_llh, d_gyro_bias=None, d_accel_bias=None, *,
+                d_gyro_scale=None, d_accel_scale=None) -> None:
         """Remove estimated errors from the state (closed-loop feedback).
 
         Parameters
@@ -275,6 +307,9 @@ class StrapdownINS:
         d_gyro_bias, d_accel_bias : array_like (3,), optional
             Residual sensor bias estimates [rad/s], [m/s^2] (measured - true), *added* to the
             bias compensation ``gyro_bias`` / ``accel_bias``.
+        d_gyro_scale, d_accel_scale : array_like (3,), optional
+            Residual scale-factor error estimates [-] (compensated minus true, to first
+            order: ``s - s^``), *added* to ``gyro_scale`` / ``accel_scale``.
         """
         d_att = np.asarray(d_att, float).reshape(3)
         d_v = np.asarray(d_v_n, float).reshape(3)
@@ -290,6 +325,12 @@ class StrapdownINS:
             self.gyro_bias = self.gyro_bias + np.asarray(d_gyro_bias, float).reshape(3)
         if d_accel_bias is not None:
             self.accel_bias = self.accel_bias + np.asarray(d_accel_bias, float).reshape(3)
+        if d_gyro_scale is not None:
+            self.gyro_scale = self.gyro_scale + np.asarray(d_gyro_scale, float).reshape(3)
+            self._scaled = True
+        if d_accel_scale is not None:
+            self.accel_scale = self.accel_scale + np.asarray(d_accel_scale, float).reshape(3)
+            self._scaled = True
 
 
 @dataclasses.dataclass

@@ -9,6 +9,9 @@ consumer's own default (``IntegrationConfig`` for ``run``, ``[lc]``/``LcSettings
                            # below override
     accel_bias_mg, gyro_bias_deg_h, accel_random_walk_mps_sqrth, gyro_random_walk_deg_sqrth
     bias_time_s = 3600     # time for the bias random walk to reach the spec
+    accel_scale_factor_ppm, gyro_scale_factor_ppm       # P0 of the scale-factor states
+    accel_bias_instability_mg, gyro_bias_instability_deg_h, accel_bias_tau_s,
+    gyro_bias_tau_s        # the Gauss-Markov biases (error_states=gm)
 
     [oscillator]           # filter Q of the clock states (sdr_di.oscillator)
     preset = "tcxo"        # ideal, tcxo, ocxo; h0, h_1 (h_-1), h_2 (h_-2) override
@@ -28,10 +31,11 @@ consumer's own default (``IntegrationConfig`` for ``run``, ``[lc]``/``LcSettings
 
 Which keys change the filter's ``Q``: ``[imu]`` (random walks; bias specs with
 ``bias_time_s``) and ``[oscillator]``. ``P0``: ``[initial_covariance]``, and ``[imu]`` bias
-specs. ``R``: ``[measurement_noise]``. The 17-state filter has no scale-factor states, so a
-scale-factor assumption could change nothing: ``accel_scale_factor_ppm`` and
-``gyro_scale_factor_ppm`` are refused (an ``[imu]`` grade's scale factors are not used).
-An oscillator's g-sensitivity is truth only (no filter state): refused here too.
+specs. ``R``: ``[measurement_noise]``. The scale factors reach ``P0`` (and the small
+``Q``) of the scale-factor states, and the in-run instabilities and correlation times the
+Gauss-Markov biases, only with the filter option ``error_states`` (``sf``, ``gm``;
+docs/filters.md); the 17-state filter does not use them. Misalignment and gyro
+g-sensitivity have no filter state: refused, as is an oscillator's g-sensitivity.
 
 Precedence (lowest to highest): the consumer's defaults; ``[lc]`` keys (lc only); the
 scenario's ``[assume]`` table (lc and the experiments); ``--assume FILE`` (replaces the
@@ -79,7 +83,9 @@ __all__ = [
 #: Tables of an assumptions file and their keys.
 ASSUME_TABLES: dict[str, tuple[str, ...]] = {
     "imu": ("grade", "accel_bias_mg", "gyro_bias_deg_h", "accel_random_walk_mps_sqrth",
-            "gyro_random_walk_deg_sqrth", "bias_time_s"),
+            "gyro_random_walk_deg_sqrth", "bias_time_s", "accel_scale_factor_ppm",
+            "gyro_scale_factor_ppm", "accel_bias_instability_mg",
+            "gyro_bias_instability_deg_h", "accel_bias_tau_s", "gyro_bias_tau_s"),
     "oscillator": ("preset", "h0", "h_1", "h_2"),
     "measurement_noise": ("policy", "sigma_range_m", "sigma_rate_mps", "sigma_pos_h_m",
                           "sigma_pos_v_m", "sigma_vel_mps"),
@@ -87,17 +93,12 @@ ASSUME_TABLES: dict[str, tuple[str, ...]] = {
     "initial_errors": ("att_deg", "vel_mps", "pos_m"),
 }
 _WHY_REFUSED = {
-    "accel_scale_factor_ppm": "the 17-state filter has no scale-factor states, so a scale-"
-                              "factor assumption changes nothing",
-    "gyro_scale_factor_ppm": "the 17-state filter has no scale-factor states, so a scale-"
-                             "factor assumption changes nothing",
     "g_sensitivity_per_g": "the filter has no g-sensitivity state (truth only: the scenario's "
                            "[oscillator])",
-    **{key: "the 17-state filter has no state for it (truth only: the scenario's [imu]; "
-            "the filter takes the grade's turn-on biases and random walks)"
-       for key in ("accel_bias_instability_mg", "gyro_bias_instability_deg_h",
-                   "accel_bias_tau_s", "gyro_bias_tau_s", "accel_misalignment_mrad",
-                   "gyro_misalignment_mrad", "gyro_g_sensitivity_deg_h_per_g")},
+    **{key: "the filter has no state for it, with any error_states (truth only: the "
+            "scenario's [imu])"
+       for key in ("accel_misalignment_mrad", "gyro_misalignment_mrad",
+                   "gyro_g_sensitivity_deg_h_per_g")},
 }
 
 
@@ -110,7 +111,8 @@ class Assumptions:
     source : str
         Where it came from (file name, or ``"<scenario> [assume]"``).
     imu : ImuErrorModel or None
-        IMU spec for ``Q`` and ``P0`` (scale factors unused).
+        IMU spec for ``Q`` and ``P0`` (scale factors, instabilities and correlation times
+        used with the filter option ``error_states`` only).
     bias_time_s : float or None
     oscillator : OscillatorSpec or None
     noise_policy : str or None
@@ -205,9 +207,14 @@ def parse_assumptions(raw: Mapping[str, Any], source: str = "assumptions") -> As
         # the grade's 1-sigma values (ImuErrorModel fields) with the file's terms over them
         fields = {"accel_bias_mg": "accel_bias_mg", "gyro_bias_deg_h": "gyro_bias_deg_h",
                   "accel_random_walk_mps_sqrth": "accel_random_walk",
-                  "gyro_random_walk_deg_sqrth": "gyro_random_walk"}
+                  "gyro_random_walk_deg_sqrth": "gyro_random_walk",
+                  **{k: k for k in ("accel_scale_factor_ppm", "gyro_scale_factor_ppm",
+                                    "accel_bias_instability_mg",
+                                    "gyro_bias_instability_deg_h")}}
         vals: dict[str, Any] = {field: _num(t[key], f"{w}.{key}")
                                 for key, field in fields.items() if key in t}
+        vals.update({key: _num(t[key], f"{w}.{key}", open_=True)
+                     for key in ("accel_bias_tau_s", "gyro_bias_tau_s") if key in t})
         kw["imu"] = dataclasses.replace(IMU_GRADES[grade], **vals)
         if "bias_time_s" in t:
             kw["bias_time_s"] = _num(t["bias_time_s"], f"{w}.bias_time_s", open_=True)

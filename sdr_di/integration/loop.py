@@ -46,8 +46,10 @@ dispatch), and its part took 5.9 ms per interval against about 3.3 ms of kernel 
 
 State layout (paper 004 Table 1): attitude error 0-2, velocity error 3-5, position error
 (lat, lon, h) 6-8, gyro bias 9-11, accelerometer bias 12-14, clock bias 15 [m], clock drift
-16 [m/s]. The clock is carried here as ``clock_bias_m`` / ``clock_drift_mps`` (receiver
-clock minus BDT, times c) beside the INS.
+16 [m/s]; with ``error_states=sf`` gyro and accelerometer scale factors 17-22, fed back into
+the INS's IMU compensation as the biases are (the layout is ``process.layout``,
+:mod:`sdr_di.filters.state`). The clock is carried here as ``clock_bias_m`` /
+``clock_drift_mps`` (receiver clock minus BDT, times c) beside the INS.
 """
 
 from __future__ import annotations
@@ -63,7 +65,8 @@ import numpy as np
 
 from ..constants import C_LIGHT
 from ..coupling.interval import Interval, MeasurementSource, Measurements
-from ..ins.error_model import NavState
+from ..filters.state import StateLayout
+from ..ins.error_model import NavState, correct_ins
 from .consistency import block_nis, enu_blocks, formal_sd, nees_per_dof
 from .metrics import nav_errors
 
@@ -129,9 +132,10 @@ class IntegrationLoop:
     clock_bias_m, clock_drift_mps : float
         Receiver clock at ``i_start`` [m, m/s].
     kf : filter
-        Integration filter (:func:`~sdr_di.filters.make_filter`, 17 states).
+        Integration filter (:func:`~sdr_di.filters.make_filter`, 17 states or the layout of
+        ``process``).
     process : InsErrorModel
-        Its process model.
+        Its process model (``layout``: the states fed back).
     set_geometry : callable
         ``set_geometry(*Measurements.geometry)`` sets the filter's measurement model for an
         update, after the predict (deep and tight:
@@ -162,6 +166,7 @@ class IntegrationLoop:
         self.ins = ins
         self.clock_bias_m, self.clock_drift_mps = clock_bias_m, clock_drift_mps
         self.kf, self.process, self.set_geometry = kf, process, set_geometry
+        self.layout: StateLayout = getattr(process, "layout", None) or StateLayout()
         self.sow_of_sample = sow_of_sample
         self.output_every = output_every
         self.truth = truth if (truth is not None and len(truth.t) == len(imu.t)
@@ -210,7 +215,7 @@ class IntegrationLoop:
         self.propagate_ins(iv)
         if not source.launch(self, iv):
             return
-        source.feed_back_ahead(self, iv, np.zeros(17))   # nothing fed back before the first
+        source.feed_back_ahead(self, iv, np.zeros(self.layout.n))  # nothing fed back yet
         while True:
             self.i0, self.k0 = iv.i1, iv.k1
             nxt = None if self.stop_requested else self.next_interval()
@@ -242,9 +247,9 @@ class IntegrationLoop:
         at = None
         if at_k1 is not None:
             ins, bias, drift = at_k1
-            x = self.kf.x
-            ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
-            at = (ins, bias - x[15], drift - x[16])
+            x, L = self.kf.x, self.layout
+            correct_ins(ins, x, L)
+            at = (ins, bias - x[L.clock_bias], drift - x[L.clock_drift])
         self.write_row(iv, m, source, at=at)
         if nxt is None:
             return
@@ -276,8 +281,7 @@ class IntegrationLoop:
         iv.nav0 = NavState.from_ins(ins)
         f_b = imu.f_b[i0 + 1:i1 + 1]
         w_ib_b = imu.w_ib_b[i0 + 1:i1 + 1]
-        iv.f_mean = f_b.mean(axis=0) - ins.accel_bias
-        iv.w_mean = w_ib_b.mean(axis=0) - ins.gyro_bias
+        iv.f_mean, iv.w_mean = ins.compensate(f_b.mean(axis=0), w_ib_b.mean(axis=0))
         for m in range(self.n_per):
             ins.step(f_b[m], w_ib_b[m], float(imu.t[i0 + m + 1] - imu.t[i0 + m]))
         iv.nav1 = NavState.from_ins(ins)
@@ -321,14 +325,14 @@ class IntegrationLoop:
         (attitude, velocity, position, IMU biases) and the clock, then the source's own
         share (``share(loop, iv, x)``, default ``source.feed_back``; :meth:`run_ahead`: the
         predicted error with ``source.feed_back_ahead``); ``x`` reset to zero. Returns the
-        ``x`` fed back (17,)."""
+        ``x`` fed back (n,)."""
         ta = time.perf_counter()
-        x = self.kf.x.copy()
-        self.ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
-        self.clock_bias_m = iv.clock_bias_m - x[15]
-        self.clock_drift_mps = self.clock_drift_mps - x[16]
+        x, L = self.kf.x.copy(), self.layout
+        correct_ins(self.ins, x, L)
+        self.clock_bias_m = iv.clock_bias_m - x[L.clock_bias]
+        self.clock_drift_mps = self.clock_drift_mps - x[L.clock_drift]
         (source.feed_back if share is None else share)(self, iv, x)
-        self.kf.x = np.zeros(17)
+        self.kf.x = np.zeros(x.size)
         self.profile["ins"] += time.perf_counter() - ta
         return x
 

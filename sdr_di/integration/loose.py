@@ -7,7 +7,9 @@ Data flow of :func:`run_loose`::
     the interval with the INS state at its ends and the compensated IMU average)
     GNSS position/velocity = truth + noise (:class:`~.noise.GnssNoise`, scheduled variance)
     --> z = INS - GNSS (eq 13) --> filter update with the filter's R --> feedback:
-    ``ins.correct(phi, dv, dp, eps, nabla)`` and the 15 navigation/IMU error states reset to 0.
+    ``ins.correct(phi, dv, dp, eps, nabla)`` (and the scale factors with
+    ``error_states=sf``) and every navigation/IMU error state reset to 0 (the clock states,
+    unobserved, are kept).
 
 Decisions
 ---------
@@ -56,11 +58,13 @@ import numpy as np
 from ..errors import ImuDataError, ScenarioError
 from ..filters import filter_record, make_filter
 from ..frames import radii_of_curvature
-from ..ins.error_model import InsErrorModel, NavState, process_noise, rotvec_to_dcm
+from ..filters.state import layout_of_options
+from ..ins.error_model import NavState, correct_ins, process_noise, rotvec_to_dcm
 from ..ins.imu import ImuErrorModel
 from ..ins.mechanization import StrapdownINS
 from ..scenario.schema import Scenario, parse_scenario
 from ..coupling.measurements import LooseMeasurementModel, loose_measurement
+from .filter_setup import error_state_model
 from .consistency import (SD_COLUMNS, block_nis, consistency_summary, enu_blocks, formal_sd,
                           nees_per_dof)
 from .metrics import nav_errors, summarize
@@ -215,7 +219,7 @@ class LcResult:
     pos_err : (n, 3) position error [m] (E, N, U)
     r_diag : (n, 6) the filter's R used at each update (after adaptation)
     r_true : (n, 6) the true noise variances
-    q_diag : (n, 17) the filter's Q used in each predict
+    q_diag : (n, n_states) the filter's Q used in each predict
     nis : (n,) normalized innovation squared
     filter_name : str
     sd : (n, 9) formal 1-sigma after the feedback, ENU: position [m], velocity [m/s],
@@ -230,6 +234,13 @@ class LcResult:
     filter_used : dict or None
         The built filter's record (:func:`~sdr_di.filters.filter_record`), the summary's
         ``assumptions.filter``.
+    imu_estimate : dict
+        The INS's IMU compensation at the end (``gyro_bias`` [rad/s], ``accel_bias``
+        [m/s^2], ``gyro_scale``, ``accel_scale`` [-], each (3,)): the filter's estimates of
+        the unit's errors, after the last feedback.
+    P_last : (n_states, n_states) ndarray or None
+        The filter's covariance after the last feedback (its 1-sigma of those estimates:
+        ``sqrt`` of the diagonal at the layout's indices).
     """
 
     t: np.ndarray
@@ -247,6 +258,8 @@ class LcResult:
     sd: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 9)))
     nees: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
     nis_blocks: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
+    imu_estimate: dict = dataclasses.field(default_factory=dict)
+    P_last: np.ndarray | None = None
 
     def metrics(self, t0: float | None = None, t1: float | None = None) -> dict:
         """RMSE / max of attitude [deg], velocity [m/s], position [m] (``t0 <= t <= t1``)."""
@@ -355,12 +368,16 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     # ---- filter
     gyro_rw, accel_rw = imu_model.gyro_random_walk_si, imu_model.accel_random_walk_si
     gb, ab = imu_model.gyro_bias_si, imu_model.accel_bias_si
+    options = {**s.options_by_filter.get(s.filter.strip().lower(), {}), **s.filter_options}
+    layout = layout_of_options(options)
+    process, q_terms, p0_extra = error_state_model(imu_model, layout)
     Q_model = process_noise(dt_f, gyro_random_walk_si=gyro_rw, accel_random_walk_si=accel_rw,
                             gyro_bias_si=gb, accel_bias_si=ab,
                             bias_time_s=s.bias_time_s if s.bias_noise else None,
-                            with_clock=False)
+                            with_clock=False, **q_terms)
     # keep Q positive definite on the IMU states even for a perfect IMU
-    floor = np.r_[[1e-14] * 3, [1e-10] * 3, [0.0] * 3, [1e-20] * 3, [1e-16] * 3, 0.0, 0.0]
+    floor = np.r_[[1e-14] * 3, [1e-10] * 3, [0.0] * 3, [1e-20] * 3, [1e-16] * 3, 0.0, 0.0,
+                  [0.0] * (layout.n - 17)]
     Q0 = s.q_scale * (Q_model + np.diag(floor))
     if s.assumed_r_sigmas is None:
         R0 = s.r_scale * s.noise.nominal_diag()
@@ -382,12 +399,10 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     sv = _sig(s.p0_sigma_vel_mps, s.init_vel_err_mps, 0.1)
     sp = _sig(s.p0_sigma_pos_m, s.init_pos_err_m, 1.0)
     p0 = np.r_[sa**2, sv**2, (sp[1] / (R_M + h0))**2, (sp[0] / ((R_N + h0) * math.cos(lat0)))**2,
-               sp[2]**2, [max(gb, 1e-7)**2] * 3, [max(ab, 1e-5)**2] * 3, 1.0, 0.01]
-    process = InsErrorModel()
-    meas = LooseMeasurementModel(truth.llh[0])
-    options = {**s.options_by_filter.get(s.filter.strip().lower(), {}), **s.filter_options}
-    kf = make_filter(s.filter, process, meas, np.zeros(17), np.diag(p0), Q0, R0, dt=dt_f,
-                     **options)
+               sp[2]**2, [max(gb, 1e-7)**2] * 3, [max(ab, 1e-5)**2] * 3, 1.0, 0.01, p0_extra]
+    meas = LooseMeasurementModel(truth.llh[0], n_states=layout.n)
+    kf = make_filter(s.filter, process, meas, np.zeros(layout.n), np.diag(p0), Q0, R0,
+                     dt=dt_f, **options)
     used = filter_record(kf, s.filter, options)
 
     # ---- INS
@@ -404,8 +419,7 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
         nav0 = NavState.from_ins(ins)
         fs = imu.f_b[k + 1:k + n_per + 1]
         ws = imu.w_ib_b[k + 1:k + n_per + 1]
-        f_mean = fs.mean(axis=0) - ins.accel_bias
-        w_mean = ws.mean(axis=0) - ins.gyro_bias
+        f_mean, w_mean = ins.compensate(fs.mean(axis=0), ws.mean(axis=0))
         for j in range(n_per):
             ins.step(fs[j], ws[j], float(imu.t[k + j + 1] - imu.t[k + j]))
         k += n_per
@@ -418,8 +432,10 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
         kf.update(z)
         assert kf.R_used is not None      # set by every update
         x = kf.x.copy()
-        ins.correct(x[0:3], x[3:6], x[6:9], x[9:12], x[12:15])
-        x[:15] = 0.0
+        correct_ins(ins, x, layout)
+        x_clock = x[layout.clock]
+        x = np.zeros_like(x)
+        x[layout.clock] = x_clock          # unobserved, never fed back
         kf.x = x
         a, v, p = nav_errors(ins.llh, ins.v_n, ins.C_b_n, truth.llh[k], truth.v_n[k],
                              truth.C_b_n[k])
@@ -439,12 +455,15 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
     return LcResult(t=np.array(rows_t), att_err=np.array(A).reshape(-1, 3),
                     vel_err=np.array(V).reshape(-1, 3), pos_err=np.array(P).reshape(-1, 3),
                     r_diag=np.array(RD).reshape(-1, 6), r_true=np.array(RT).reshape(-1, 6),
-                    q_diag=np.array(QD).reshape(-1, 17), nis=np.array(NIS),
+                    q_diag=np.array(QD).reshape(-1, layout.n), nis=np.array(NIS),
                     filter_name=kf.name, elapsed_s=time.perf_counter() - t_start,
                     adaptation_time_s=(kf.rule.adaptation_time_s if kf.rule is not None
                                        else math.nan), filter_used=used,
                     sd=np.array(SD).reshape(-1, 9), nees=np.array(NEES).reshape(-1, 3),
-                    nis_blocks=np.array(NISB).reshape(-1, 2))
+                    nis_blocks=np.array(NISB).reshape(-1, 2),
+                    imu_estimate={k: getattr(ins, k).copy() for k in (
+                        "gyro_bias", "accel_bias", "gyro_scale", "accel_scale")},
+                    P_last=kf.P.copy())
 
 
 def lc_summary(sc: Scenario, settings: LcSettings, filter_imu: ImuErrorModel, assumed,

@@ -151,6 +151,7 @@ from ..receiver.scalar import ScalarReceiver
 from ..receiver.tracking import ChannelState
 from .alignment import align_ins
 from ..coupling.config import MODES, SCALAR_EPOCH_S, IntegrationConfig, imu_samples_per_interval
+from ..filters.state import layout_of_options
 from .filter_setup import check_filter, make_integration_filter
 from .handover import (Handover, HandoverError, handover_channels, handover_span_s,
                        offer_subframe_klobuchar)
@@ -666,7 +667,9 @@ class IntegratedReceiver:
         clk_b = float(sol.clock_bias_m) + float(sol.clock_drift_mps) * (t_if[i_h] - k_h / fs)
         clk_d = float(sol.clock_drift_mps)
         loose = cfg.mode == "loose"
-        model = LooseMeasurementModel() if loose else RangeRateMeasurementModel()
+        n_states = layout_of_options(cfg.filter_options).n
+        model = LooseMeasurementModel(n_states=n_states) if loose else \
+            RangeRateMeasurementModel(n_states=n_states)
         kf, process, meas = make_integration_filter(cfg, T, sol, llh_fix, att_sig, model)
         # the summary's record of what the filter uses, read from the built filter
         self.filter_used = filter_record(kf, cfg.filter, cfg.filter_options)
