@@ -1,9 +1,9 @@
 """One scalar tracking channel: NCOs, loops, lock detection, NH/bit/frame sync, decoding.
 
 A :class:`Channel` does not read samples. Its driver (:class:`~sdr_di.receiver.scalar.
-ScalarReceiver`) takes the next *block* of correlation intervals (:attr:`Channel.block`: one
-row of kernel parameters per code epoch; one epoch before bit synchronization, then the
-epochs of one coherent interval), correlates all channels' blocks in one kernel call and
+ScalarReceiver`) takes the next *block* of correlation intervals (:attr:`Channel.block_rows`:
+one row of kernel parameters per code epoch and one per its noise correlator; one epoch
+before bit synchronization, then the epochs of one coherent interval), correlates all channels' blocks in one kernel call and
 hands each channel its per-epoch early/prompt/late sums (:meth:`Channel.process_block`).
 The channel then
 
@@ -411,13 +411,14 @@ class Channel:
 
     # -- per-epoch processing ---------------------------------------------------------------
     def process_block(self, outs, noise: np.ndarray | None = None) -> None:
-        """Consume the E/P/L correlations of every epoch of :attr:`block` and plan the next.
+        """Consume the E/P/L correlations of every epoch of :attr:`block_rows` and plan the
+        next.
 
         Parameters
         ----------
-        outs : sequence
-            One ``(E, P, L)`` (complex) per row of :attr:`block`, or one per epoch (no
-            noise-correlator values).
+        outs : numpy.ndarray or sequence
+            One ``(E, P, L)`` (complex; complex128 rows from the scalar bank) per row of
+            :attr:`block_rows`, or one per epoch (no noise-correlator values).
         noise : numpy.ndarray, optional
             With one triple per row: the noise rows' values, :func:`~sdr_di.receiver.lock.
             noise_values` of their sums and sample counts (the scalar bank makes them for
