@@ -1,9 +1,9 @@
 """One scalar tracking channel: NCOs, loops, lock detection, NH/bit/frame sync, decoding.
 
 A :class:`Channel` does not read samples. Its driver (:class:`~sdr_di.receiver.scalar.
-ScalarReceiver`) takes the next *block* of correlation intervals (:attr:`Channel.block`: one
-row of kernel parameters per code epoch; one epoch before bit synchronization, then the
-epochs of one coherent interval), correlates all channels' blocks in one kernel call and
+ScalarReceiver`) takes the next *block* of correlation intervals (:attr:`Channel.block_rows`:
+one row of kernel parameters per code epoch and one per its noise correlator; one epoch
+before bit synchronization, then the epochs of one coherent interval), correlates all channels' blocks in one kernel call and
 hands each channel its per-epoch early/prompt/late sums (:meth:`Channel.process_block`).
 The channel then
 
@@ -66,8 +66,10 @@ from ..errors import NavMessageError
 from ..signal.codes import NH20, nav_type
 from ..signal.navmsg import EphemerisAssembler, HeldSubframes, decode_subframe, find_preamble
 from ..signal.words import PREAMBLE, SUBFRAME_BITS
+from ._numba_channel import plain_epochs, plan_block
 from .correlator import check_prn
 from .lock import (
+    NOISE_MIN_LAG_CHIPS,
     NOISE_SAMPLES,
     LockCounter,
     PostCorrelationNoise,
@@ -76,6 +78,7 @@ from .lock import (
     noise_code_phase,
     prompt_signal_power,
 )
+from .lock import _NOISE_LAG_STEP
 from .loops import CarrierLoop, CodeLoop, costas_atan, dll_nelp, fll_atan
 from .tracking import ChannelObservation, ChannelState, TrackingConfig, TrackingLog
 
@@ -85,6 +88,7 @@ _L = CODE_LENGTH_B3I
 _LF = float(CODE_LENGTH_B3I)
 _RING = 2048  # prompts kept (>= cn0 window and sync windows)
 _HIST = 64  # committed NCO epochs kept for observation_at
+_MAX_BLOCK = 20  # epochs of the longest block (TrackingConfig.coherent_ms_d1 <= 20)
 _NH = [float(v) for v in NH20]
 _NH_ARR = np.asarray(NH20, dtype=np.float64)
 _PREAMBLE = [int(b) for b in PREAMBLE]
@@ -127,6 +131,12 @@ class Channel:
     cn0_dbhz : float
         Latest C/N0 estimate.
     """
+
+    #: Run the per-block and per-epoch bookkeeping in the numba kernels of
+    #: :mod:`~sdr_di.receiver._numba_channel` (the same values bit for bit as the plain
+    #: Python forms, :meth:`_plan_reference` and :meth:`_epoch`, which ``False`` runs; a
+    #: channel with a tracking log always runs those).
+    jit = True
 
     def __init__(self, prn: int, sampling_rate_hz: float, if_hz: float,
                  config: TrackingConfig | None = None, *, carrier_hz: float = F_B3I,
@@ -175,10 +185,11 @@ class Channel:
         # NCO (valid once started)
         self.next_start = 0
         self.n_next = 0
-        self.block: list[tuple] = []
-        self._epoch_rows: list[tuple] = []
+        #: correlator rows of the next block (:meth:`_plan`), a view of ``_rows``
+        self.block_rows = np.empty((0, 6))
+        self._rows = np.zeros((2 * _MAX_BLOCK, 6))
+        self._ends = np.zeros((_MAX_BLOCK, 4))  # (next_start, theta, phi, dphase) per epoch
         self.n_block_epochs = 0
-        self._block_ends: list[tuple] = []
         self.block_end = 0
         self.theta = 0.0
         self.code_rate = CHIP_RATE_B3I
@@ -186,7 +197,9 @@ class Channel:
         self.phi = 0.0  # carrier NCO phase at next_start, in [0, 1)
         self.dphase = 0.0  # accumulated Doppler phase at next_start [cycles]
         self.epoch = 0
-        self._hist: list = [None] * _HIST
+        # (start, theta, rate, dphase, fd, epoch, f_est, f_rate, f_mid) of the committed
+        # epochs at row epoch % _HIST (epoch NaN: none yet)
+        self._hist = np.full((_HIST, 9), np.nan)
         self._ring = np.zeros(_RING, np.complex128)
         self._time: tuple | None = None  # (sf_epoch, sf_sow, sf_week or None)
         self._reset_tracking_state()
@@ -319,11 +332,13 @@ class Channel:
 
         One epoch until bit synchronization; then up to the next coherent-interval edge
         (``coherent_ms`` epochs aligned with the bit edges; the first block after the sync is
-        shorter). The rows of :attr:`block` are the kernel parameters of each epoch:
+        shorter). The rows of :attr:`block_rows` are the kernel parameters of each epoch:
         ``(start, n, theta, dchip, phi, dphi)``; ``block_end`` is one past the last sample.
         Each of the :attr:`n_block_epochs` epoch rows is followed by its noise-correlator row
         (its first ``NOISE_SAMPLES`` samples, code phase far from the prompt's:
-        :mod:`~sdr_di.receiver.lock` notes).
+        :mod:`~sdr_di.receiver.lock` notes). The loop over the epochs is
+        :func:`~sdr_di.receiver._numba_channel.plan_block` (:attr:`jit`), or its plain form
+        :meth:`_plan_reference`.
         """
         m = 1
         if self._bit_off is not None and self.state == ChannelState.TRACK:
@@ -341,26 +356,36 @@ class Channel:
         # the loop's frequency integrator holds the Doppler at the middle of the block it
         # steers (module notes); the observations extrapolate from there with its rate
         f_mid = start + 0.5 * m * _LF * fs / rate
-        th = self.theta
-        ph = self.phi
-        dph = self.dphase
-        ep = self.epoch
-        rows = []
-        ends = []
-        block = []
-        hist = self._hist
+        args = (m, start, self.theta, self.phi, self.dphase, self.epoch, rate, dchip, dphi,
+                ddop, fd, f_est, f_rate, f_mid)
+        if self.jit:
+            plan_block(*args, _L, NOISE_SAMPLES, NOISE_MIN_LAG_CHIPS, _NOISE_LAG_STEP,
+                       self._hist, self._rows, self._ends)
+        else:
+            self._plan_reference(*args)
+        self.block_rows = self._rows[:2 * m]
+        self.n_block_epochs = m
+        end, n0 = self._ends[m - 1, 0], self._rows[0, 1]
+        self.block_end = int(end)
+        self.n_next = int(n0)
+
+    def _plan_reference(self, m: int, start: int, th: float, ph: float, dph: float, ep: int,
+                        rate: float, dchip: float, dphi: float, ddop: float, fd: float,
+                        f_est: float, f_rate: float, f_mid: float) -> None:
+        """:meth:`_plan`'s loop over the epochs in Python (the reference of
+        :func:`~sdr_di.receiver._numba_channel.plan_block`, whose notes give the arguments):
+        the rows, the NCO state after each epoch and the history rows."""
+        rows, ends, hist = self._rows, self._ends, self._hist
         ceil, floor = math.ceil, math.floor
-        for _ in range(m):
+        for i in range(m):
             n = ceil((_LF - th) / dchip)
             if n < 1:
                 n = 1
-            row = (start, n, th, dchip, ph, dphi)
-            rows.append(row)
             # each epoch's noise row right after it: the kernel's threads take contiguous
             # halves of the rows, which then hold equal work
-            block.append(row)
-            block.append((start, n if n < NOISE_SAMPLES else NOISE_SAMPLES,
-                          noise_code_phase(th, ep), dchip, ph, dphi))
+            rows[2 * i] = (start, n, th, dchip, ph, dphi)
+            rows[2 * i + 1] = (start, n if n < NOISE_SAMPLES else NOISE_SAMPLES,
+                               noise_code_phase(th, ep), dchip, ph, dphi)
             hist[ep % _HIST] = (start, th, rate, dph, fd, ep, f_est, f_rate, f_mid)
             th = th + n * dchip - _LF
             if th < 0.0:
@@ -370,28 +395,30 @@ class Channel:
             dph += n * ddop
             start += n
             ep += 1
-            ends.append((start, th, ph, dph))
-        self.block = block
-        self._epoch_rows = rows
-        self.n_block_epochs = m
-        self._block_ends = ends
-        self.block_end = start
-        self.n_next = rows[0][1]
+            ends[i] = (start, th, ph, dph)
+
+    @property
+    def block(self) -> list[tuple]:
+        """:attr:`block_rows` as tuples ``(start, n, theta, dchip, phi, dphi)`` (start and n
+        as int)."""
+        return [(int(r[0]), int(r[1]), *r[2:]) for r in self.block_rows.tolist()]
 
     def _consume(self, i: int) -> None:
         """NCO state after the ``i``-th epoch (0-based) of the current block."""
-        self.next_start, self.theta, self.phi, self.dphase = self._block_ends[i]
+        start, self.theta, self.phi, self.dphase = self._ends[i].tolist()
+        self.next_start = int(start)
         self.epoch += 1
 
     # -- per-epoch processing ---------------------------------------------------------------
     def process_block(self, outs, noise: np.ndarray | None = None) -> None:
-        """Consume the E/P/L correlations of every epoch of :attr:`block` and plan the next.
+        """Consume the E/P/L correlations of every epoch of :attr:`block_rows` and plan the
+        next.
 
         Parameters
         ----------
-        outs : sequence
-            One ``(E, P, L)`` (complex) per row of :attr:`block`, or one per epoch (no
-            noise-correlator values).
+        outs : numpy.ndarray or sequence
+            One ``(E, P, L)`` (complex; complex128 rows from the scalar bank) per row of
+            :attr:`block_rows`, or one per epoch (no noise-correlator values).
         noise : numpy.ndarray, optional
             With one triple per row: the noise rows' values, :func:`~sdr_di.receiver.lock.
             noise_values` of their sums and sample counts (the scalar bank makes them for
@@ -407,10 +434,15 @@ class Channel:
                                [r[1] for r in self.block[1::2]])
             outs = outs[0::2]
         self._frozen = False
-        for i in range(m):
-            e, p, l = outs[i]
-            self._epoch(e, p, l, i, m)
-            self._consume(i)
+        if self.jit and self.log is None and self._bit_off is not None and m > 1:
+            self._epochs_jit(np.asarray(outs, np.complex128), m)
+        else:
+            if isinstance(outs, np.ndarray):
+                outs = outs.tolist()
+            for i in range(m):
+                e, p, l = outs[i]
+                self._epoch(e, p, l, i, m)
+                self._consume(i)
         if self.state == ChannelState.LOST:
             # coast from here at the last Doppler
             self.fd = self.carrier.vel_hz
@@ -423,6 +455,31 @@ class Channel:
         self.code_rate = CHIP_RATE_B3I * (1.0 + self.fd / self.carrier_hz) \
             + self.code.rate_corr_cps
         self._plan()
+
+    def _epochs_jit(self, outs: np.ndarray, m: int) -> None:
+        """:meth:`process_block`'s epochs of a bit-synchronized channel without a log: runs
+        of plain epochs in :func:`~sdr_di.receiver._numba_channel.plain_epochs`, the others
+        (a completed bit, a lock evaluation, the block's last epoch) in :meth:`_epoch`."""
+        i = 0
+        coh = self._coh
+        while i < m:
+            if self._bit_off is not None and i < m - 1:
+                j, coh[0], coh[1], coh[2], self._bit_acc, self._bit_n, self._eval_count = \
+                    plain_epochs(outs, i, m, self.epoch, self._bit_off, self.bit_ms,
+                                 self.is_d1, _NH_ARR, self._ring, coh[0], coh[1], coh[2],
+                                 self._bit_acc, self._bit_n, self._eval_count,
+                                 self.cfg.lock_eval_ms, self._frozen)
+                if j > i:
+                    k = j - i
+                    coh[3] += k
+                    self._n_tracked += k
+                    self.epoch += k - 1
+                    self._consume(j - 1)
+                    i = j
+            e, p, l = outs[i].tolist()
+            self._epoch(e, p, l, i, m)
+            self._consume(i)
+            i += 1
 
     def process_epoch(self, e: complex, p: complex, l: complex) -> None:
         """Single-epoch form of :meth:`process_block` (the block must be one epoch long; no
@@ -437,7 +494,7 @@ class Channel:
         ep = self.epoch
         self._ring[ep % _RING] = p
         self._n_tracked += 1
-        dt1 = self._epoch_rows[i][1] / self.fs
+        dt1 = self._rows[2 * i, 1].item() / self.fs
         frozen = self._frozen
         if self._bit_off is None:
             # 1 ms loops (pull-in, or tracking before bit sync)
@@ -487,7 +544,7 @@ class Channel:
             if self.state != st or (self._bit_off is not None) != synced:
                 self._frozen = True  # the rest of the block was planned for the old mode
         if self.log is not None and ep % self.log_every == 0:
-            st0 = self._hist[ep % _HIST]
+            st0 = self._hist[ep % _HIST].tolist()
             self.log.append((st0[0], ep, st0[1], st0[2], st0[6], st0[3], self.cn0_dbhz,
                              self.lock_metric, 1.0 if self.code_lock else 0.0,
                              1.0 if self.carrier_lock else 0.0, float(self.state),
@@ -787,11 +844,11 @@ class Channel:
 
     def _sample_of_epoch(self, epoch: int) -> float | None:
         """Approximate sample at which code epoch ``epoch`` began (from the NCO history)."""
-        h = self._hist[self.epoch % _HIST]
-        if h is None:
+        h = self._hist[self.epoch % _HIST].tolist()
+        if math.isnan(h[5]):
             return None
         start, th, rate, _, _, ep, *_ = h
-        return start + ((epoch - ep) * _LF - th) * self.fs / rate
+        return int(start) + ((epoch - int(ep)) * _LF - th) * self.fs / rate
 
     def _synced_subframe(self) -> None:
         fr = self._frame
@@ -918,16 +975,18 @@ class Channel:
         """
         s = int(sample_index)
         h = None
+        hist = self._hist
         for j in range(_HIST):
-            cand = self._hist[(self.epoch - j) % _HIST]
-            if cand is None or cand[5] != self.epoch - j:
+            row = (self.epoch - j) % _HIST
+            if hist[row, 5] != self.epoch - j:     # (NaN: no epoch there yet)
                 break
-            if cand[0] <= s:
-                h = cand
+            if hist[row, 0] <= s:
+                h = hist[row].tolist()
                 break
         if h is None:
             raise ValueError(f"PRN {self.prn}: sample {s} is older than the NCO history")
         start, th, rate, dph, fd, ep, f_est, f_rate, f_mid = h
+        start, ep = int(start), int(ep)
         f_est += f_rate * (s - f_mid) / self.fs
         chips = th + (s - start) * rate / self.fs
         wraps = math.floor(chips / _LF)

@@ -152,22 +152,18 @@ class _Bank:
                   chans: list, ready: Callable[[int, list, np.ndarray | None], None]) -> None:
         """Correlate every row of the channels' blocks on the stored samples ``x``
         (:meth:`~sdr_di.receiver.ifreader.IfSource.read_stored`, first sample ``buf0``);
-        ``ready(j, outs, noise)`` gets channel ``j``'s list of ``(E, P, L)`` complex triples
-        as soon as its rows are final, the channels in order: those of the kernel call's
+        ``ready(j, outs, noise)`` gets channel ``j``'s ``(E, P, L)`` sums (complex128, one row
+        per row of its block) as soon as its rows are final, the channels in order: those of the kernel call's
         leading part while its worker correlates the rest (:meth:`~sdr_di.receiver.threads.
         KernelThreads.run_rows`), then the others. ``noise``: the values of its noise rows
         (every other row: :meth:`~sdr_di.receiver.channel.Channel.process_block`), made for
         the channels of a part in one numpy pass (:func:`~sdr_di.receiver.lock.
         noise_values`); None when a channel's block is not in pairs."""
-        params: list[tuple] = []
-        reps = []
-        for c in chans:
-            blk = c.block
-            params.extend(blk)
-            reps.append(len(blk))
-        self._rot(list(slots), [c.block[0][5] for c in chans])
-        n_rows = len(params)
-        par = np.array(params, dtype=np.float64).T.copy()
+        blocks = [c.block_rows for c in chans]
+        reps = [len(b) for b in blocks]
+        self._rot(list(slots), [b[0, 5].item() for b in blocks])
+        par = np.concatenate(blocks).T.copy()
+        n_rows = par.shape[1]
         start = par[0].astype(np.int64) - buf0
         nsamp = par[1].astype(np.int64)
         row_slot = np.repeat(np.array(slots, dtype=np.int64), reps)
@@ -190,16 +186,15 @@ class _Bank:
             if j1 == j0:
                 return
             a0, a1 = (ends[j0 - 1] if j0 else 0), ends[j1 - 1]
-            # (re, im) pairs are contiguous: a complex128 view gives Python complex E, P, L
+            # (re, im) pairs are contiguous: a complex128 view of E, P, L
             seg = out[a0:a1].view(np.complex128).reshape(-1, 3)
-            o = seg.tolist()
             noise = None
             if paired:       # (every noise row holds at least one sample: Channel._plan)
                 nz = seg[1::2]
                 noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], nsamp[a0 + 1:a1:2])
             for j in range(j0, j1):
                 a = (ends[j - 1] if j else 0) - a0
-                ready(j, o[a:a + reps[j]],
+                ready(j, seg[a:a + reps[j]],
                       None if noise is None else noise[a // 2:(a + reps[j]) // 2])
             taken[0] = j1
 
@@ -671,7 +666,7 @@ class ScalarReceiver:
         slots = tuple(r.slot_of[id(c)] for c in batch)
         t_ch = [0.0]
 
-        def ready(j: int, outs: list, noise, batch=batch, t_ch=t_ch) -> None:
+        def ready(j: int, outs: np.ndarray, noise, batch=batch, t_ch=t_ch) -> None:
             tc = time.perf_counter()
             batch[j].process_block(outs, noise)
             t_ch[0] += time.perf_counter() - tc
