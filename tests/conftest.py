@@ -29,7 +29,15 @@ def if_files(tmp_path_factory):
     ``sample_format``, ``prns``, ``scenario``...), generated once per set of arguments and
     shared by every test that asks for the same file (one per xdist worker).
 
-    The files are shared: a test that changes one copies it first.
+    The files are shared: a test that changes one copies it first (``shutil.copytree`` of
+    ``.if_file.parent``, which holds that one set), and a run writes under ``tmp_path``,
+    never beside the file. A session fixture lives once per process: under
+    ``pytest -n 2 --dist loadscope`` each worker makes the files its modules ask for.
+
+    Ask for a file the suite already makes before a new one (2.5 MHz, the default seed
+    unless given): ``(0.02, name="s")``, ``(0.1)``, ``(1.0, name="s")``, ``(16.0)`` (runs read 8-13.5 s of
+    it with ``--duration``), ``(26.0)``, ``(37.0)``. A test of
+    generation itself, or of a scenario the arguments cannot express, generates its own.
     """
     import sdr_di
 
