@@ -80,17 +80,19 @@ def test_run_refuses_options_that_do_not_fit_before_any_work(short_file, tmp_pat
 
 
 @pytest.mark.slow
-def test_loose_run_writes_the_cli_solution(tmp_path):
+def test_loose_run_writes_the_cli_solution(if_files, tmp_path):
     """A loose run through the API writes the CLI's CSV byte for byte, with the accuracy
-    after the hand-over (default scenario, 13.5 s at 2.5 MHz: hand-over at about 12.2 s)."""
-    files = sdr_di.generate(tmp_path / "g", duration_s=13.5, sampling_rate_hz=2.5e6)
-    res = sdr_di.run(files.if_file, mode="loose", filter="ekf", out=tmp_path / "api")
+    after the hand-over (default scenario at 2.5 MHz, 13.5 s of the session's 16 s file:
+    hand-over at about 12.2 s)."""
+    files = if_files(16.0)
+    res = sdr_di.run(files.if_file, mode="loose", filter="ekf", duration_s=13.5,
+                     out=tmp_path / "api")
     assert res.mode == "loose" and set(res.files) == {"solution", "summary", "channels", "nis"}
     assert 10.0 < res.metrics["handover_s"] < 13.0
     assert res.metrics["n"] >= 3 and np.isfinite(res.metrics["pos_m_rmse"])
     assert res.metrics["pos_m_rmse"] < 5.0
     assert main(["run", str(files.if_file), "--mode", "loose", "--filter", "ekf",
-                 "--no-progress", "--out", str(tmp_path / "cli")]) == 0
+                 "--duration", "13.5", "--no-progress", "--out", str(tmp_path / "cli")]) == 0
     assert res.files["solution"].read_bytes() == \
         (tmp_path / "cli" / res.files["solution"].name).read_bytes()
 

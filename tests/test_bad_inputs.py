@@ -558,15 +558,10 @@ def _snapshot(d: Path) -> set[str]:
 
 
 @pytest.fixture(scope="module")
-def workdir(tmp_path_factory) -> Path:
-    from sdr_di.scenario import load_scenario
-    from sdr_di.sim.generate import generate_files
-
-    gen = tmp_path_factory.mktemp("generated")
-    sc = load_scenario(DEFAULT_SCENARIO).with_overrides(duration_s=0.02, sampling_rate_hz=2.5e6)
-    generate_files(sc, gen, name="s", progress=False)
+def workdir(if_files, tmp_path_factory) -> Path:
+    """The work folder of the cases, made from the session's 0.02 s set (copied)."""
     d = tmp_path_factory.mktemp("bad_inputs")
-    make_workdir(d, gen)
+    make_workdir(d, if_files(0.02, name="s").if_file.parent)
     return d
 
 

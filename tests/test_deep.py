@@ -5,7 +5,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -294,19 +293,18 @@ DUR = "26"
 
 
 @pytest.fixture(scope="module")
-def gen26(tmp_path_factory):
-    out = tmp_path_factory.mktemp("deep")
-    assert main(["generate", "--no-progress", "--duration", DUR, "--fs", "2.5e6", "--out",
-                 str(out)]) == 0
-    return out
+def gen26(if_files):
+    """The folder of a 26 s default-scenario set at 2.5 MHz (the session's factory: shared,
+    the runs write elsewhere)."""
+    return if_files(float(DUR)).if_file.parent
 
 
 @pytest.mark.slow
-def test_deep_mode_end_to_end(gen26, capsys):
+def test_deep_mode_end_to_end(gen26, tmp_path, capsys):
     """Deep mode on a generated default-scenario file (2.5 MHz in this test only): every
     channel stays in the measurement vector for the whole vector-loop span (>= 10 s) and the
     position RMSE is below 2 m."""
-    out = gen26 / "run_ff"
+    out = tmp_path / "run_ff"
     rc = main(["run", str(gen26 / "default.bin"), "--mode", "deep", "--filter", "ff-aukf",
                "--no-progress", "--out", str(out)])
     text = capsys.readouterr().out
@@ -325,10 +323,10 @@ def test_deep_mode_end_to_end(gen26, capsys):
 
 
 @pytest.fixture(scope="module")
-def ekf_run(gen26):
+def ekf_run(gen26, tmp_path_factory):
     """The EKF in deep mode on ``gen26`` with a row every filter interval (50 Hz), the
     default NCO latency: ``(summary, rows, solution bytes, output folder)``."""
-    out = gen26 / "run_ekf"
+    out = tmp_path_factory.mktemp("deep") / "run_ekf"
     rc = main(["run", str(gen26 / "default.bin"), "--mode", "deep", "--filter", "ekf",
                "--rate", "50", "--no-progress", "--out", str(out)])
     assert rc == 0
@@ -477,7 +475,6 @@ def test_deep_receiver_rejects_bad_settings(gen26):
             IntegrationConfig(nco_latency=bad)
     with pytest.raises(ValueError, match="deep mode only"):
         IntegrationConfig(mode="tight", nco_latency=1)
-    shutil.rmtree(gen26 / "none", ignore_errors=True)
 
 
 def test_every_filter_runs_the_deep_measurement_model_with_a_changing_channel_count(nav):

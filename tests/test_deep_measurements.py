@@ -144,16 +144,16 @@ def test_reset_measurements_are_white_and_the_cascade_s_rates_are_not():
 
 
 @pytest.fixture(scope="module")
-def geo_file(tmp_path_factory):
-    """20 s at 2.5 MHz of the default scenario with the GEO satellite C05 (D2, 2 ms bits)
-    in place of C32."""
-    out = tmp_path_factory.mktemp("geo")
-    assert main(["generate", "--no-progress", "--duration", "20", "--fs", "2.5e6", "--prn",
-                 "C05,C08,C10,C13,C27,C28,C30", "--out", str(out), "--name", "g"]) == 0
-    return out
+def geo_file(if_files):
+    """The folder of 20 s at 2.5 MHz of the default scenario with the GEO satellite C05 (D2,
+    2 ms bits) in place of C32 (``g.bin``...; the session's factory: the runs write
+    elsewhere)."""
+    return if_files(20.0, name="g",
+                    prns=("C05", "C08", "C10", "C13", "C27", "C28", "C30")).if_file.parent
 
 
-def test_each_architecture_tracks_a_geo_channel_in_the_vector_loop(geo_file, capsys):
+def test_each_architecture_tracks_a_geo_channel_in_the_vector_loop(geo_file, tmp_path,
+                                                                   capsys):
     """``run --mode deep --deep-measurements A`` (``reset`` through ``sdr_di.run``) on a
     file with a GEO satellite: the
     architecture is in the summary (and named in the solution's header unless it is the
@@ -163,7 +163,7 @@ def test_each_architecture_tracks_a_geo_channel_in_the_vector_loop(geo_file, cap
     import sdr_di
 
     for arch, vel_max in (("prefilter", 0.03), ("reset", 0.03), ("discriminator", 0.2)):
-        out = geo_file / f"run_{arch}"
+        out = tmp_path / f"run_{arch}"
         if arch == "reset":             # the API door
             res = sdr_di.run(geo_file / "g.bin", mode="deep", deep_measurements=arch, out=out)
             assert res.details.result.deep_measurements == arch

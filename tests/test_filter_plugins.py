@@ -107,7 +107,8 @@ def test_a_false_option_reaches_the_rule_as_false():
 # ---- run and lc take entries with options ------------------------------------------------------
 @pytest.fixture(scope="module")
 def short_file(if_files):
-    return if_files(1.0).if_file
+    """1 s at 2.5 MHz (``s.bin``): the session's file that test_run_diagnostics also uses."""
+    return if_files(1.0, name="s").if_file
 
 
 @pytest.mark.parametrize("mode", ["deep", "loose", "tight"])
@@ -294,15 +295,13 @@ def test_example_study_spec_parses_with_the_plugin(monkeypatch):
 
 # ---- deep mode and studies --------------------------------------------------------------------
 @pytest.mark.slow
-def test_run_deep_with_a_plugin_by_import_path(plugin, tmp_path, capsys):
-    """``run --mode deep --filter MODULE:TunedEKF:scale=2`` on a 13.5 s file at 2.5 MHz
-    (hand-over at about 12.2 s): the summary and the CSV header name the import path and the
-    options, and the summary's Q0 is the plugin's (2x the nominal)."""
-    assert main(["generate", "--no-progress", "--duration", "13.5", "--fs", "2.5e6", "--out",
-                 str(tmp_path)]) == 0
+def test_run_deep_with_a_plugin_by_import_path(plugin, if_files, tmp_path, capsys):
+    """``run --mode deep --filter MODULE:TunedEKF:scale=2`` on 13.5 s of the session's 16 s
+    file at 2.5 MHz (hand-over at about 12.2 s): the summary and the CSV header name the
+    import path and the options, and the summary's Q0 is the plugin's (2x the nominal)."""
     out = tmp_path / "run"
-    rc = main(["run", str(tmp_path / "default.bin"), "--mode", "deep", "--no-progress",
-               "--filter", f"{plugin}:TunedEKF:scale=2", "--out", str(out)])
+    rc = main(["run", str(if_files(16.0).if_file), "--duration", "13.5", "--mode", "deep",
+               "--no-progress", "--filter", f"{plugin}:TunedEKF:scale=2", "--out", str(out)])
     assert rc == 0, capsys.readouterr()
     summ = json.loads((out / f"default_deep_{plugin}_TunedEKF_summary.json").read_text())
     assert summ["filter"] == f"{plugin}:TunedEKF" and summ["metrics"]["n"] > 0

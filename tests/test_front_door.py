@@ -28,8 +28,8 @@ from sdr_di.options import RunOptions
 
 @pytest.fixture(scope="module")
 def if_file(if_files) -> Path:
-    """16 s of the default scenario at 2.5 MHz (seed 3), from the session's factory."""
-    return if_files(16.0, seed=3).if_file
+    """16 s of the default scenario at 2.5 MHz, from the session's factory."""
+    return if_files(16.0).if_file
 
 
 def _cli(argv: list[str]):

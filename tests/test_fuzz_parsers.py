@@ -23,6 +23,7 @@ import gzip
 import json
 import math
 import os
+import shutil
 import tomllib
 from pathlib import Path
 
@@ -151,13 +152,10 @@ def test_scenario_overrides(kw):
 # -- IF sidecar JSON -----------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory) -> Path:
-    from sdr_di.sim.generate import generate_files
-
-    d = tmp_path_factory.mktemp("fuzz_set")
-    sc = load_scenario(DEFAULT_SCENARIO).with_overrides(duration_s=0.01, sampling_rate_hz=2e6)
-    generate_files(sc, d, name="s", progress=False)
-    return d
+def generated(if_files, tmp_path_factory) -> Path:
+    """A private copy of the session's 0.02 s set (``s.*``): the cases write beside it."""
+    return shutil.copytree(if_files(0.02, name="s").if_file.parent,
+                           tmp_path_factory.mktemp("fuzz") / "set")
 
 
 _FORMATS = st.sampled_from(["iq_int8", "iq_int16", "real_int8", "real_int16", "iq_int4",

@@ -290,13 +290,12 @@ def test_tag_source_reads_pocketsdr_lists(tmp_path):
 # -- end to end: a generated B3I snippet re-encoded in the peers' formats -------------------
 
 @pytest.fixture(scope="module")
-def snippet(tmp_path_factory):
-    """0.1 s of the default scenario at 2.5 MHz (complex baseband, 4-bit in iq_int8)."""
-    g = tmp_path_factory.mktemp("gen")
-    assert main(["generate", "--no-progress", "--duration", "0.1", "--fs", "2.5e6", "--out",
-                 str(g)]) == 0
-    meta = json.loads((g / "default.json").read_text())
-    return IfSource.from_sidecar(g / "default.json").read(0, meta["n_samples"]), meta
+def snippet(if_files):
+    """0.1 s of the default scenario at 2.5 MHz (complex baseband, 4-bit in iq_int8; the
+    session's factory)."""
+    sidecar = if_files(0.1).metadata
+    meta = json.loads(sidecar.read_text())
+    return IfSource.from_sidecar(sidecar).read(0, meta["n_samples"]), meta
 
 
 def encode_pocket_raw8(x, meta):

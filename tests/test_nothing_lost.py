@@ -55,16 +55,10 @@ class Mark(EKF):
 
 
 @pytest.fixture(scope="module")
-def small_set(tmp_path_factory) -> Path:
-    """A generated 0.02 s set at 2.5 MHz: ``s.bin``, ``s.json``, ``s_imu.csv``,
-    ``s_truth.csv``."""
-    from sdr_di.scenario import load_scenario
-    from sdr_di.sim.generate import generate_files
-
-    d = tmp_path_factory.mktemp("small")
-    sc = load_scenario(DEFAULT_SCENARIO).with_overrides(duration_s=0.02, sampling_rate_hz=2.5e6)
-    generate_files(sc, d, name="s", progress=False)
-    return d
+def small_set(if_files) -> Path:
+    """The folder of a generated 0.02 s set at 2.5 MHz: ``s.bin``, ``s.json``, ``s_imu.csv``,
+    ``s_truth.csv`` (the session's factory; a test that changes it works on ``work``)."""
+    return if_files(0.02, name="s").if_file.parent
 
 
 @pytest.fixture

@@ -37,10 +37,10 @@ def _small(duration_s: float = 0.02):
 
 
 @pytest.fixture(scope="module")
-def complete_set(tmp_path_factory) -> Path:
-    d = tmp_path_factory.mktemp("set")
-    generate_files(_small(), d, name="s", progress=False)
-    return d
+def complete_set(if_files) -> Path:
+    """The folder of a complete 0.02 s set (``s.*``; the session's factory: the tests copy it
+    before they change it)."""
+    return if_files(0.02, name="s").if_file.parent
 
 
 def _contents(d: Path) -> dict[str, str]:
@@ -81,20 +81,17 @@ def test_fingerprint_sees_both_ends_and_the_size(tmp_path):
 
 # -- readers refuse a mixed set ---------------------------------------------------------------
 
-def test_new_bin_beside_old_sidecar_is_refused(complete_set, tmp_path):
+def test_new_bin_beside_old_sidecar_is_refused(complete_set, if_files, tmp_path):
     d = _copy(complete_set, tmp_path / "mixed")
-    longer = tmp_path / "longer"
-    generate_files(_small(0.04), longer, name="s", progress=False)
-    shutil.copy(longer / "s.bin", d / "s.bin")  # the new 0.04 s .bin, the old 0.02 s sidecar
+    longer = if_files(0.04, name="s").if_file
+    shutil.copy(longer, d / "s.bin")  # the new 0.04 s .bin, the old 0.02 s sidecar
     with pytest.raises(FileSetError, match=r"s\.json: s\.bin is not the file .* mixed"):
         IfSource.from_sidecar(d / "s.json")
 
 
-def test_same_size_other_content_is_refused(complete_set, tmp_path):
+def test_same_size_other_content_is_refused(complete_set, if_files, tmp_path):
     d = _copy(complete_set, tmp_path / "mixed")
-    other = tmp_path / "other"
-    generate_files(_small().with_overrides(seed=7), other, name="s", progress=False)
-    shutil.copy(other / "s.bin", d / "s.bin")
+    shutil.copy(if_files(0.02, seed=7, name="s").if_file, d / "s.bin")
     with pytest.raises(FileSetError, match="same size, different content"):
         IfSource.from_sidecar(d / "s.json")
 

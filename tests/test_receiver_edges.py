@@ -261,16 +261,14 @@ def test_total_blockage_keeps_writing_rows_and_fixes_resume_from_the_prediction(
     assert not after2 or min(after2) > 26.0, min(after2)
 
 
-def test_assisted_search_with_the_long_search_finds_30_dbhz_satellites(tmp_path):
+def test_assisted_search_with_the_long_search_finds_30_dbhz_satellites(if_files):
     """The sidecar's satellites at 30 dB-Hz: the 40 ms cold search of all PRNs finds few of
     them, the assisted search (listed PRNs around their Doppler, then 400 x 1 ms for the
     missed ones) finds them, and searches only the listed PRNs."""
     from sdr_di.receiver.run_scalar import open_source, sidecar_assistance
     from sdr_di.receiver.scalar import ScalarReceiver
 
-    assert main(["generate", "--no-progress", "--duration", "0.5", "--fs", "2.5e6", "--cn0",
-                 "30", "--seed", "3", "--out", str(tmp_path)]) == 0
-    src = open_source(tmp_path / "default.bin")
+    src = open_source(if_files(0.5, seed=3, cn0_dbhz=30.0).if_file)
     aid = sidecar_assistance(src)
     assert len(aid) == 7 and all(d is not None for d in aid.values())
     cold = ScalarReceiver(log=False, long_noncoherent=None)
@@ -288,7 +286,7 @@ def test_assisted_search_with_the_long_search_finds_30_dbhz_satellites(tmp_path)
             assert r.noncoherent in (40, 400)
 
 
-def test_cold_start_with_ephemeris_time_hint_and_position(tmp_path, capsys):
+def test_cold_start_with_ephemeris_time_hint_and_position(if_files, tmp_path, capsys):
     """A file read as a foreign one (no sidecar): --ephemeris, the start time and an
     approximate position give the visible satellites and their Dopplers to search."""
     from pathlib import Path
@@ -299,9 +297,8 @@ def test_cold_start_with_ephemeris_time_hint_and_position(tmp_path, capsys):
 
     root = Path(__file__).resolve().parents[1]
     rnx = root / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"
-    assert main(["generate", "--no-progress", "--duration", "0.6", "--fs", "2.5e6",
-                 "--out", str(tmp_path)]) == 0
-    meta = __import__("json").loads((tmp_path / "default.json").read_text())
+    files = if_files(0.6)
+    meta = __import__("json").loads(files.metadata.read_text())
     week, sow = meta["start"]["week"], meta["start"]["sow"]
     vis = visible_satellites(load_nav(rnx), week, sow,
                              llh_to_ecef(np.radians(40.0), np.radians(116.0), 100.0))
@@ -309,7 +306,7 @@ def test_cold_start_with_ephemeris_time_hint_and_position(tmp_path, capsys):
     assert set(truth) <= set(vis)  # the scenario's satellites are among the visible ones
     for p, fd in truth.items():  # static-receiver prediction: 20 m/s of motion ~ 80 Hz
         assert abs(vis[p] - fd) < 150.0, (p, vis[p], fd)
-    args = ["run", str(tmp_path / "default.bin"), "--fs", "2.5e6", "--format", "iq_int8",
+    args = ["run", str(files.if_file), "--fs", "2.5e6", "--format", "iq_int8",
             "--start-week", str(week), "--start-sow", str(sow), "--ephemeris", str(rnx),
             "--no-progress", "--out", str(tmp_path / "run")]
     # 0.6 s is too short for a fix: exit 1 (docs/errors.md), the outputs are kept

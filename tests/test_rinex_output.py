@@ -1,6 +1,7 @@
 """RINEX 3.05 output: observation and navigation files, read back with georinex and our reader.
 
-The end-to-end test runs the scalar receiver on a short generated file (8 s at 2.5 MHz):
+The end-to-end test runs the scalar receiver on 8 s of a generated file at 2.5 MHz (the
+session's 16 s file):
 long enough for frame synchronization (pseudoranges) on some satellites and not on others
 (phase, Doppler and C/N0 only, with the half-cycle flag), too short for a decoded ephemeris.
 Fix-dependent fields (clock offset, approximate position) are tested with synthetic epochs.
@@ -309,18 +310,15 @@ class _RecordingEngine(PvtEngine):
             self._inside = False
 
 
-def test_run_writes_rinex_read_back_with_georinex(tmp_path, monkeypatch, capsys):
-    g = tmp_path / "g"
-    assert main(["generate", "--no-progress", "--duration", "8", "--fs", "2.5e6", "--out",
-                 str(g)]) == 0
+def test_run_writes_rinex_read_back_with_georinex(if_files, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(run_scalar_mod, "PvtEngine", _RecordingEngine)
     # 8 s without assistance (--no-assist: not the sidecar's navigation file): too short
     # for decoded ephemerides, hence no fix: exit 1 (docs/errors.md); the observation and
     # navigation files are written all the same
-    assert main(["run", str(g / "default.bin"), "--out", str(g / "run"), "--no-progress",
-                 "--no-assist"]) == 1
+    assert main(["run", str(if_files(16.0).if_file), "--duration", "8", "--out",
+                 str(tmp_path / "run"), "--no-progress", "--no-assist"]) == 1
     out = capsys.readouterr().out
-    obs_path, nav_path = g / "run" / "default_obs.rnx", g / "run" / "default_nav.rnx"
+    obs_path, nav_path = tmp_path / "run" / "default_obs.rnx", tmp_path / "run" / "default_nav.rnx"
     assert f"rinex_obs {obs_path}" in out and f"rinex_nav {nav_path}" in out
     used = [o for o in _RecordingEngine.last.used if math.isfinite(o.sow)]
     with_pr = [o for o in used if o.n]

@@ -7,6 +7,7 @@ fast; the full-rate figures come from ``scripts/check_scalar.py`` (closing notes
 import csv
 import json
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -33,8 +34,10 @@ def _gen(out: Path, *args) -> Path:
 
 
 @pytest.fixture(scope="module")
-def complex_file(tmp_path_factory):
-    return _gen(tmp_path_factory.mktemp("cplx"), "--fs", "2.5e6")
+def complex_file(if_files):
+    """The folder of a 37 s default-scenario set at 2.5 MHz (complex; the session's factory:
+    shared, the run writes elsewhere)."""
+    return if_files(float(DUR)).if_file.parent
 
 
 def _velocity_rmse_bound(pvt_csv: Path, channels_csv: Path) -> float:
@@ -75,10 +78,10 @@ def _prns(d: Path) -> list[int]:
     return [s["prn"] for s in meta["satellites"]]
 
 
-def test_scalar_run_tracks_decodes_and_fixes(complex_file):
+def test_scalar_run_tracks_decodes_and_fixes(complex_file, tmp_path):
     d = complex_file
     rx = ScalarReceiver(log=False)
-    res = run_scalar(open_source(d / "default.bin"), d / "run", prns=_prns(d) + [1, 40],
+    res = run_scalar(open_source(d / "default.bin"), tmp_path / "run", prns=_prns(d) + [1, 40],
                      progress=False, receiver=rx)
     # every simulated satellite acquired: Doppler within 100 Hz, code phase within 0.5 chip
     # of the generator's truth (at the file's first sample)
@@ -150,7 +153,7 @@ def _expect(capsys, args, pattern, out_dir: Path, status: int = 2):
     assert not out_dir.exists() or not any(out_dir.iterdir())
 
 
-def test_bad_inputs(tmp_path, capsys):
+def test_bad_inputs(if_files, tmp_path, capsys):
     out = tmp_path / "out"
     empty = tmp_path / "empty.bin"
     empty.write_bytes(b"")
@@ -159,9 +162,7 @@ def test_bad_inputs(tmp_path, capsys):
     _expect(capsys, [str(empty), "--fs", "25e6", "--format", "int3"], "unknown sample format", out)
     # truncated: the sidecar promises more samples than the file has (the set's size record
     # catches it first: a file that is not the one the sidecar was written with)
-    g = tmp_path / "g"
-    assert main(["generate", "--no-progress", "--duration", "0.1", "--fs", "2.5e6", "--out",
-                 str(g)]) == 0
+    g = shutil.copytree(if_files(0.1).if_file.parent, tmp_path / "g")  # changed below
     data = (g / "default.bin").read_bytes()
     (g / "default.bin").write_bytes(data[: len(data) // 2])
     _expect(capsys, [str(g / "default.bin")], "shorter|truncated|not the file this sidecar",
@@ -170,11 +171,9 @@ def test_bad_inputs(tmp_path, capsys):
     _expect(capsys, [str(g / "default.bin"), "--prn", "C21,C77"], "C77", out)
 
 
-def test_no_satellite_found(tmp_path, capsys):
-    g = tmp_path / "g"
-    assert main(["generate", "--no-progress", "--duration", "0.3", "--fs", "2.5e6", "--cn0",
-                 "0", "--out", str(g)]) == 0
+def test_no_satellite_found(if_files, tmp_path, capsys):
+    f = if_files(0.3, cn0_dbhz=0.0).if_file
     # a run without a fix: exit 1 (docs/errors.md), and no empty output folder left
-    _expect(capsys, [str(g / "default.bin"), "--prn", "C10,C27"], "no satellite found",
+    _expect(capsys, [str(f), "--prn", "C10,C27"], "no satellite found",
             tmp_path / "out", status=1)
     assert not (tmp_path / "out").exists()
