@@ -418,7 +418,7 @@ def _print_pocket_pairs(f: Path, mode: str, pairs: list) -> None:
     issue 47's target for the file's rate."""
     what = "sdr-di run" if mode == "scalar" else f"sdr-di run --mode {mode}"
     for cpu, g, load in pairs:
-        print(f"  PocketSDR pocket_trk ({g['cmd']}) on {f.name}, right after a {what} of "
+        print(f"  PocketSDR pocket_trk ({g['cmd']}) on {f.name}, right after {what} of "
               f"{cpu:.1f} CPU s: {g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, "
               f"{g['locked']} channels locked at the end, exit {g['rc']}; load average "
               f"{load:.2f}; sdr-di / pocket_trk CPU = {cpu / g['cpu_s']:.2f}")

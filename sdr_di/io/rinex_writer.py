@@ -582,8 +582,8 @@ class RinexNavWriter(FinalizingWriter):
         if self._closed:
             raise ValueError(f"{self.path}: writer is closed")
         # the frozen record is its own key (equal and hashed by its fields, as its
-        # dataclasses.astuple would be, which deep-copies every field: 0.29 ms a call, a third
-        # of the 2.5 MHz scalar run's PVT callback; docs/notes/speed.md, session 23)
+        # dataclasses.astuple would be, which deep-copies every field: 22-25 against 0.5 us
+        # of thread CPU a call; docs/notes/speed.md, session 23)
         if eph in self._seen:
             return False
         if not eph.finite():
