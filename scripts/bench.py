@@ -40,7 +40,13 @@ runs PocketSDR's ``pocket_trk`` (built from its ``app/pocket_trk``, ``make USE_S
 the same file right after each assisted run (``-sig B3I -fmt CS8 -tscale 2``: it replays the
 file at twice real time, so its CPU time is the figure) and prints the CPU ratio of each
 interleaved pair and their mean (issue 29: at most 1; run one after the other, the VM's
-speed changed between the two sets and moved the ratio by 0.1-0.2).
+speed changed between the two sets and moved the ratio by 0.1-0.2). With ``--mode deep``
+(or loose, tight, all) it also runs after each run of those modes, and pairs the run's
+whole-process CPU with ``pocket_trk``'s (scalar: PocketSDR has no other) on the same file,
+as issue 47's targets are stated; at any sample rate of the file (``-f`` from its sidecar,
+e.g. the studies' 2.5 MHz files)::
+
+    python scripts/bench.py run --if-file F60 --mode deep --repeat 3 --pocketsdr PATH
 
 ``run --mode deep|loose|tight|all`` (issue 13): the same file(s) through ``sdr-di run --mode
 MODE`` (``run_integrated``: scalar start-up, hand-over, integration loop, solution files; the
@@ -238,9 +244,13 @@ def _run_mode(path: Path, out: Path, mode: str, filt: str) -> dict:
 
 
 def _bench_modes(files: list[Path], modes: tuple[str, ...], args: argparse.Namespace,
-                 out: Path) -> dict[Path, dict[str, dict]]:
+                 out: Path, pocket: dict[tuple[Path, str], list] | None = None
+                 ) -> dict[Path, dict[str, dict]]:
     """Real-time factor of the integration modes on ``files`` (module notes); returns
-    ``{file: {mode: best run}}`` (least wall time: ``wall``, ``cpu``, ``profile``)."""
+    ``{file: {mode: best run}}`` (least wall time: ``wall``, ``cpu``, ``profile``). With
+    ``args.pocketsdr``, PocketSDR's ``pocket_trk`` runs on the same file right after each
+    run and the pair (the run's whole-process CPU s, ``pocket_trk``'s run) is appended to
+    ``pocket[(file, mode)]``."""
     print(f"integration modes, filter {args.filter}: x real time = file seconds per process "
           "wall second; per CPU s = file seconds per CPU second (user + sys, all threads); "
           "scalar: share of the run's wall time in the scalar receiver (deep: start-up only; "
@@ -267,6 +277,11 @@ def _bench_modes(files: list[Path], modes: tuple[str, ...], args: argparse.Names
                       f"{d / cpu:9.2f} {100 * p['scalar'] / tot:6.1f}% "
                       f"{100 * p['loop'] / tot:5.1f}% {lcpu} {tail} {r['handover_s']:11.2f} "
                       f"{r['maxrss'] / 2**20:12.1f}" + stolen_note(r))
+                if args.pocketsdr and pocket is not None:
+                    # right after each run, so that both see the same minutes of the VM
+                    g = _run_pocketsdr(args.pocketsdr, f, args.pocketsdr_tscale,
+                                       out / "pocketsdr")
+                    pocket.setdefault((f, mode), []).append((r["cpu_s"], g, _load()))
                 b = best.setdefault(f, {})
                 if mode not in b or wall < b[mode]["wall"]:
                     b[mode] = {"wall": wall, "cpu": r["cpu_s"], "profile": p,
@@ -378,6 +393,46 @@ def _run_pocketsdr(exe: str, path: Path, tscale: float, work: Path) -> dict:
             "stdout_tail": res.stdout[-4000:], "n_sat": len(prns)}
 
 
+def _load() -> float:
+    """The machine's 1-minute load average now (NaN where unknown)."""
+    return os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+
+
+def _file_rate_mhz(path: Path) -> float | None:
+    """Sample rate of a default-scenario IF file from its sidecar [MHz]; None without one."""
+    try:
+        meta = json.loads(Path(path).with_suffix(".json").read_text())
+        return float(meta["sampling_rate_hz"]) / 1e6
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+#: Issue 47's targets of the CPU ratio to ``pocket_trk``'s (scalar) CPU on the same file:
+#: ``{mode: ((MHz at or below which the first applies, target), (else, target))}``.
+_POCKET_TARGETS = {"scalar": ((2.5, 1.0), (None, 0.85)), "deep": ((2.5, 1.0), (None, 1.1))}
+
+
+def _print_pocket_pairs(f: Path, mode: str, pairs: list) -> None:
+    """The interleaved pairs of one file and mode (an sdr-di run's whole-process CPU s,
+    ``pocket_trk``'s run right after it, the load average then) and their mean ratio, with
+    issue 47's target for the file's rate."""
+    what = "sdr-di run" if mode == "scalar" else f"sdr-di run --mode {mode}"
+    for cpu, g, load in pairs:
+        print(f"  PocketSDR pocket_trk ({g['cmd']}) on {f.name}, right after {what} of "
+              f"{cpu:.1f} CPU s: {g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, "
+              f"{g['locked']} channels locked at the end, exit {g['rc']}; load average "
+              f"{load:.2f}; sdr-di / pocket_trk CPU = {cpu / g['cpu_s']:.2f}")
+    ratios = [cpu / g["cpu_s"] for cpu, g, _ in pairs]
+    mhz = _file_rate_mhz(f)
+    target = ""
+    if mode in _POCKET_TARGETS and mhz is not None:
+        (lim, t_low), (_, t_high) = _POCKET_TARGETS[mode]
+        target = f" (issue 47 target at {mhz:g} MHz: <= {t_low if mhz <= lim else t_high:g})"
+    print(f"  {what} / pocket_trk (scalar) CPU, {f.name}, {len(ratios)} interleaved pairs: "
+          f"mean {sum(ratios) / len(ratios):.2f}, {min(ratios):.2f}-{max(ratios):.2f}"
+          + target)
+
+
 def bench_run(args: argparse.Namespace) -> None:
     """Scalar receiver real-time factor, per-stage shares and peak memory on default-scenario
     files (generated for each duration, or ``--if-file``); issue 17's target 2 per file, with
@@ -388,10 +443,10 @@ def bench_run(args: argparse.Namespace) -> None:
                          "file")
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="sdr-di-bench-"))
     try:
-        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-        print(f"machine: {os.cpu_count()} cores, load average {load:.2f} at start; scalar "
-              f"receiver, default scenario, 7 satellites, 25 MHz, {args.bits}-bit iq_int8, "
-              "PVT at 5 Hz")
+        rate = (f"{_file_rate_mhz(Path(args.if_file)) or float('nan'):g} MHz "
+                f"({Path(args.if_file).name})" if args.if_file else f"25 MHz, {args.bits}-bit")
+        print(f"machine: {os.cpu_count()} cores, load average {_load():.2f} at start; scalar "
+              f"receiver, default scenario, 7 satellites, {rate} iq_int8, PVT at 5 Hz")
         print_bytecode_note()
         print("x real time: file seconds per wall second of the whole process (imports, "
               "acquisition, tracking, PVT, output); tracking: of the tracking loop alone; "
@@ -415,7 +470,8 @@ def bench_run(args: argparse.Namespace) -> None:
                 files.append(sub / "bench.bin")
         modes = ("deep", "loose", "tight") if args.mode == "all" else (
             () if args.mode == "scalar" else (args.mode,))
-        mode_best = _bench_modes(files, modes, args, out) if modes else {}
+        pocket: dict[tuple[Path, str], list] = {}   # {(file, mode): [(CPU s, run, load)]}
+        mode_best = _bench_modes(files, modes, args, out, pocket) if modes else {}
         searches = () if args.mode not in ("scalar", "all") else (
             ("cold", "assisted") if args.search == "both" else (args.search,))
         if args.mode == "all":
@@ -423,7 +479,6 @@ def bench_run(args: argparse.Namespace) -> None:
         if searches:
             print(scalar_head)
         best: dict[Path, dict] = {}
-        pocket: dict[Path, list] = {}     # {file: [(sdr-di CPU s, pocket_trk run)]}
         for f, search in ((f, s) for f in files for s in searches):
             for _ in range(args.repeat):
                 r = _run_receiver(f, out / "run", search)
@@ -448,7 +503,7 @@ def bench_run(args: argparse.Namespace) -> None:
                     # right after each run, so that both see the same minutes of the VM
                     g = _run_pocketsdr(args.pocketsdr, f, args.pocketsdr_tscale,
                                        out / "pocketsdr")
-                    pocket.setdefault(f, []).append((r["cpu_s"], g))
+                    pocket.setdefault((f, "scalar"), []).append((r["cpu_s"], g, _load()))
         if searches:
             print("stage shares: % of the process wall time (other: imports, numba cache "
                   "loading, setup, output files)")
@@ -469,24 +524,15 @@ def bench_run(args: argparse.Namespace) -> None:
                       f"{g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, {g['tracked']} of "
                       f"{g['n_sat']} channels tracking, exit {g['rc']}; sdr-di / GNSS-SDR wall "
                       f"= {b['wall'] / g['wall_s']:.2f} (target <= {_RUN_TARGET_GNSS_SDR:g})")
-        for f, pairs in pocket.items():
-            for cpu, g in pairs:
-                print(f"  PocketSDR pocket_trk ({g['cmd']}) on the same file, right after an "
-                      f"sdr-di run of {cpu:.1f} CPU s: {g['wall_s']:.2f} s wall, CPU "
-                      f"{g['cpu_s']:.1f} s, {g['locked']} channels locked at the end, exit "
-                      f"{g['rc']}; sdr-di / pocket_trk CPU = {cpu / g['cpu_s']:.2f}")
-            ratios = [cpu / g["cpu_s"] for cpu, g in pairs]
-            print(f"  sdr-di / pocket_trk CPU, {len(ratios)} interleaved pairs: mean "
-                  f"{sum(ratios) / len(ratios):.2f}, {min(ratios):.2f}-{max(ratios):.2f} "
-                  "(issue 29 target <= 1)")
+        for (f, mode), pairs in pocket.items():
+            _print_pocket_pairs(f, mode, pairs)
             if args.pocketsdr_show:
                 print(pairs[-1][1]["stdout_tail"])
         if args.mode == "all":
             for f, b in best.items():
                 _print_target4(f, b, mode_best.get(f, {}), args.repeat)
-        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
         print(speed_line("at the end"))
-        print(f"load average {load:.2f} at the end")
+        print(f"load average {_load():.2f} at the end")
     finally:
         if not args.keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -511,7 +557,8 @@ def main(argv: list[str] | None = None) -> None:
                    help="also time GNSS-SDR (scripts/gnss_sdr_b3i.conf) on each file")
     r.add_argument("--pocketsdr", default=None, metavar="PATH",
                    help="also run PocketSDR's pocket_trk (PATH) on the same file after each "
-                   "assisted run (CPU time in interleaved pairs; issue 29)")
+                   "assisted scalar run and each --mode deep/loose/tight run (CPU time in "
+                   "interleaved pairs; issues 29 and 47)")
     r.add_argument("--pocketsdr-tscale", type=float, default=2.0,
                    help="pocket_trk's -tscale (replay speed, x real time; default 2)")
     r.add_argument("--pocketsdr-show", action="store_true",

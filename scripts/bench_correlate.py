@@ -20,7 +20,9 @@ first). Kernels:
   (:func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_bits`) called as the scalar
   receiver and the deep loop call it: stored 4-bit-in-int8 samples, bit windows packed
   once, one kernel call for all channels, NCO values given directly. On ``int8`` samples it
-  runs the integer kernel (:mod:`~sdr_di.receiver._numba_correlate_int`);
+  runs the integer kernel (:mod:`~sdr_di.receiver._numba_correlate_int`) at 11 MHz or
+  more, below about 10.6 MHz the low-rate kernel
+  (:mod:`~sdr_di.receiver._numba_correlate_gather`);
 * ``recv_f32``: the same calls on the float32 kernel
   (:func:`~sdr_di.receiver._numba_correlate_bits.correlate_epl_float`, the reference path,
   what ``receiver`` ran before the integer kernel).

@@ -4,8 +4,9 @@
 variable                   meaning                                                      used by
 =========================  ===========================================================  =====================================
 ``SDR_DI_CORRELATOR``      ``int`` (default): the integer correlator kernel for int8      :data:`sdr_di.receiver._numba_correlate_bits.INTEGER_PATH`
-                           samples; ``float``: the float32 reference kernel for every    (read when that module is imported)
-                           input (docs/notes/correlator.md)
+                           samples, the low-rate kernel below ~10.6 MHz; ``float``:      and ``GATHER_PATH`` (read when that
+                           the float32 reference kernel for every input                  module is imported)
+                           (docs/notes/correlator.md)
 ``SDR_DI_KERNEL_THREADS``  threads of the correlation kernels (default: chosen per       :class:`sdr_di.receiver.threads.KernelThreads`
                            call size from measured costs)
 ``SDR_DI_LOOP_THREAD``     ``1``: the integration loop runs on a thread of the run's     :meth:`sdr_di.integration.loop_process.LoopChild.start`

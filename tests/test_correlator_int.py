@@ -176,9 +176,10 @@ def test_dispatch_and_agreement_with_float_kernel(monkeypatch):
     assert abs(p_i / p_f - 1) < 1e-3
 
 
-def test_low_rate_int8_stays_on_float_kernel():
+def test_low_rate_int8_stays_off_the_integer_kernel(monkeypatch):
     """At 2.5 MHz (code step 4.1 chips per sample) the integer kernel's runs are 14 samples
-    and it is the slower one: the dispatcher keeps the float32 kernel."""
+    and it is the slower one: the dispatcher takes the low-rate kernel
+    (``receiver/_numba_correlate_gather.py``), or the float32 one when that is off."""
     rng = np.random.default_rng(9)
     fs = 2.5e6
     table, start, nsamp, theta0, dchip, phi0, dphi = _case(rng, 2, fs, n_rows=2)
@@ -189,7 +190,11 @@ def test_low_rate_int8_stays_on_float_kernel():
     idx = np.arange(start.size, dtype=np.int64)
     args = (xs, n_comp, bit_windows(table), idx, CODE_PAD, L, start, nsamp, theta0, dchip,
             phi0, dphi, rot_re, rot_im, idx, 0.5, 1)
-    o_disp, o_flt = np.empty((2, 3, 2)), np.empty((2, 3, 2))
+    o_disp, o_gat, o_flt = (np.empty((2, 3, 2)) for _ in range(3))
+    kb.correlate_epl_bits(*args, o_disp)
+    kb.correlate_epl_gather(*args, o_gat)
+    np.testing.assert_array_equal(o_disp, o_gat)
+    monkeypatch.setattr(kb, "GATHER_PATH", False)
     kb.correlate_epl_bits(*args, o_disp)
     kb.correlate_epl_float(*args, o_flt)
     np.testing.assert_array_equal(o_disp, o_flt)

@@ -6,6 +6,7 @@ import pytest
 from sdr_di.errors import UnknownPrnError
 from sdr_di.receiver import _numba_correlate_bits
 from sdr_di.receiver._numba_correlate_bits import correlate_epl_bits, mean_power
+from sdr_di.receiver._numba_correlate_gather import correlate_epl_gather
 from sdr_di.receiver._numba_correlate_int import ROT_SCALE
 from sdr_di.receiver.correlator import (
     CARRIER_BLOCK,
@@ -31,8 +32,10 @@ TOL = 2e-6
 @pytest.fixture(autouse=True)
 def _float_kernel(monkeypatch):
     """These tests hold the float32 kernel to float64 references; int8 samples would take the
-    integer kernel, which has its own tests (tests/test_correlator_int.py)."""
+    integer kernel, which has its own tests (tests/test_correlator_int.py), and rows below
+    about 10.6 MHz the low-rate kernel (its tests below: ``test_gather_kernel_*``)."""
     monkeypatch.setattr(_numba_correlate_bits, "INTEGER_PATH", False)
+    monkeypatch.setattr(_numba_correlate_bits, "GATHER_PATH", False)
 
 
 def reference_epl(x, codes, theta0, rate, phi0, fc, n, fs, d, start):
@@ -210,6 +213,75 @@ def test_receiver_kernel_on_stored_samples_matches_numpy_reference(fs, complex_i
         np.testing.assert_allclose(got, ref, rtol=TOL, atol=TOL * scale)
     assert mean_power(xs, n_comp) == pytest.approx(np.mean(np.abs(x.astype(complex)) ** 2),
                                                     rel=1e-12)
+
+
+def _stored_case(rng, fs, complex_input, dtype, n_ch=5, n_block=60_000):
+    """Stored samples (``dtype``, I/Q interleaved when complex) and random NCO rows for the
+    receiver's kernel entry, with their float64 reference sums."""
+    n_comp = 2 if complex_input else 1
+    xs = rng.integers(-100, 100, n_block * n_comp).astype(dtype)
+    x = xs.astype(np.float32)
+    if complex_input:
+        x = x.view(np.complex64)
+    codes = rng.choice(np.array([-1, 1], np.int8), size=(n_ch, L))
+    theta0 = rng.uniform(0, L, n_ch)
+    rate = 10.23e6 * (1.0 + rng.uniform(-5e-5, 5e-5, n_ch))
+    phi0 = rng.uniform(0, 1, n_ch)
+    fc = rng.uniform(-6e3, 6e3, n_ch) + (0.0 if complex_input else fs / 4)
+    n = rng.integers(20_000, 50_000, n_ch)
+    start = np.array([rng.integers(0, n_block - m + 1) for m in n])
+    rot_re, rot_im = carrier_rotation(fc / fs)
+    idx = np.arange(n_ch, dtype=np.int64)
+    args = (xs, n_comp, bit_windows(padded_replicas(codes)), idx, CODE_PAD, L,
+            start.astype(np.int64), n.astype(np.int64), theta0, rate / fs, phi0, fc / fs,
+            rot_re, rot_im, idx)
+    return args, x, codes, theta0, rate, phi0, fc, n, start
+
+
+@pytest.mark.parametrize(("fs", "complex_input", "dtype", "spacing"), [
+    (2.5e6, True, np.int8, 0.5),    # the studies' files
+    (2.5e6, True, np.float32, 0.0),
+    (5e6, False, np.int16, 1.0),    # real IF
+    (2.5e6, True, np.int8, 3.0),    # a wide spacing: E and L 6 chips apart in one word
+])
+def test_gather_kernel_matches_numpy_reference(fs, complex_input, dtype, spacing):
+    """The low-rate kernel (one bit-window word per sample) equals the float64 reference
+    within the float32 kernel's tolerance, for any task split."""
+    rng = np.random.default_rng(int(fs) % 997 + int(10 * spacing))
+    args, x, codes, theta0, rate, phi0, fc, n, start = _stored_case(rng, fs, complex_input,
+                                                                     dtype)
+    ref = reference_epl(x, codes, theta0, rate, phi0, fc, n, fs, spacing, start)
+    scale = np.sqrt(n.max()) * 100
+    for n_sub in (1, 3):
+        out = np.empty((n.size, 3, 2))
+        correlate_epl_gather(*args, spacing, n_sub, out)
+        got = out[..., 0] + 1j * out[..., 1]
+        np.testing.assert_allclose(got, ref, rtol=TOL, atol=TOL * scale)
+
+
+def test_gather_kernel_dispatch_and_agreement_with_float_kernel(monkeypatch):
+    """Below about 10.6 MHz the kernel entry takes the low-rate kernel (unless forced off),
+    at 25 MHz the float32 one; at 2.5 MHz the two differ only by float32 rounding (their
+    sums run over other spans), well within 2e-6 of the sums' noise level, and the low-rate
+    kernel is not the float32 one by another name."""
+    assert _numba_correlate_bits.gather_kernel_pays(0.5, 10.23e6 / 2.5e6)
+    assert _numba_correlate_bits.gather_kernel_pays(0.5, 10.23e6 / 10e6)
+    assert not _numba_correlate_bits.gather_kernel_pays(0.5, 10.23e6 / 12.5e6)
+    assert not _numba_correlate_bits.gather_kernel_pays(0.5, 10.23e6 / 25e6)
+    rng = np.random.default_rng(12)
+    args, *_, n, _ = _stored_case(rng, 2.5e6, True, np.int8)
+    o_gat, o_flt, o_disp, o_forced = (np.empty((n.size, 3, 2)) for _ in range(4))
+    correlate_epl_gather(*args, 0.5, 1, o_gat)
+    _numba_correlate_bits.correlate_epl_float(*args, 0.5, 1, o_flt)
+    monkeypatch.setattr(_numba_correlate_bits, "GATHER_PATH", True)
+    correlate_epl_bits(*args, 0.5, 1, o_disp)
+    monkeypatch.setattr(_numba_correlate_bits, "GATHER_PATH", False)
+    correlate_epl_bits(*args, 0.5, 1, o_forced)
+    np.testing.assert_array_equal(o_disp, o_gat)
+    np.testing.assert_array_equal(o_forced, o_flt)
+    assert not np.array_equal(o_gat, o_flt)
+    noise = 100 * np.sqrt(n)[:, None, None]
+    assert np.abs(o_gat - o_flt).max() / noise.min() < TOL
 
 
 @pytest.mark.parametrize("kind", ["complex128", "float64", "int16", "int8", "strided_complex64"])
@@ -578,10 +650,11 @@ codes = padded_replicas(np.where(rng.random((5, 10230)) < 0.5, -1.0, 1.0))
 z = (rng.normal(size=40000) + 1j * rng.normal(size=40000)) * 20
 x = z.astype(np.complex64) if sys.argv[1] == "float32" else \\
     np.clip(z.real, -127, 127).astype(np.int8)
+fs = float(sys.argv[2])
 h = hashlib.sha1()
 for k in range(3):
     r = correlate_table(x, codes, 10230, rng.uniform(0, 10230, 5), 10.23e6 + rng.normal(size=5),
-                        rng.random(5), rng.normal(size=5) * 3000, 25000, 25e6, 0.5,
+                        rng.random(5), rng.normal(size=5) * 3000, round(fs / 1e3), fs, 0.5,
                         start_sample=rng.integers(0, 15000, 5))
     for v in (r.early, r.prompt, r.late):
         h.update(np.ascontiguousarray(v).tobytes())
@@ -589,9 +662,10 @@ print(h.hexdigest())
 """
 
 
-@pytest.mark.parametrize("kind, kernel", [("float32", "correlate_epl_float"),
-                                          ("int8", "correlate_epl_int8")])
-def test_kernels_compiled_here_equal_the_cached_ones(tmp_path, kind, kernel):
+@pytest.mark.parametrize("kind, kernel, fs", [("float32", "correlate_epl_float", 25e6),
+                                              ("int8", "correlate_epl_int8", 25e6),
+                                              ("int8", "correlate_epl_gather", 2.5e6)])
+def test_kernels_compiled_here_equal_the_cached_ones(tmp_path, kind, kernel, fs):
     """A kernel compiled in this process and the same kernel loaded from numba's cache by the
     next one give the same sums bit for bit, so a run's outputs do not depend on whether it
     is the first after an install (module notes of ``receiver._numba_correlate_bits``:
@@ -603,7 +677,8 @@ def test_kernels_compiled_here_equal_the_cached_ones(tmp_path, kind, kernel):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
 
     def digest() -> str:
-        res = subprocess.run([sys.executable, "-c", _KERNEL_DIGEST, kind], capture_output=True,
+        res = subprocess.run([sys.executable, "-c", _KERNEL_DIGEST, kind, str(fs)],
+                             capture_output=True,
                              text=True, env=env, timeout=300)
         assert res.returncode == 0, res.stderr
         return res.stdout.strip()

@@ -245,6 +245,11 @@ def test_nav_file_round_trip_ours_and_georinex(tmp_path):
     w = rw.RinexNavWriter(path, creation_time=CREATED)
     assert w.update(order[:5], KLOB, t_tx_sow=None) == 5
     assert w.update({o.prn: o for o in order[:5]}) == 0                # each record once
+    other = rw.RinexNavWriter(tmp_path / "y_nav.rnx", creation_time=CREATED)
+    assert other.add(order[0])
+    assert not other.add(dataclasses.replace(order[0]))  # an equal record, another object
+    assert other.add(dataclasses.replace(order[0], URAI=order[0].URAI + 1))
+    other.abort()
     for r in order[5:]:
         assert w.add(r, t_tx_sow=r.toe + 18.0)
     assert not path.exists()

@@ -6,9 +6,13 @@ correlate_table`, ``correlate``, ``Correlator``) all call :func:`correlate_epl_b
 runs the float32 kernel :func:`correlate_epl_float` described here, or, for ``int8``
 samples, its integer twin :func:`~sdr_di.receiver._numba_correlate_int.correlate_epl_int8`
 (same blocks, runs, bit windows and block phasor; int16 wipe-off with a rounded rotation
-table, sign-flip code, int32 sums: its module notes). :data:`INTEGER_PATH` (environment
-``SDR_DI_CORRELATOR=float``) forces the float32 kernel as the reference. Plain arrays in and
-out; the NCO values are given per row.
+table, sign-flip code, int32 sums: its module notes), and, at low sample rates (B3I below
+about 10.6 MHz, whatever the sample type), its low-rate twin
+:func:`~sdr_di.receiver._numba_correlate_gather.correlate_epl_gather` (one bit-window word
+per sample instead of runs, which are about 30 samples long at 2.5 MHz: its module notes).
+:data:`INTEGER_PATH` and :data:`GATHER_PATH` (environment ``SDR_DI_CORRELATOR=float``)
+force the float32 kernel as the reference. Plain arrays in and out; the NCO values are given
+per row.
 
 For row ``r`` and sample ``k = 0 .. n_r - 1`` of its interval (sample ``start_r + k``):
 
@@ -100,14 +104,20 @@ from numba import njit, prange
 
 from ..settings import integer_correlator
 from ._numba_correlate_blocks import add_task_parts, code_wrap_split, rotate_block
+from ._numba_correlate_gather import correlate_epl_gather, gather_kernel_pays
 from ._numba_correlate_int import correlate_epl_int8, int_kernel_pays
 
 
 #: Use the integer kernel (:mod:`~sdr_di.receiver._numba_correlate_int`) for ``int8``
 #: samples. Environment ``SDR_DI_CORRELATOR=float`` (read at import,
-#: :func:`sdr_di.settings.integer_correlator`) or setting this to False forces the float32
-#: kernel for every input (the reference path).
+#: :func:`sdr_di.settings.integer_correlator`) or setting this and :data:`GATHER_PATH` to
+#: False forces the float32 kernel for every input (the reference path).
 INTEGER_PATH = integer_correlator()
+#: Use the low-rate kernel (:mod:`~sdr_di.receiver._numba_correlate_gather`) where its
+#: runs would be short (:func:`~sdr_di.receiver._numba_correlate_gather.
+#: gather_kernel_pays`); ``SDR_DI_CORRELATOR=float`` sets it False, as it does
+#: :data:`INTEGER_PATH`.
+GATHER_PATH = INTEGER_PATH
 
 #: Entries of the padded table one run may span (two 64-bit words, minus a safety margin).
 _SPAN = 124.0
@@ -156,11 +166,19 @@ def correlate_epl_bits(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, t
     for ``int8`` samples when :data:`INTEGER_PATH` is set (the default) and every row's runs
     are long enough for it to be the faster one (:func:`~sdr_di.receiver.
     _numba_correlate_int.int_kernel_pays`: code step at most about 0.9 chip per sample, i.e.
-    B3I sampled at 11 MHz or more), else the float32 kernel :func:`correlate_epl_float`."""
-    if (INTEGER_PATH and xs.dtype == np.int8 and dchip.size
-            and int_kernel_pays(spacing, float(dchip.max()))):
+    B3I sampled at 11 MHz or more), the low-rate kernel :func:`~sdr_di.receiver.
+    _numba_correlate_gather.correlate_epl_gather` for any samples when :data:`GATHER_PATH`
+    is set and some row's code step is above about 0.96 chip per sample (B3I below about
+    10.6 MHz: :func:`~sdr_di.receiver._numba_correlate_gather.gather_kernel_pays`), else the
+    float32 kernel :func:`correlate_epl_float`."""
+    dchip_max = float(dchip.max()) if dchip.size else 0.0
+    if INTEGER_PATH and xs.dtype == np.int8 and dchip.size and int_kernel_pays(spacing,
+                                                                               dchip_max):
         correlate_epl_int8(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, theta0,
                            dchip, phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out)
+    elif GATHER_PATH and gather_kernel_pays(spacing, dchip_max):
+        correlate_epl_gather(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, theta0,
+                             dchip, phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out)
     else:
         correlate_epl_float(xs, n_comp, bits, tab_idx, pad, code_len, start, nsamp, theta0,
                             dchip, phi0, dphi, rot_re, rot_im, rot_idx, spacing, n_sub, out)
