@@ -325,7 +325,8 @@ def _add_run(sub) -> None:
     g.add_argument("--deep-measurements", choices=_DEEP_MEASUREMENTS, default=None,
                    help="deep: what each channel hands the integration filter: 'prefilter' "
                    "(default, paper 004's cascaded pre-filters), 'reset' (pre-filters "
-                   "restarted from an uninformative prior every interval) or "
+                   "whose output is only what they measured since the last fusion, "
+                   "restarted after each, --fusion-rate) or "
                    "'discriminator' (the interval's discriminator outputs; docs/deep.md)")
     g.add_argument("--fusion-rate", type=float, default=None, metavar="HZ",
                    help="deep, --deep-measurements reset: rate of the filter's updates with "
