@@ -333,12 +333,17 @@ def run_integrated(source: IfSource, out_dir: str | Path, *,
                               "{postfix}]", postfix="; ".join(filter(None, [
                                   "scalar start-up: acquisition", first_use_note()])))
 
+        shown = {"stage": None}
+
         def cb(done, n_ch, n_used):
+            # A new stage is drawn at once; other reports follow tqdm's refresh interval.
             rt = done / max(time.perf_counter() - t_wall, 1e-9)
-            bar.set_postfix_str(f"x{rt:.2f} real time, " + _progress_stage(cfg.mode, n_ch,
-                                                                             n_used),
-                                refresh=False)
+            stage = _progress_stage(cfg.mode, n_ch, n_used)
+            bar.set_postfix_str(f"x{rt:.2f} real time, {stage}", refresh=False)
             bar.update(round(done - bar.n, 3))
+            if stage != shown["stage"]:
+                shown["stage"] = stage
+                bar.refresh()
 
     try:
         rx = IntegratedReceiver(cfg, scalar=None if tracking is None
