@@ -2,6 +2,7 @@
 
 import csv
 import functools
+import math
 import json
 from pathlib import Path
 
@@ -243,3 +244,21 @@ def test_acquire_resolves_the_500_hz_doppler_ambiguity(monkeypatch):
                             lambda *a, off=off: (good(*a)[0] + off, True))
         r = acquire(x, fs, prns=[8], noncoherent=40)[0]
         assert r.detected and abs(r.doppler_hz - 1234.0) < 25.0, (off, r)
+
+
+@pytest.mark.parametrize("fs", [2.5003e6, 16.3676e6])
+def test_acquire_when_a_code_period_is_not_a_whole_number_of_samples(fs):
+    """At 2.5003 MHz a 1 ms block of round(fs / 1000) samples ends 0.3 sample (1.2 chips)
+    short of the code period, 48 chips over 40 blocks: before the block alignment took the
+    rounded length into account, nothing was detected; the code phase then read the circular
+    lag on the block's short side (1.2 chips off) and the refinement went astray (300 Hz).
+    16.3676 MHz is a real front end's rate (NordNav, 0.6 sample short)."""
+    rng = np.random.default_rng(11)
+    sats = [(10, 40.0, -1031.9, 104.02, 0.2), (13, 40.0, 142.2, 1354.85, 0.5),
+            (5, 40.0, -0.1, 8000.3, 0.1), (28, 40.0, -1698.2, 3770.18, 0.9)]
+    i, q = synth(sats, fs, 0.0, int(math.ceil(40.5e-3 * fs)), True, rng)
+    x = (i + 1j * q).astype(np.complex64)
+    res = acquire(x, fs, prns=[s[0] for s in sats] + [1, 30], noncoherent=40)
+    _check(res, sats, [1, 30])
+    coarse = acquire(x, fs, prns=[10], noncoherent=40, refine=False)[0]
+    assert coarse.detected and _code_err(coarse.code_phase_chips, 104.02) < 0.4, coarse

@@ -11,8 +11,10 @@ circular correlation with the replica is ``R_b(tau) = IFFT(X_b conj(C))``, all c
 ``tau`` (samples) at once. The replica FFT per PRN, sample rate and block length is cached.
 
 Code Doppler (``fd / f_carrier`` of the chip rate, 4 ppm at 5 kHz) is handled two ways:
-across blocks, the power of block ``b`` is shifted by ``round(b N_c fd / f_carrier)`` samples
-before summation (the code drifts 0.8 chip over 20 ms at 5 kHz); within a block the replica is
+across blocks, the power of block ``b`` is shifted by ``round(b (N_c - M fs / 1000 / (1 +
+fd / f_carrier)))`` samples before summation, the code phase that block ``b`` starts at (the code
+drifts 0.8 chip over 20 ms at 5 kHz; where ``fs`` is not a multiple of 1 kHz the rounded
+``N_c`` alone drifts up to half a sample per block); within a block the replica is
 resampled at ``10.23e6 (1 + fd / f_carrier)`` chips/s for that bin when the smear over the block
 exceeds 0.1 chip (coherent blocks longer than about 2 ms at 5 kHz), otherwise the nominal-rate
 replica is used.
@@ -481,7 +483,10 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
                 ph -= np.floor(ph)
                 wipe = np.exp(-2j * np.pi * ph).astype(np.complex64)
                 xf = scipy.fft.fft(blocks * wipe, axis=1, workers=workers, overwrite_x=True)
-                shifts = np.rint(eps * b_idx * n_c).astype(np.int64)
+                # block b starts b (n_c - M periods) samples further into the code: code
+                # Doppler, and a period of a non-integer number of samples (fs not a multiple
+                # of 1 kHz, e.g. 16.3676 MHz) that a rounded n_c leaves behind
+                shifts = np.rint(b_idx * (n_c - m_ms * 1e-3 * fs_g / (1.0 + eps))).astype(np.int64)
                 resample = abs(eps) * CHIP_RATE_B3I * t_c > 0.1
                 rate = CHIP_RATE_B3I * (1.0 + eps) if resample else CHIP_RATE_B3I
                 cfs = {ip: _replica_fft(codes[batch[ip]], fs_g, n_c, rate, workers)
@@ -633,7 +638,13 @@ def _evaluate(s: np.ndarray, prn: int, dopplers: np.ndarray, x: np.ndarray, fs: 
         tau_f += _parabola(float(s[j, (tau - 1) % n_lags]), float(s[j, tau]),
                            float(s[j, (tau + 1) % n_lags]))
     rate = CHIP_RATE_B3I * (1.0 + fd / carrier_hz)
-    theta = float(np.mod(-tau_f * rate / (fs * u), code_len))
+    # The correlation is circular over the block's n_c samples, not over a code period
+    # (n_c fs / rate chips differ from a whole number of periods by code Doppler and, where
+    # fs is not a multiple of 1 kHz, by the rounded n_c): the samples on the longer side of
+    # the lag set the phase. The late side (k < tau) is the longer one beyond half a block.
+    n_grid = n_c * u
+    tau_s = tau_f - n_grid if tau_f > 0.5 * n_grid else tau_f
+    theta = float(np.mod(-tau_s * rate / (fs * u), code_len))
     cn0 = math.nan
     refined = False
     notes: list[str] = []
