@@ -10,8 +10,9 @@ Usage::
                                         [--duration 30] [--t-step 15] [--t0 17] [--csv FILE]
                                         [--ensemble]
 
-For every seed and C/N0 the default scenario (``signals/default.toml``; the seed draws the
-IMU errors and the signal noise; truth IMU and oscillator equal to the assumed ones) is
+For every seed and C/N0 the default scenario (``signals/default.toml``, or ``--scenario``; the
+seed draws the IMU errors and the signal noise; truth IMU and oscillator equal to the assumed
+ones unless the scenario says otherwise) is
 generated once at ``--fs`` for ``--duration`` s
 (:class:`~sdr_di.experiments._deep.generated_inputs`, the experiments' generator and file
 cache), and every mode x filter runs on those files with
@@ -77,7 +78,7 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
     recs = []
     for cn0 in args.cn0:
         for seed in args.seeds:
-            sc = load_scenario(DEFAULT_SCENARIO).with_overrides(
+            sc = load_scenario(args.scenario or DEFAULT_SCENARIO).with_overrides(
                 seed=seed, duration_s=args.duration, sampling_rate_hz=args.fs, cn0_dbhz=40.0)
             if cn0 < 40.0:
                 sc = with_outages(sc, [{"prn": "all", "start_s": args.t_step,
@@ -94,7 +95,8 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
                     t0 = time.perf_counter()
                     try:
                         kw = {"deep_measurements": arch} if arch else {}
-                        dr = run_deep_variant(inp, f, mode=mode, filter_rate_hz=rate, **kw)
+                        dr = run_deep_variant(inp, f, mode=mode, filter_rate_hz=rate,
+                                              assume=assume_dict(args.assume), **kw)
                         rec["error"] = dr.error or ""
                     except Exception as exc:  # noqa: BLE001 - a failed cell, named
                         rec["error"] = f"{type(exc).__name__}: {exc}"
@@ -116,6 +118,21 @@ def run_grid(args: argparse.Namespace) -> list[dict]:
                           + f" ({rec['wall_s']:.0f} s)", file=sys.stderr, flush=True)
                     recs.append(rec)
     return recs
+
+
+def assume_dict(pairs: list[str] | None) -> dict | None:
+    """``["imu.grade=tactical", "imu.bias_time_s=600"]`` -> the filter's assumptions as a
+    study cell's ``assume`` (numbers where they parse as numbers)."""
+    if not pairs:
+        return None
+    out: dict = {}
+    for pair in pairs:
+        key, _, text = pair.partition("=")
+        try:
+            out[key.strip()] = float(text)
+        except ValueError:
+            out[key.strip()] = text.strip()
+    return out
 
 
 def run_series(res, t0: float) -> dict:
@@ -222,7 +239,8 @@ def ensemble_table(rows: list[dict], args: argparse.Namespace) -> str:
 
 def table(recs: list[dict], args: argparse.Namespace) -> str:
     """Markdown table: mean over the seeds per mode x C/N0 x filter (module notes)."""
-    lines = [f"{args.duration:g} s at {args.fs / 1e6:g} MHz, default scenario, 40 dB-Hz "
+    scen = getattr(args, "scenario", None) or "default scenario"
+    lines = [f"{args.duration:g} s at {args.fs / 1e6:g} MHz, {scen}, 40 dB-Hz "
              f"then the level from {args.t_step:g} s; window {args.t0:g} s to the end; mean "
              "over the seeds that ran (n); expected value 1.", "",
              "| mode | C/N0 [dB-Hz] | filter | rate [Hz] | architecture | n | failed | "
@@ -264,6 +282,12 @@ def main(argv=None) -> int:
     p.add_argument("--filter-rates", nargs="+", type=float, default=[50.0],
                    help="integration filter rates [Hz] (default 50)")
     p.add_argument("--fs", type=float, default=2.5e6)
+    p.add_argument("--scenario", default=None, metavar="FILE.toml",
+                   help="the base scenario (default signals/default.toml), e.g. one whose "
+                   "[imu] names a grade, so that each seed draws its own unit")
+    p.add_argument("--assume", nargs="+", default=None, metavar="KEY=VALUE",
+                   help="the filter's assumptions as a study cell's assume keys, e.g. "
+                   "imu.grade=tactical (docs/assumptions.md)")
     p.add_argument("--duration", type=float, default=30.0)
     p.add_argument("--t-step", type=float, default=15.0,
                    help="time of the C/N0 step [s of file] (after the hand-over, ~12.2 s)")
