@@ -180,6 +180,29 @@ def test_each_architecture_tracks_a_geo_channel_in_the_vector_loop(geo_file, tmp
         assert ("measurements" in head) == (arch != "prefilter"), head
 
 
+def test_a_geo_channel_is_tracked_and_used_in_scalar_and_tight(geo_file, tmp_path, capsys):
+    """Issue 46 item 3 beside the deep test above: on the same file the scalar receiver
+    tracks C05 (D2, 2 ms bits), writes its observations and fixes with all seven
+    satellites, and tight mode keeps C05's range and rate in its measurement vector on
+    every update (measured: 39 of 99 scalar epochs with 7 satellites; tight position RMSE
+    0.70 m, velocity 0.017 m/s)."""
+    out = tmp_path / "scalar"
+    assert main(["run", str(geo_file / "g.bin"), "--no-progress", "--out", str(out)]) == 0
+    obs = (out / "g_obs.rnx").read_text()
+    assert "C05 " in obs.split("END OF HEADER")[1], "no C05 observation"
+    rows = [ln.split(",") for ln in (out / "g_pvt.csv").read_text().splitlines()
+            if ln and not ln.startswith("#")]
+    n_sats = [int(r[rows[0].index("n_sats")]) for r in rows[1:]]
+    assert n_sats.count(7) >= 20, n_sats
+    out = tmp_path / "tight"
+    assert main(["run", str(geo_file / "g.bin"), "--mode", "tight", "--no-progress",
+                 "--out", str(out)]) == 0
+    s = json.loads((out / "g_tight_summary.json").read_text())
+    assert 5 in s["prns"] and s["used_fraction"][s["prns"].index(5)] == 1.0, s["prns"]
+    assert s["metrics"]["pos_m_rmse"] < 1.5 and s["metrics"]["vel_mps_rmse"] < 0.05
+    capsys.readouterr()
+
+
 def test_architecture_is_a_study_factor():
     """A study spec crosses cells with ``deep_measurements`` (the experiment parameter the
     run hands to the receiver); a value that is not an architecture is refused."""
