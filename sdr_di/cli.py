@@ -723,7 +723,8 @@ def _cmd_study(args: argparse.Namespace) -> int:
           f"{res.elapsed_s:.1f} s")
     for c in (res.tuning or {}).values():
         where = f" in {c.cell}" if c.cell else ""
-        print(f"tuned: {c.filter}{where} -> {c.entry} (training score {c.score:.4g})")
+        edge = f"; on the grid's edge: {', '.join(c.edge)}" if c.edge else ""
+        print(f"tuned: {c.filter}{where} -> {c.entry} (training score {c.score:.4g}{edge})")
     for r in res.failed:
         print(f"  failed: {r['cell']} seed {r['seed_index']} {r['filter']}: {r['error']}",
               file=sys.stderr)

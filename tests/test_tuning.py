@@ -251,3 +251,38 @@ def test_mean_ratio_of_the_report_and_the_comparison_is_one_function():
                       for n in names})
     c.log_mean = 800.0
     assert c.ratio == math.inf
+
+
+def test_the_cli_says_when_a_tuned_point_lies_on_the_grid_edge(tmp_path, capsys):
+    """``sdr-di study`` prints each tuned entry; one on an edge of its grid (cell b's optimum
+    q_scale = 8 is the grid's highest value) says so, as tuning.csv's ``edge`` does."""
+    from sdr_di.cli import main
+
+    spec = tmp_path / "toy.toml"
+    spec.write_text("""
+[study]
+name = "toy"
+experiment = "test-tuning-toy"
+runs = 3
+filters = ["ekf", "ukf"]
+baseline = "ekf"
+[[cells]]
+name = "a"
+cell = "a"
+[[cells]]
+name = "b"
+cell = "b"
+opt = 8.0
+[tuning]
+base_seed = 7
+runs = 4
+criterion = "mean_log_pos_rmse"
+per_cell = true
+grid = { ekf = { q_scale = [0.5, 2.0, 8] } }
+""")
+    assert main(["study", str(spec), "--out", str(tmp_path / "out"), "--workers", "0"]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("tuned:")]
+    a = next(ln for ln in lines if " in a " in ln)
+    b = next(ln for ln in lines if " in b " in ln)
+    assert "q_scale=2" in a and "edge" not in a, a
+    assert "q_scale=8" in b and "on the grid's edge: q_scale (highest)" in b, b
