@@ -10,8 +10,9 @@ quantity, one table: a row per cell, each filter's mean RMSE over the seeds, and
 filter other than the baseline its RMSE ratio to the baseline (geometric mean over the
 seeds, with the corrected interval of ``comparisons.csv``) and its wins out of the pairs;
 then a consistency table (mean NIS per measurement block and NEES per quantity of each cell
-and filter, expected value 1; ``--no-consistency`` leaves it out, and it is left out for a
-study written before these columns existed); then each claim's verdict per cell. Nothing
+and filter, expected value 1) and the ensemble one (ANEES and ANIS with their chi-square
+bands, ``sdr_di.studies.ensemble``); ``--no-consistency`` leaves both out, and each is left
+out for a study written before its columns existed; then each claim's verdict per cell. Nothing
 is computed here that the study did not write: the table is a view of its outputs.
 """
 
@@ -100,6 +101,26 @@ def main(argv: list[str] | None = None) -> int:
                 r = by.get((c, f))
                 if r is not None:
                     print(f"| {c} | {f} | " + " | ".join(_g(_f(r[k])) for k in keys) + " |")
+        print()
+    ens = [k for k in (cells[0] if cells else {}) if k.startswith(("anees_", "anis_"))
+           and not k.endswith(("_lo", "_hi")) and any(math.isfinite(_f(r[k])) for r in cells)]
+    if ens and not args.no_consistency:
+        print("**ensemble consistency** (Bar-Shalom et al. 5.4): average NEES and NIS per "
+              "degree of freedom over the cell's runs, [the two-sided 95 % chi-square band "
+              "for that many runs]; * outside the band\n")
+        print("| cell | filter | " + " | ".join(ens) + " |")
+        print("|---" * (len(ens) + 2) + "|")
+        for c in names:
+            for f in filters:
+                r = by.get((c, f))
+                if r is None:
+                    continue
+                out = []
+                for k in ens:
+                    v, lo, hi = _f(r[k]), _f(r.get(k + "_lo")), _f(r.get(k + "_hi"))
+                    star = "*" if math.isfinite(v) and not lo <= v <= hi else ""
+                    out.append(f"{_g(v)}{star} [{_g(lo)}, {_g(hi)}]")
+                print(f"| {c} | {f} | " + " | ".join(out) + " |")
         print()
     claims = meta.get("claims") or []
     if claims:
