@@ -1,5 +1,11 @@
 """The error model's numba kernels (``ins/_numba_error_model.py``) against the numpy
-reference :func:`error_derivative`, bit for bit, in every state layout."""
+reference :func:`error_derivative`, in every state layout.
+
+On the development machine (AVX-512, session 24) the two agree bit for bit and a deep run
+writes the same bytes with and without the kernels. The kernels reproduce numpy's order of
+operations, but numpy's reductions and transcendental loops dispatch on the CPU's SIMD
+features, so on another machine the last bits may differ: the tests allow 1e-12 of the
+largest value (a wrong order of terms or a wrong term is far above it)."""
 
 import numpy as np
 import pytest
@@ -7,6 +13,12 @@ import pytest
 from sdr_di.filters.state import state_layout
 from sdr_di.ins.error_model import (ClockModel, InsErrorModel, NavState, error_derivative,
                                     error_derivative_kernel, jacobian_steps, rotvec_to_dcm)
+
+
+def _same(got, ref):
+    ref = np.asarray(ref)
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * float(np.abs(ref).max()))
+
 
 
 def _nav(rng):
@@ -43,11 +55,10 @@ def test_kernel_rows_equal_numpy_rows(error_states):
         for X in (_rows(rng, layout.n, 35), _rows(rng, layout.n, 35)[4:5]):
             ref = error_derivative(X, nav, f_b, w_ib_b, clock, layout, tau)
             got = error_derivative_kernel(X, nav, f_b, w_ib_b, clock, layout, tau)
-            np.testing.assert_array_equal(got, ref)
+            _same(got, ref)
             # one row (numpy's products of one row take other BLAS paths)
             one = error_derivative_kernel(X[-1:], nav, f_b, w_ib_b, clock, layout, tau)
-            np.testing.assert_array_equal(
-                one, error_derivative(X[-1:], nav, f_b, w_ib_b, clock, layout, tau))
+            _same(one, error_derivative(X[-1:], nav, f_b, w_ib_b, clock, layout, tau))
 
 
 def test_ekf_time_update_same_with_and_without_kernels():
@@ -64,10 +75,10 @@ def test_ekf_time_update_same_with_and_without_kernels():
             x = rng.normal(size=layout.n) * jacobian_steps(layout) * 100.0
             fx_on, F_on = on.f_and_F(x, 0.02)
             fx_off, F_off = off.f_and_F(x, 0.02)
-            np.testing.assert_array_equal(fx_on, fx_off)
-            np.testing.assert_array_equal(F_on, F_off)
+            _same(fx_on, fx_off)
+            _same(F_on, F_off)
             # set_interval renews the computed states' terms
             nav1.llh = nav1.llh + [1e-5, 0.0, 3.0]
             for m in (on, off):
                 m.set_interval(nav0, nav1, f_b, w)
-            np.testing.assert_array_equal(on.f(x, 0.02), off.f(x, 0.02))
+            _same(on.f(x, 0.02), off.f(x, 0.02))
