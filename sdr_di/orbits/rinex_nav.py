@@ -1,4 +1,4 @@
-"""Read BDS broadcast ephemerides from RINEX 3.0x navigation files.
+"""Read BDS broadcast ephemerides from RINEX 3.0x and 4.0x navigation files.
 
 Design
 ------
@@ -7,7 +7,8 @@ fails: a record whose all-blank *spare* fields are written as 19 spaces makes it
 ``float()`` fail, the whole record turns into NaN and the only trace is a logging INFO line
 ("malformed line for C22"). Every shipped station file (ESBC, MOJN, NYA1, BRDC00WRD) is
 affected, so ``georinex.load(..., use='C')`` returns the right satellites and times with
-NaN for every value. RINEX 4 files are not read by georinex at all.
+NaN for every value. RINEX 4 files are not read by georinex at all (1.16.2); this module
+reads their BDS frames itself (below).
 
 This module therefore reads the BDS records with its own small fixed-width parser, which is
 the path that actually works, and uses georinex only where it is reliable:
@@ -20,7 +21,7 @@ the path that actually works, and uses georinex only where it is reliable:
   Records of other constellations are skipped (every RINEX 3 record line starts with the
   satellite system letter, continuation lines start with blanks, so no per-system line
   count is needed).
-* **Header**: the ``RINEX VERSION / TYPE`` line is parsed here (so that RINEX 4, RINEX 2,
+* **Header**: the ``RINEX VERSION / TYPE`` line is parsed here (so that RINEX 2 and 5,
   observation files and garbage are rejected with a precise one-line message), and the
   ``BDSA``/``BDSB IONOSPHERIC CORR`` lines are read here and cross-checked against
   georinex's header reader (:func:`georinex.rinexheader`) whenever that reader works on the
@@ -41,6 +42,29 @@ RINEX 3.0x BDS record -> :class:`~sdr_di.orbits.ephemeris.Ephemeris`::
     IDOT   spare    BDT week  spare
     SV accuracy [m] SatH1     TGD1      TGD2
     t_tx   AODC     spare     spare
+
+RINEX 4.0x (4.00-4.02 layout; IGS merged daily files since 2023) frames every record with a
+marker line ``> TYP SVN MSG`` (``A1,1X,A3,1X,A3,1X,A4``):
+
+* ``> EPH Cnn D1`` / ``> EPH Cnn D2`` (the B1I/B3I D1 and D2 messages this receiver uses):
+  the record that follows has the RINEX 3 BDS layout above and is read by the same code,
+  with the same checks; the marker's satellite must start the record's first line.
+* ``> ION Cnn D1D2``: BDS Klobuchar coefficients, ``4X,I4,5(1X,I2)`` transmission time
+  (BDT) + alpha0-2, then ``4X`` + alpha3 beta0-2, then ``4X`` + beta3. RINEX 4 headers have
+  no ``IONOSPHERIC CORR`` lines; these frames replace them. A daily file holds several (15
+  in the shipped BRD400DLR, from C02, C03, C05, C56 and C57, one every 1-5 h: alpha0
+  4.0e-8 to 4.6e-8 s from the GEOs, beta0 84 000 to 119 000 s, beta1 -1.6e5 to 1.0e6
+  s/semicircle). **Rule:** :attr:`NavData.iono` is the earliest frame
+  (smallest transmission time, file order for ties), the one a receiver switched on at the
+  start of the file would have had; all frames are kept, sorted by time, in
+  :attr:`NavData.iono_frames` for a caller that wants the one in force at another time.
+  A header ``BDSA``/``BDSB`` pair (not written in RINEX 4) is used only without such frames.
+* Skipped up to the next marker: B-CNAV ephemerides (``CNV1``, ``CNV2``, ``CNV3``), ``STO``,
+  ``EOP`` and ``ION ... CNVX`` frames, and every frame of another system.
+
+A marker of an unknown record type, an EPH frame that does not hold its whole record, an ION
+frame cut short and a malformed number in either raise :class:`EphemerisError`; a version
+5.x file is refused (``unsupported RINEX version 5.00: ...``).
 
 Angles in RINEX are radians already. The SV accuracy [m] is converted to the ICD URA index
 (``URAI``). ``toc`` is the epoch of the first line expressed as BDT seconds of week; the
