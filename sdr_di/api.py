@@ -184,7 +184,7 @@ def generate(out: PathLike | None = None, *, scenario: PathLike | None = None,
     cn0_dbhz : float, optional
         C/N0 of every satellite [dB-Hz] (``--cn0``).
     ephemeris : path, optional
-        RINEX 3 navigation file (``--ephemeris``).
+        RINEX 3 or 4 navigation file (``--ephemeris``).
     prns : sequence of str or int, optional
         Satellites instead of the automatic selection, ``"C21"`` or ``21`` (``--prn``).
     progress : bool

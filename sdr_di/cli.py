@@ -69,7 +69,7 @@ def _add_generate(sub) -> None:
     p.add_argument("--cn0", type=float, default=None, metavar="DBHZ",
                    help="override the C/N0 of every satellite [dB-Hz]")
     p.add_argument("--ephemeris", type=Path, default=None,
-                   help="override the RINEX 3 navigation file")
+                   help="override the RINEX 3 or 4 navigation file")
     p.add_argument("--prn", type=_prn_list, default=None, metavar="LIST",
                    help="comma-separated PRNs instead of automatic selection (e.g. C21,C22)")
     p.add_argument("--sigmf", action="store_true",

@@ -4,7 +4,7 @@ Each parser is given arbitrary input and mutations of a valid file; it must eith
 raise the project's own error type (:class:`~sdr_di.errors.SdrDiError` subclasses), never
 anything else (``ValueError``, ``KeyError``, ``TypeError``, ``IndexError``...). Parsers:
 scenario TOML (file and parsed tables), IF sidecar JSON (and opening the IF file it describes),
-peers' ``.tag`` files, IMU and truth CSV, RINEX 3 navigation files and SP3 orbits (plain and
+peers' ``.tag`` files, IMU and truth CSV, RINEX 3 and 4 navigation files and SP3 orbits (plain and
 gzip, including corrupted gzip streams).
 
 Found and fixed: a sidecar with ``"carrier_hz": null`` (TypeError in the IF reader; the
@@ -342,6 +342,63 @@ def test_rinex_nav_mutations(generated, data, gz):
         for recs in nav.records.values():
             for eph in recs:
                 assert math.isfinite(eph.sqrtA) and math.isfinite(eph.toe)
+
+
+def _small_nav4() -> list[str]:
+    """RINEX 4: header, a BDS ION frame, a D2 and a D1 EPH frame, a skipped CNV1 frame."""
+    text = gzip.decompress((REPO / "ephemeris" / "BRD400DLR_S_20230710000_01D_MN.rnx.gz")
+                           .read_bytes()).decode("latin-1")
+    lines = text.splitlines()
+    end = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln)
+    out = lines[:end + 1]
+    for marker, n in (("> ION C05 D1D2", 4), ("> EPH C01 D2", 9), ("> EPH C20 D1", 9),
+                      ("> EPH C20 CNV1", 10)):
+        i = next(i for i, ln in enumerate(lines) if ln.rstrip() == marker)
+        out += lines[i:i + n]
+    return out
+
+
+_NAV4 = _small_nav4()
+
+
+def test_the_seed_nav4_file_parses(generated):
+    p = generated / "seed4.rnx"
+    p.write_text("\n".join(_NAV4) + "\n")
+    nav = load_nav(p)
+    assert nav.prns == (1, 20) and nav.iono is not None
+
+
+@FUZZ
+@given(data=st.data())
+def test_rinex4_nav_mutations(generated, data):
+    lines = list(_NAV4)
+    for _ in range(data.draw(st.integers(1, 3))):
+        i = data.draw(st.integers(0, len(lines) - 1))
+        ln = lines[i].ljust(80)
+        op = data.draw(st.sampled_from(["field", "column", "line", "delete", "cut"]))
+        if op == "field":
+            k = data.draw(st.integers(0, 3))
+            ln = ln[:4 + 19 * k] + data.draw(tokens).rjust(19)[:19] + ln[4 + 19 * (k + 1):]
+        elif op == "column":
+            j = data.draw(st.integers(0, 79))
+            ln = ln[:j] + data.draw(st.characters(max_codepoint=255)) + ln[j + 1:]
+        elif op == "line":
+            ln = data.draw(st.text(max_size=80))
+        elif op == "delete":
+            del lines[i]
+            continue
+        else:
+            ln = ln[:data.draw(st.integers(0, 80))]
+        lines[i] = ln
+    p = generated / "fuzz4.rnx"
+    p.write_bytes(("\n".join(lines) + "\n").encode("latin-1", "replace"))
+    nav = parses_or_own_error(load_nav, p)
+    if nav is not None:
+        for recs in nav.records.values():
+            for eph in recs:
+                assert eph.finite()
+        for f in nav.iono_frames:
+            assert all(math.isfinite(v) for v in (*f.klobuchar.alpha, *f.klobuchar.beta))
 
 
 @FUZZ

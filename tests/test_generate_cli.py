@@ -104,10 +104,10 @@ def test_unreadable_and_non_bds_rinex(tmp_path, capsys):
     gps.write_text("     3.04           N: GNSS NAV DATA    G: GPS              RINEX VERSION / TYPE\n"
                    "                                                            END OF HEADER\n")
     _expect_error(capsys, tmp_path, ["--ephemeris", str(gps)], r"no BDS records")
-    v4 = tmp_path / "v4.rnx.gz"
-    with gzip.open(v4, "wt") as fh:
-        fh.write("     4.00           NAVIGATION DATA     M                   RINEX VERSION / TYPE\n")
-    _expect_error(capsys, tmp_path, ["--ephemeris", str(v4)], r"unsupported RINEX version 4\.00")
+    v5 = tmp_path / "v5.rnx.gz"
+    with gzip.open(v5, "wt") as fh:
+        fh.write("     5.00           NAVIGATION DATA     M                   RINEX VERSION / TYPE\n")
+    _expect_error(capsys, tmp_path, ["--ephemeris", str(v5)], r"unsupported RINEX version 5\.00")
 
 
 def test_output_directory_not_writable(tmp_path, capsys):

@@ -232,9 +232,11 @@ def test_fixture_record_itself_is_fine(tmp_path):
     assert r.finite() and r.week == 956 and r.toe == 432000.0 and r.SatH1 == 0
 
 
-def test_rinex4_rejected(tmp_path):
-    msg = _err(_write(tmp_path, "BRD400DLR_S_20230710000_01D_MN.rnx", HDR_RINEX4))
-    assert msg.startswith("unsupported RINEX version 4.00: ")
+def test_rinex5_rejected(tmp_path):
+    """RINEX 4 is read (tests/test_orbits_rinex4.py); a later major version is refused."""
+    msg = _err(_write(tmp_path, "BRD500DLR_S_20230710000_01D_MN.rnx",
+                      HDR_RINEX4.replace("4.00", "5.00")))
+    assert msg.startswith("unsupported RINEX version 5.00: ")
 
 
 def test_rinex2_rejected(tmp_path):

@@ -1,4 +1,4 @@
-"""Read BDS broadcast ephemerides from RINEX 3.0x navigation files.
+"""Read BDS broadcast ephemerides from RINEX 3.0x and 4.0x navigation files.
 
 Design
 ------
@@ -7,7 +7,8 @@ fails: a record whose all-blank *spare* fields are written as 19 spaces makes it
 ``float()`` fail, the whole record turns into NaN and the only trace is a logging INFO line
 ("malformed line for C22"). Every shipped station file (ESBC, MOJN, NYA1, BRDC00WRD) is
 affected, so ``georinex.load(..., use='C')`` returns the right satellites and times with
-NaN for every value. RINEX 4 files are not read by georinex at all.
+NaN for every value. RINEX 4 files are not read by georinex at all (1.16.2); this module
+reads their BDS frames itself (below).
 
 This module therefore reads the BDS records with its own small fixed-width parser, which is
 the path that actually works, and uses georinex only where it is reliable:
@@ -20,7 +21,7 @@ the path that actually works, and uses georinex only where it is reliable:
   Records of other constellations are skipped (every RINEX 3 record line starts with the
   satellite system letter, continuation lines start with blanks, so no per-system line
   count is needed).
-* **Header**: the ``RINEX VERSION / TYPE`` line is parsed here (so that RINEX 4, RINEX 2,
+* **Header**: the ``RINEX VERSION / TYPE`` line is parsed here (so that RINEX 2 and 5,
   observation files and garbage are rejected with a precise one-line message), and the
   ``BDSA``/``BDSB IONOSPHERIC CORR`` lines are read here and cross-checked against
   georinex's header reader (:func:`georinex.rinexheader`) whenever that reader works on the
@@ -41,6 +42,29 @@ RINEX 3.0x BDS record -> :class:`~sdr_di.orbits.ephemeris.Ephemeris`::
     IDOT   spare    BDT week  spare
     SV accuracy [m] SatH1     TGD1      TGD2
     t_tx   AODC     spare     spare
+
+RINEX 4.0x (4.00-4.02 layout; IGS merged daily files since 2023) frames every record with a
+marker line ``> TYP SVN MSG`` (``A1,1X,A3,1X,A3,1X,A4``):
+
+* ``> EPH Cnn D1`` / ``> EPH Cnn D2`` (the B1I/B3I D1 and D2 messages this receiver uses):
+  the record that follows has the RINEX 3 BDS layout above and is read by the same code,
+  with the same checks; the marker's satellite must start the record's first line.
+* ``> ION Cnn D1D2``: BDS Klobuchar coefficients, ``4X,I4,5(1X,I2)`` transmission time
+  (BDT) + alpha0-2, then ``4X`` + alpha3 beta0-2, then ``4X`` + beta3. RINEX 4 headers have
+  no ``IONOSPHERIC CORR`` lines; these frames replace them. A daily file holds several (15
+  in the shipped BRD400DLR, from C02, C03, C05, C56 and C57, one every 1-5 h: alpha0
+  4.0e-8 to 4.6e-8 s from the GEOs, beta0 84 000 to 119 000 s, beta1 -1.6e5 to 1.0e6
+  s/semicircle). **Rule:** :attr:`NavData.iono` is the earliest frame
+  (smallest transmission time, file order for ties), the one a receiver switched on at the
+  start of the file would have had; all frames are kept, sorted by time, in
+  :attr:`NavData.iono_frames` for a caller that wants the one in force at another time.
+  A header ``BDSA``/``BDSB`` pair (not written in RINEX 4) is used only without such frames.
+* Skipped up to the next marker: B-CNAV ephemerides (``CNV1``, ``CNV2``, ``CNV3``), ``STO``,
+  ``EOP`` and ``ION ... CNVX`` frames, and every frame of another system.
+
+A marker of an unknown record type, an EPH frame that does not hold its whole record, an ION
+frame cut short and a malformed number in either raise :class:`EphemerisError`; a version
+5.x file is refused (``unsupported RINEX version 5.00: ...``).
 
 Angles in RINEX are radians already. The SV accuracy [m] is converted to the ICD URA index
 (``URAI``). ``toc`` is the epoch of the first line expressed as BDT seconds of week; the
@@ -112,6 +136,7 @@ __all__ = [
     "DEFAULT_MAX_AGE_S",
     "DEFAULT_MAX_AGE_GEO_S",
     "URA_BOUNDS_M",
+    "IonFrame",
     "NavData",
     "load_nav",
     "merge_nav",
@@ -164,16 +189,36 @@ def ura_index(accuracy_m: float) -> int:
 # --------------------------------------------------------------------------------------
 
 
+@dataclasses.dataclass(frozen=True)
+class IonFrame:
+    """One RINEX 4 ``> ION Cnn D1D2`` frame: BDS Klobuchar coefficients as a satellite sent them.
+
+    Attributes
+    ----------
+    prn : int
+        BDS PRN of the satellite the frame was received from.
+    epoch : datetime.datetime
+        Transmission time of the message (naive, BDT).
+    klobuchar : Klobuchar
+        alpha [s, s/semicircle, s/semicircle^2, s/semicircle^3] and beta [s, ...].
+    """
+
+    prn: int
+    epoch: _dt.datetime
+    klobuchar: Klobuchar
+
+
 @dataclasses.dataclass
 class NavData:
-    """BDS broadcast ephemerides read from one or more RINEX 3 navigation files.
+    """BDS broadcast ephemerides read from one or more RINEX 3 or 4 navigation files.
 
     Attributes
     ----------
     records : dict[int, list[Ephemeris]]
         Records per PRN, sorted by (week, toe), one per (week, toe) after deduplication.
     iono : Klobuchar or None
-        BDS Klobuchar coefficients from the header (``BDSA``/``BDSB``), None when absent.
+        BDS Klobuchar coefficients: RINEX 3 from the header (``BDSA``/``BDSB``), RINEX 4
+        from the earliest ``> ION Cnn D1D2`` frame (module notes); None when absent.
     path : Path
         The file read (the first one for merged data).
     sources : tuple[Path, ...]
@@ -191,6 +236,13 @@ class NavData:
     tx_times : dict[(int, int, float), float]
         Transmission time of each record [s since the BDT epoch], keyed by (PRN, week, toe);
         the earliest when merged (module notes, broadcast selection).
+    iono_frames : tuple[IonFrame, ...]
+        RINEX 4 only: every ``> ION Cnn D1D2`` frame (BDS Klobuchar as sent by a satellite),
+        sorted by transmission time (file order for equal times); ``iono`` is the first one.
+        Empty for RINEX 3.
+    iono_label : str
+        Where ``iono`` comes from, in words (e.g. ``"BDSA/BDSB"``, or the ION frame chosen);
+        empty when ``iono`` is None or the NavData was built by hand.
     """
 
     records: dict[int, list[Ephemeris]]
@@ -203,6 +255,8 @@ class NavData:
     n_conflicts: int = 0
     iono_gps: Klobuchar | None = None
     tx_times: dict = dataclasses.field(default_factory=dict)
+    iono_frames: tuple[IonFrame, ...] = ()
+    iono_label: str = ""
 
     def __post_init__(self) -> None:
         if not self.sources:
@@ -366,13 +420,10 @@ def _parse_header(lines: list[str], path: Path
         raise EphemerisError(f"navigation file {path}: empty file")
     version, ftype, system = _parse_version_line(lines[first], path)
     vtxt = f"{version:.2f}"
-    if version >= 4.0:
+    if not 3.0 <= version < 5.0:
         raise EphemerisError(
-            f"unsupported RINEX version {vtxt}: {path} (only RINEX 3.0x navigation files are "
-            f"read; convert it to RINEX 3, e.g. with gfzrnx -vo 3)")
-    if version < 3.0:
-        raise EphemerisError(
-            f"unsupported RINEX version {vtxt}: {path} (only RINEX 3.0x navigation files are read)")
+            f"unsupported RINEX version {vtxt}: {path} (only RINEX 3.0x and 4.0x navigation "
+            f"files are read)")
     if ftype != "N":
         kind = {"O": "an observation", "M": "a meteorological", "C": "a clock"}.get(ftype, f"a type-{ftype!r}")
         raise EphemerisError(f"navigation file {path}: is {kind} file, not a navigation file")
@@ -565,6 +616,112 @@ def _parse_body(lines: list[str], first: int, path: Path
     return out, tx
 
 
+#: RINEX 4 frame record types (``> EPH``, ``> STO``, ``> EOP``, ``> ION``).
+_V4_FRAME_TYPES = frozenset(("EPH", "STO", "EOP", "ION"))
+#: RINEX 4 BDS message types read as ephemerides (B1I/B3I D1 and D2; B-CNAV is skipped).
+_V4_BDS_EPH = frozenset(("D1", "D2"))
+#: Lines of a BDS ``ION ... D1D2`` frame body: epoch + alpha0-2, alpha3 + beta0-2, beta3.
+_ION_LINES = 3
+
+
+def _ion_frame(i: int, lines: list[str], sv: str, path: Path) -> IonFrame:
+    """The Klobuchar coefficients of the ``> ION Cnn D1D2`` frame whose marker is ``lines[i]``.
+
+    Layout (RINEX 4.00-4.02, BDS D1/D2 Klobuchar): ``4X,I4,5(1X,I2)`` transmission time
+    (BDT) + alpha0 alpha1 alpha2 (3 x D19.12); ``4X`` + alpha3 beta0 beta1 beta2; ``4X`` +
+    beta3.
+    """
+    if i + _ION_LINES >= len(lines):
+        raise EphemerisError(
+            f"navigation file {path}: truncated ION {sv} D1D2 frame at line {i + 1} (end of file)")
+    body = lines[i + 1:i + 1 + _ION_LINES]
+    for j, ln in enumerate(body):
+        if ln[:1] == ">":
+            raise EphemerisError(
+                f"navigation file {path}: truncated ION {sv} D1D2 frame at line {i + 1} "
+                f"(line {i + j + 2} starts a new frame)")
+    try:
+        y, mo, d, hh, mi, ss = (int(x) for x in body[0][4:23].split())
+        epoch = _dt.datetime(y, mo, d, hh, mi, ss)
+    except (ValueError, OverflowError):
+        raise EphemerisError(
+            f"navigation file {path}: bad epoch {body[0][4:23]!r} in ION {sv} D1D2 frame at "
+            f"line {i + 2}") from None
+    slots = [(body[0][23 + _FW * k:23 + _FW * (k + 1)], i + 2) for k in range(3)]
+    slots += [(body[1][4 + _FW * k:4 + _FW * (k + 1)], i + 3) for k in range(4)]
+    slots.append((body[2][4:4 + _FW], i + 4))
+    vals = []
+    for txt, lineno in slots:
+        try:
+            v = _f(txt)
+        except ValueError:
+            raise EphemerisError(
+                f"navigation file {path}: malformed number {txt.strip()!r} in ION {sv} D1D2 "
+                f"frame, line {lineno}") from None
+        if not math.isfinite(v):
+            raise EphemerisError(
+                f"navigation file {path}: non-finite value {txt.strip()!r} in ION {sv} D1D2 "
+                f"frame, line {lineno}")
+        vals.append(v)
+    prn = int(sv[1:])
+    if not 1 <= prn <= 63:
+        raise EphemerisError(
+            f"navigation file {path}: BDS PRN {prn} outside 1..63 in ION frame at line {i + 1}")
+    return IonFrame(prn=prn, epoch=epoch,
+                    klobuchar=Klobuchar(alpha=tuple(vals[:4]), beta=tuple(vals[4:])))
+
+
+def _parse_body_v4(lines: list[str], first: int, path: Path, want_eph: bool = True
+                   ) -> tuple[list[Ephemeris], dict[tuple[int, int, float], float],
+                              list[IonFrame]]:
+    """BDS D1/D2 records, their transmission times (as :func:`_parse_body`) and the BDS
+    ``ION ... D1D2`` frames of a RINEX 4 body, in file order.
+
+    Every line of the body belongs to a frame opened by a marker ``> TYP SVN MSG``
+    (``A1,1X,A3,1X,A3,1X,A4``). ``> EPH Cnn D1|D2`` frames hold a BDS record laid out as in
+    RINEX 3 (SV / EPOCH line + 7 broadcast-orbit lines, parsed by
+    :func:`_record_to_ephemeris`); ``> ION Cnn D1D2`` frames the Klobuchar coefficients
+    (:func:`_ion_frame`). Every other frame (B-CNAV ``CNV1-3`` ephemerides, ``STO``, ``EOP``,
+    ``ION ... CNVX``, other systems) is skipped up to the next marker. ``want_eph=False``
+    skips the ephemerides too (:func:`read_klobuchar`).
+    """
+    out: list[Ephemeris] = []
+    tx: dict[tuple[int, int, float], float] = {}
+    ions: list[IonFrame] = []
+    i = first
+    n = len(lines)
+    while i < n:
+        ln = lines[i]
+        if ln[:1] != ">":  # blank line or a line of a skipped frame
+            i += 1
+            continue
+        tokens = ln[1:].split()
+        if len(tokens) < 3 or tokens[0] not in _V4_FRAME_TYPES:
+            raise EphemerisError(
+                f"navigation file {path}: malformed RINEX 4 frame marker {ln.strip()!r} at "
+                f"line {i + 1}")
+        kind, sv, msg = tokens[0], tokens[1], tokens[2]
+        bds = len(sv) == 3 and sv[0] == "C" and sv[1:].isascii() and sv[1:].isdigit()
+        if bds and kind == "EPH" and msg in _V4_BDS_EPH and want_eph:
+            if i + 1 >= n or lines[i + 1][:3].replace(" ", "0") != sv:
+                got = lines[i + 1][:3] if i + 1 < n else "end of file"
+                raise EphemerisError(
+                    f"navigation file {path}: truncated EPH {sv} {msg} frame at line {i + 1} "
+                    f"(next line starts with {got!r}, not the record's {sv})")
+            eph, t_tx = _record_to_ephemeris(i + 1, lines, path)
+            out.append(eph)
+            key = (eph.prn, eph.week, eph.toe)
+            t_abs = _tx_abs(eph, t_tx)
+            tx[key] = min(tx.get(key, t_abs), t_abs)
+            i += 1 + _BDS_LINES + 1
+        elif bds and kind == "ION" and msg == "D1D2":
+            ions.append(_ion_frame(i, lines, sv, path))
+            i += 1 + _ION_LINES
+        else:
+            i += 1
+    return out, tx, ions
+
+
 def _tx_abs(eph: Ephemeris, t_tx: float) -> float:
     """Transmission time [s of the record's week] as seconds since the BDT epoch, taken in
     the week that puts it nearest the toe (a record sent before a week rollover)."""
@@ -596,12 +753,14 @@ def _dedup(recs: Iterable[Ephemeris]) -> tuple[dict[int, list[Ephemeris]], int, 
 
 
 def load_nav(path: str | Path, crosscheck: bool = False) -> NavData:
-    """Load the BDS broadcast ephemerides of a RINEX 3.0x navigation file.
+    """Load the BDS broadcast ephemerides of a RINEX 3.0x or 4.0x navigation file.
 
     Parameters
     ----------
     path : str or Path
-        RINEX 3.0x navigation file, mixed (``M``) or BDS-only (``C``), plain or gzip.
+        RINEX 3.0x or 4.0x navigation file, mixed (``M``) or BDS-only (``C``), plain or
+        gzip. Of a RINEX 4 file the ``EPH Cnn D1|D2`` and ``ION Cnn D1D2`` frames are read,
+        every other frame is skipped (module notes).
     crosscheck : bool, optional
         Also read the file with ``georinex.load(use='C')`` and compare every value georinex
         returns as finite with ours (see :func:`crosscheck_with_georinex`). Default False
@@ -610,15 +769,17 @@ def load_nav(path: str | Path, crosscheck: bool = False) -> NavData:
     Returns
     -------
     NavData
-        Records per PRN (sorted by toe, deduplicated), BDS Klobuchar from the header.
+        Records per PRN (sorted by toe, deduplicated), BDS Klobuchar from the header
+        (RINEX 3) or the earliest ION frame (RINEX 4).
 
     Raises
     ------
     EphemerisError
         Missing/unreadable/binary/empty file, not a RINEX file, RINEX version other than
-        3.0x (``unsupported RINEX version 4.00: ...``), observation or other non-navigation
-        file, no BDS record, malformed/blank required/non-finite field, truncated record,
-        inconsistent week, georinex disagreement. The message is one line naming the file.
+        3.0x or 4.0x (``unsupported RINEX version 5.00: ...``), observation or other
+        non-navigation file, no BDS record, malformed/blank required/non-finite field,
+        truncated record or frame, malformed RINEX 4 frame marker, inconsistent week,
+        georinex disagreement. The message is one line naming the file.
     """
     from ..paths import note_input
 
@@ -628,16 +789,38 @@ def load_nav(path: str | Path, crosscheck: bool = False) -> NavData:
     lines = text.splitlines()
     version, body, iono, iono_gps = _parse_header(lines, path)
     _crosscheck_header(text, iono, path)
-    recs, tx = _parse_body(lines, body, path)
+    frames: tuple[IonFrame, ...] = ()
+    if version >= 4.0:
+        recs, tx, ions = _parse_body_v4(lines, body, path)
+        iono, label, frames = _klobuchar_of_frames(ions, iono)
+    else:
+        recs, tx = _parse_body(lines, body, path)
+        label = "BDSA/BDSB" if iono is not None else ""
     if not recs:
         raise EphemerisError(f"navigation file {path}: no BDS records (RINEX {version:.2f})")
     records, n_dup, n_conf = _dedup(recs)
     nav = NavData(records=records, iono=iono, path=path, sources=(path,), version=version,
                   n_records_read=len(recs), n_duplicates=n_dup, n_conflicts=n_conf,
-                  iono_gps=iono_gps, tx_times=tx)
+                  iono_gps=iono_gps, tx_times=tx, iono_frames=frames, iono_label=label)
     if crosscheck:
         crosscheck_with_georinex(nav)
     return nav
+
+
+def _klobuchar_of_frames(ions: list[IonFrame], header: Klobuchar | None
+                         ) -> tuple[Klobuchar | None, str, tuple[IonFrame, ...]]:
+    """RINEX 4: (Klobuchar in force for the file, its label, the frames sorted by time).
+
+    The rule (module notes): the earliest ``ION ... D1D2`` frame, ties to file order; a
+    header with ``BDSA``/``BDSB`` lines (not written by RINEX 4, read if present) only when
+    the file has no such frame.
+    """
+    frames = tuple(sorted(ions, key=lambda f: f.epoch))  # stable: file order for ties
+    if frames:
+        f = frames[0]
+        return (f.klobuchar, f"ION C{f.prn:02d} D1D2 frame of {f.epoch:%Y-%m-%d %H:%M:%S} BDT "
+                f"(earliest of {len(frames)})", frames)
+    return header, ("BDSA/BDSB" if header is not None else ""), frames
 
 
 def merge_nav(navs: Sequence[NavData]) -> NavData:
@@ -651,7 +834,8 @@ def merge_nav(navs: Sequence[NavData]) -> NavData:
     pooled = [r for nav in navs for prn in nav.prns for r in nav.records[prn]]
     # keep argument order for equal keys: _dedup is stable (dict insertion order per group)
     records, n_dup, n_conf = _dedup(pooled)
-    iono = next((n.iono for n in navs if n.iono is not None), None)
+    first_iono = next((n for n in navs if n.iono is not None), None)
+    iono = first_iono.iono if first_iono is not None else None
     iono_gps = next((n.iono_gps for n in navs if n.iono_gps is not None), None)
     sources = tuple(p for n in navs for p in n.sources)
     tx: dict = {}
@@ -663,19 +847,25 @@ def merge_nav(navs: Sequence[NavData]) -> NavData:
                    n_records_read=sum(n.n_records_read for n in navs),
                    n_duplicates=sum(n.n_duplicates for n in navs) + n_dup,
                    n_conflicts=sum(n.n_conflicts for n in navs) + n_conf, iono_gps=iono_gps,
-                   tx_times=tx)
+                   tx_times=tx, iono_frames=tuple(f for n in navs for f in n.iono_frames),
+                   iono_label=first_iono.iono_label if first_iono is not None else "")
 
 
 def read_klobuchar(path: str | Path) -> Klobuchar | None:
-    """BDS Klobuchar coefficients (``BDSA``/``BDSB IONOSPHERIC CORR``) of a RINEX 3 header.
+    """BDS Klobuchar coefficients of a navigation file: RINEX 3 ``BDSA``/``BDSB IONOSPHERIC
+    CORR`` header lines, RINEX 4 the earliest ``> ION Cnn D1D2`` frame (as :func:`load_nav`).
 
-    Returns None when the header has no BDS coefficients. Raises :class:`EphemerisError`
-    for the same file problems as :func:`load_nav` (the body is not read).
+    Returns None when the file has no BDS coefficients. Raises :class:`EphemerisError`
+    for the same file problems as :func:`load_nav` (a RINEX 3 body is not read; of a RINEX
+    4 body only the ION frames are).
     """
     path = Path(path)
     text = _read_text(path)
-    _, _, iono, _ = _parse_header(text.splitlines(), path)
+    lines = text.splitlines()
+    version, body, iono, _ = _parse_header(lines, path)
     _crosscheck_header(text, iono, path)
+    if version >= 4.0:
+        iono = _klobuchar_of_frames(_parse_body_v4(lines, body, path, want_eph=False)[2], iono)[0]
     return iono
 
 

@@ -923,9 +923,11 @@ def broadcast_klobuchar(iono: Klobuchar) -> Klobuchar:
 
 
 def assistance_klobuchar(nav) -> tuple[Klobuchar | None, str]:
-    """Klobuchar coefficients of a navigation file's header, as the satellites broadcast them.
+    """Klobuchar coefficients of a navigation file, as the satellites broadcast them.
 
-    The file's BDS coefficients (``BDSA``/``BDSB``) when present; otherwise its GPS
+    The file's BDS coefficients when present (``nav.iono``: the RINEX 3 header's
+    ``BDSA``/``BDSB`` lines, or the RINEX 4 ION frame :func:`~sdr_di.orbits.rinex_nav.load_nav`
+    chose, labelled by ``nav.iono_label``); otherwise its GPS
     coefficients (``GPSA``/``GPSB``: the same eight-parameter set with the same scale factors,
     describing the same day's ionosphere), used with the BDS model; otherwise none. Each is
     rounded to its ICD LSB (:func:`broadcast_klobuchar`), so a receiver taking them as
@@ -937,7 +939,7 @@ def assistance_klobuchar(nav) -> tuple[Klobuchar | None, str]:
         The coefficients and where they come from, in words.
     """
     if getattr(nav, "iono", None) is not None:
-        return broadcast_klobuchar(nav.iono), "BDSA/BDSB"
+        return broadcast_klobuchar(nav.iono), getattr(nav, "iono_label", "") or "BDSA/BDSB"
     if getattr(nav, "iono_gps", None) is not None:
         return broadcast_klobuchar(nav.iono_gps), "GPSA/GPSB (file has no BDS coefficients)"
     return None, "none (file has no Klobuchar coefficients)"
