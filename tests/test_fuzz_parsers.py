@@ -306,16 +306,9 @@ def _small_nav() -> list[str]:
 _NAV = _small_nav()
 
 
-def test_the_seed_nav_file_parses(generated):
-    p = generated / "seed.rnx"
-    p.write_text("\n".join(_NAV) + "\n")
-    assert sum(len(v) for v in load_nav(p).records.values()) == 2
-
-
-@FUZZ
-@given(data=st.data(), gz=st.booleans())
-def test_rinex_nav_mutations(generated, data, gz):
-    lines = list(_NAV)
+def _mutate_nav_lines(data, lines: list[str]) -> None:
+    """One to three mutations of a navigation file's lines, in place: a 19-character number
+    field of a record line, one column, a whole line, a deleted line, a cut line."""
     for _ in range(data.draw(st.integers(1, 3))):
         i = data.draw(st.integers(0, len(lines) - 1))
         ln = lines[i].ljust(80)
@@ -334,6 +327,19 @@ def test_rinex_nav_mutations(generated, data, gz):
         else:
             ln = ln[:data.draw(st.integers(0, 80))]
         lines[i] = ln
+
+
+def test_the_seed_nav_file_parses(generated):
+    p = generated / "seed.rnx"
+    p.write_text("\n".join(_NAV) + "\n")
+    assert sum(len(v) for v in load_nav(p).records.values()) == 2
+
+
+@FUZZ
+@given(data=st.data(), gz=st.booleans())
+def test_rinex_nav_mutations(generated, data, gz):
+    lines = list(_NAV)
+    _mutate_nav_lines(data, lines)
     text = ("\n".join(lines) + "\n").encode("latin-1", "replace")
     p = generated / ("fuzz.rnx.gz" if gz else "fuzz.rnx")
     p.write_bytes(gzip.compress(text) if gz else text)
@@ -372,24 +378,7 @@ def test_the_seed_nav4_file_parses(generated):
 @given(data=st.data())
 def test_rinex4_nav_mutations(generated, data):
     lines = list(_NAV4)
-    for _ in range(data.draw(st.integers(1, 3))):
-        i = data.draw(st.integers(0, len(lines) - 1))
-        ln = lines[i].ljust(80)
-        op = data.draw(st.sampled_from(["field", "column", "line", "delete", "cut"]))
-        if op == "field":
-            k = data.draw(st.integers(0, 3))
-            ln = ln[:4 + 19 * k] + data.draw(tokens).rjust(19)[:19] + ln[4 + 19 * (k + 1):]
-        elif op == "column":
-            j = data.draw(st.integers(0, 79))
-            ln = ln[:j] + data.draw(st.characters(max_codepoint=255)) + ln[j + 1:]
-        elif op == "line":
-            ln = data.draw(st.text(max_size=80))
-        elif op == "delete":
-            del lines[i]
-            continue
-        else:
-            ln = ln[:data.draw(st.integers(0, 80))]
-        lines[i] = ln
+    _mutate_nav_lines(data, lines)
     p = generated / "fuzz4.rnx"
     p.write_bytes(("\n".join(lines) + "\n").encode("latin-1", "replace"))
     nav = parses_or_own_error(load_nav, p)

@@ -412,6 +412,25 @@ def _f(text: str) -> float:
     return float(text.strip().replace("D", "E").replace("d", "e"))
 
 
+
+def _finite(txt: str, path: Path, where: str) -> float:
+    """The finite number of a record field ``txt`` (``D`` exponents allowed).
+
+    Raises
+    ------
+    EphemerisError
+        Malformed or non-finite, naming the file and ``where`` (field, record, line).
+    """
+    try:
+        v = _f(txt)
+    except ValueError:
+        raise EphemerisError(
+            f"navigation file {path}: malformed number {txt.strip()!r} in {where}") from None
+    if not math.isfinite(v):
+        raise EphemerisError(
+            f"navigation file {path}: non-finite value {txt.strip()!r} in {where}")
+    return v
+
 def _parse_header(lines: list[str], path: Path
                   ) -> tuple[float, int, Klobuchar | None, Klobuchar | None]:
     """Validate the header; return (version, first body line, BDS and GPS Klobuchar)."""
@@ -510,17 +529,7 @@ def _fields_of_record(lines: list[str], start: int, path: Path) -> dict[str, flo
                 continue
             raise EphemerisError(
                 f"navigation file {path}: blank required field {name!r} in {sv} record, line {lineno}")
-        try:
-            v = _f(txt)
-        except ValueError:
-            raise EphemerisError(
-                f"navigation file {path}: malformed number {txt.strip()!r} in field {name!r} of "
-                f"{sv} record, line {lineno}") from None
-        if not math.isfinite(v):
-            raise EphemerisError(
-                f"navigation file {path}: non-finite value {txt.strip()!r} in field {name!r} of "
-                f"{sv} record, line {lineno}")
-        out[name] = v
+        out[name] = _finite(txt, path, f"field {name!r} of {sv} record, line {lineno}")
     return out
 
 
@@ -652,17 +661,7 @@ def _ion_frame(i: int, lines: list[str], sv: str, path: Path) -> IonFrame:
     slots.append((body[2][4:4 + _FW], i + 4))
     vals = []
     for txt, lineno in slots:
-        try:
-            v = _f(txt)
-        except ValueError:
-            raise EphemerisError(
-                f"navigation file {path}: malformed number {txt.strip()!r} in ION {sv} D1D2 "
-                f"frame, line {lineno}") from None
-        if not math.isfinite(v):
-            raise EphemerisError(
-                f"navigation file {path}: non-finite value {txt.strip()!r} in ION {sv} D1D2 "
-                f"frame, line {lineno}")
-        vals.append(v)
+        vals.append(_finite(txt, path, f"ION {sv} D1D2 frame, line {lineno}"))
     prn = int(sv[1:])
     if not 1 <= prn <= 63:
         raise EphemerisError(
