@@ -48,6 +48,7 @@ __all__ = [
     "klobuchar_delay",
     "iono_delay_b3i_m",
     "saastamoinen_delay",
+    "saastamoinen_zenith",
     "saastamoinen_zenith_wet",
     "KLOBUCHAR_R_M",
     "KLOBUCHAR_H_M",
@@ -141,12 +142,21 @@ def saastamoinen_delay(lat, h, el, humidity: float = 0.5) -> np.ndarray:
         # broadcast first: numpy's power of an array and of a 0-d value (scalar maths) may
         # differ in the last bit
         lat, h, el = np.broadcast_arrays(lat, h, el)
-    hc = np.clip(h, 0.0, 11000.0)
-    P = 1013.25 * (1.0 - 2.2557e-5 * hc) ** 5.2568          # hPa
     sin_el = np.sin(np.maximum(el, 1e-3))
+    return np.where(el > 0.0, saastamoinen_zenith(lat, h, humidity) / sin_el, 0.0)
+
+
+def saastamoinen_zenith(lat, h, humidity: float = 0.5):
+    """Zenith total (hydrostatic + wet) delay [m] of :func:`saastamoinen_delay`'s standard
+    atmosphere (its slant delay is this over ``sin(el)``): geodetic latitude ``lat`` [rad],
+    ellipsoidal height ``h`` [m] (clipped to 0..11000 m); arrays or numpy scalars.
+    ``np.power``, not ``**``: numpy's scalar power (the C library's) and its array power
+    (SIMD) may differ in the last bit, and this must give one receiver the same value in
+    both forms."""
+    hc = np.clip(h, 0.0, 11000.0)
+    P = 1013.25 * np.power(1.0 - 2.2557e-5 * hc, 5.2568)          # hPa
     hyd = 0.0022768 * P / (1.0 - 0.00266 * np.cos(2.0 * lat) - 0.00028 * hc / 1e3)
-    wet = _zenith_wet(hc, humidity)
-    return np.where(el > 0.0, (hyd + wet) / sin_el, 0.0)
+    return hyd + _zenith_wet(hc, humidity)
 
 
 def _zenith_wet(hc, humidity: float):

@@ -31,7 +31,8 @@ from ..constants import F_REL, GM_CGCS, OMEGA_E, SECONDS_PER_WEEK
 from .ephemeris import Ephemeris
 
 __all__ = ["EphemerisStack", "GEO_INCLINATION_ROT", "kepler_E", "sat_pos_vel_clock",
-           "sat_pos_vel_clock_stacked", "sat_states", "stack_ephemerides"]
+           "geo_to_ecef", "sat_pos_vel_clock_stacked", "sat_states",
+           "stack_ephemerides"]
 
 #: Rotation angle of the GEO inertial-like frame about X [rad] (ICD: -5 deg).
 GEO_INCLINATION_ROT = np.deg2rad(-5.0)
@@ -116,6 +117,10 @@ class EphemerisStack:
     af2: np.ndarray
     f_e_sqrtA: np.ndarray       # F e sqrtA [s/rad]: the relativistic clock term's factor
     geo: np.ndarray             # bool (n,): GEO rows
+    #: (26, n) float64: the 24 columns above in the order of :func:`stack_ephemerides`'
+    #: ``names``, then ``week`` and ``toc_week`` (for the range model's numba kernels)
+    table: np.ndarray = dataclasses.field(repr=False, compare=False,
+                                          default_factory=lambda: np.empty((26, 0)))
 
     @property
     def size(self) -> int:
@@ -152,11 +157,12 @@ def stack_ephemerides(ephemerides) -> EphemerisStack:
     names = ("A", "sqrtA", "n", "e", "sq1e2", "M0", "omega", "i0", "IDOT", "Omega0",
              "om_rate", "om_toe", "Cus", "Cuc", "Crs", "Crc", "Cis", "Cic", "af0", "af1",
              "af2", "f_e_sqrtA", "toe", "toc")
+    week = np.array([e.week for e in ephs], np.int64).reshape(-1, 1)
+    toc_week = np.array([_toc_week(e) for e in ephs], np.int64).reshape(-1, 1)
+    table = np.concatenate([cols[:, :, 0], week.T, toc_week.T]).astype(np.float64)
     st = EphemerisStack(
-        ephs=ephs,
-        week=np.array([e.week for e in ephs], np.int64).reshape(-1, 1),
-        toc_week=np.array([_toc_week(e) for e in ephs], np.int64).reshape(-1, 1),
-        geo=np.array([e.is_geo for e in ephs], bool),
+        ephs=ephs, week=week, toc_week=toc_week,
+        geo=np.array([e.is_geo for e in ephs], bool), table=table,
         **{k: cols[i] for i, k in enumerate(names)})
     with _STACKS_LOCK:
         if len(_STACKS) >= _STACKS_MAX:
@@ -244,22 +250,7 @@ def sat_pos_vel_clock_stacked(stack: EphemerisStack, t_sow, week: int | None = N
     v[..., 0], v[..., 1], v[..., 2] = Xd, Yd, Zd
 
     if s.geo.any():
-        g = np.flatnonzero(s.geo)
-        cx, sx = np.cos(GEO_INCLINATION_ROT), np.sin(GEO_INCLINATION_ROT)
-        Rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, sx], [0.0, -sx, cx]])
-        r_g = r[g] @ Rx.T
-        v_g = v[g] @ Rx.T
-        a = OMEGA_E * tk[g]
-        sa, ca = np.sin(a), np.cos(a)
-        # R_Z(a) = [[ca, sa, 0], [-sa, ca, 0], [0, 0, 1]]; dR_Z/dt = omega_e [[-sa, ca, 0], [-ca, -sa, 0], [0,0,0]]
-        x, y, z = r_g[..., 0], r_g[..., 1], r_g[..., 2]
-        vx, vy, vz = v_g[..., 0], v_g[..., 1], v_g[..., 2]
-        r[g] = np.stack([ca * x + sa * y, -sa * x + ca * y, z], axis=-1)
-        v[g] = np.stack([
-            ca * vx + sa * vy + OMEGA_E * (-sa * x + ca * y),
-            -sa * vx + ca * vy + OMEGA_E * (-ca * x - sa * y),
-            vz,
-        ], axis=-1)
+        geo_to_ecef(r, v, tk, s.geo)
 
     # clock
     dtc = _time_from(t, week, s.toc_week, s.toc)
@@ -268,6 +259,28 @@ def sat_pos_vel_clock_stacked(stack: EphemerisStack, t_sow, week: int | None = N
     dt_sv = s.af0 + s.af1 * dtc + s.af2 * dtc * dtc + rel
     ddt_sv = s.af1 + 2.0 * s.af2 * dtc + rel_dot
     return r, v, dt_sv, ddt_sv
+
+
+def geo_to_ecef(r: np.ndarray, v: np.ndarray, tk: np.ndarray, geo: np.ndarray) -> None:
+    """GEO rows of ``r``, ``v`` (n, m, 3), in their inertial-like frame [m, m/s], to ECEF
+    CGCS2000 in place: ``R_Z(omega_e t_k) R_X(-5 deg)`` and its time derivative (ICD 5.2.4);
+    ``tk`` (n, m) time from toe [s], ``geo`` (n,) bool."""
+    g = np.flatnonzero(geo)
+    cx, sx = np.cos(GEO_INCLINATION_ROT), np.sin(GEO_INCLINATION_ROT)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, sx], [0.0, -sx, cx]])
+    r_g = r[g] @ Rx.T
+    v_g = v[g] @ Rx.T
+    a = OMEGA_E * tk[g]
+    sa, ca = np.sin(a), np.cos(a)
+    # R_Z(a) = [[ca, sa, 0], [-sa, ca, 0], [0, 0, 1]]; dR_Z/dt = omega_e [[-sa, ca, 0], [-ca, -sa, 0], [0,0,0]]
+    x, y, z = r_g[..., 0], r_g[..., 1], r_g[..., 2]
+    vx, vy, vz = v_g[..., 0], v_g[..., 1], v_g[..., 2]
+    r[g] = np.stack([ca * x + sa * y, -sa * x + ca * y, z], axis=-1)
+    v[g] = np.stack([
+        ca * vx + sa * vy + OMEGA_E * (-sa * x + ca * y),
+        -sa * vx + ca * vy + OMEGA_E * (-ca * x - sa * y),
+        vz,
+    ], axis=-1)
 
 
 def sat_pos_vel_clock(eph: Ephemeris, t_sow: np.ndarray | float, week: int | None = None
