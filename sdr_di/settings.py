@@ -11,8 +11,9 @@ variable                   meaning                                              
                            call size from measured costs)
 ``SDR_DI_LOOP_THREAD``     ``1``: the integration loop runs on a thread of the run's     :meth:`sdr_di.integration.loop_process.LoopChild.start`
                            process instead of a child process
-``OMP_WAIT_POLICY``        numba's OpenMP workers; the generator asks for ``PASSIVE``      :func:`passive_kernel_workers` (``sim.ifgen.IfGenerator``)
-                           unless the user set it (:func:`passive_kernel_workers`)
+``OMP_WAIT_POLICY``        numba's OpenMP workers; the generator and the receivers ask   :func:`passive_kernel_workers` (``sim.ifgen.IfGenerator``,
+                           for ``PASSIVE`` unless the user set it                        ``receiver.scalar.ScalarReceiver.run``,
+                           (:func:`passive_kernel_workers`)                              ``receiver.acquisition.acquire``)
 =========================  ===========================================================  =====================================
 
 Each switch is read when its user asks (so a test may set it with ``monkeypatch.setenv``);
@@ -82,9 +83,15 @@ def passive_kernel_workers() -> None:
     For the IF generator, before its first parallel kernel: otherwise the workers spin for
     milliseconds after each chunk (one region of about 0.2 s) and take CPU from the writer
     thread and from other processes (``sdr-di generate`` of the 60 s default file: 13.0 ->
-    11.3 user CPU-s, docs/notes/speed.md). libgomp reads the variable when numba first
-    loads it, so a process whose parallel kernels already ran keeps its policy. Not for the
-    receivers, whose short parallel calls on idle cores wake the workers faster when they
-    spin.
+    11.3 user CPU-s, docs/notes/speed.md). For the receivers, before their first parallel
+    kernel (the scalar receiver's run, every acquisition): their tracking kernels run one
+    numba thread each (:mod:`sdr_di.receiver.threads`), but the acquisition's refinement
+    calls run numba's threads, and on a loaded machine a worker spinning at the barrier
+    for a descheduled one took 0.2-0.6 CPU-s of a 0.5 s file's 1.5-2 CPU-s run (the same
+    output: scheduling only; docs/notes/speed.md, session 24). libgomp reads the variable
+    when numba first loads it, so a process whose parallel kernels already ran keeps its
+    policy. Short parallel calls in a loop on idle cores wake sleeping workers more slowly
+    (the public ``correlate_table`` with 2 numba threads: 2x the wall time), which no
+    receiver makes.
     """
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")

@@ -3,6 +3,7 @@
 import csv
 import functools
 import math
+import os
 import json
 from pathlib import Path
 
@@ -262,3 +263,18 @@ def test_acquire_when_a_code_period_is_not_a_whole_number_of_samples(fs):
     _check(res, sats, [1, 30])
     coarse = acquire(x, fs, prns=[10], noncoherent=40, refine=False)[0]
     assert coarse.detected and _code_err(coarse.code_phase_chips, 104.02) < 0.4, coarse
+
+
+def test_acquisition_asks_for_sleeping_kernel_workers(monkeypatch):
+    """acquire() sets OMP_WAIT_POLICY=PASSIVE before its first parallel kernel unless the
+    user chose a policy (sdr_di.settings.passive_kernel_workers: on a loaded machine the
+    refinement kernels' spinning workers cost 0.2-0.6 CPU-s per start)."""
+    x = np.zeros(2500 * 4, np.complex64)
+    for given, expected in ((None, "PASSIVE"), ("ACTIVE", "ACTIVE")):
+        monkeypatch.setenv("OMP_WAIT_POLICY", "x")      # undone after the test
+        if given is None:
+            monkeypatch.delenv("OMP_WAIT_POLICY")
+        else:
+            monkeypatch.setenv("OMP_WAIT_POLICY", given)
+        acquire(x, 2.5e6, prns=[1], noncoherent=4)
+        assert os.environ.get("OMP_WAIT_POLICY") == expected

@@ -86,6 +86,36 @@ def test_g1_reset_every_8190_chips():
     assert not np.array_equal(g1[8190:], free_running[8190:])
 
 
+def test_lfsr13_from_the_cycle_table_equals_stepping_the_register():
+    """lfsr13 reads the chips off the register's cycle (codes.py notes): the same chips as
+    stepping the register, for every PRN's G2 phase, G1 with its reset, the all-zero state,
+    and random tap sets (most of them not maximal: stepped, or a shorter cycle)."""
+    from sdr_di.signal.codes import (
+        G1_RESET_PERIOD,
+        G1_TAPS,
+        G2_TAPS,
+        _lfsr13_steps,
+        g2_initial_phase,
+        lfsr13,
+    )
+
+    def stepped(state, taps, n, reset=None):
+        init = sum((int(b) & 1) << (13 - k) for k, b in enumerate(state, start=1))
+        return _lfsr13_steps(init, sum(1 << (13 - t) for t in taps), n, reset)
+
+    cases = [(g2_initial_phase(p), G2_TAPS, 10230, None) for p in range(1, 64)]
+    cases += [((1,) * 13, G1_TAPS, 10230, G1_RESET_PERIOD), ((0,) * 13, G2_TAPS, 100, None)]
+    rng = np.random.default_rng(47)
+    for _ in range(200):
+        taps = tuple(sorted({13, *rng.integers(1, 14, size=int(rng.integers(1, 6))).tolist()}))
+        cases.append((tuple(rng.integers(0, 2, 13).tolist()), taps, int(rng.integers(0, 20000)),
+                      None if rng.random() < 0.5 else int(rng.integers(1, 9000))))
+    for state, taps, n, reset in cases:
+        got = lfsr13(state, taps, n, reset)
+        assert got.dtype == np.uint8 and got.flags.writeable
+        np.testing.assert_array_equal(got, stepped(state, taps, n, reset))
+
+
 def test_phase_separation_condition_of_the_bound():
     # The derivation needs no two G2 offsets within 1 chip of each other (else a window of the
     # correlation would be identically 1 and the bound would not hold).

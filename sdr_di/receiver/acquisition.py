@@ -114,6 +114,7 @@ from scipy import special
 
 from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I, F_B3I, is_geo
 from ..errors import AcquisitionError, ImplausibleAcquisition  # noqa: F401
+from ..settings import passive_kernel_workers
 from ._numba_acquire import accumulate_power
 from ._numba_correlate_bits import correlate_epl_bits
 from .correlator import (
@@ -412,6 +413,7 @@ def acquire(samples: np.ndarray, sampling_rate_hz: float, if_hz: float = 0.0,
     """
     prn_list = [check_prn(p) for p in (range(1, 64) if prns is None else prns)]
     m_ms, k_nc = check_search(coherent_ms, noncoherent, doppler_range_hz, pfa)
+    passive_kernel_workers()       # before the first parallel kernel (sdr_di.settings)
     fs = float(sampling_rate_hz)
     if not fs > 0:
         raise AcquisitionError(f"sampling rate must be positive, got {sampling_rate_hz}")

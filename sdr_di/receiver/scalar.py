@@ -85,6 +85,7 @@ import numpy as np
 
 from ..constants import CODE_LENGTH_B3I
 from ..orbits.ephemeris import Ephemeris
+from ..settings import passive_kernel_workers
 from ._numba_correlate_bits import correlate_epl_bits
 from .acquisition import (
     LIKELY_CAUSES,
@@ -479,6 +480,7 @@ class ScalarReceiver:
             when ``log=False``).
         """
         t_total = time.perf_counter()
+        passive_kernel_workers()       # before the first parallel kernel (sdr_di.settings)
         r = self._begin(source, prns, on_epoch, epoch_interval_s, start_sample, stop_sample,
                         assist)
         t_track = time.perf_counter()

@@ -96,6 +96,15 @@ def lfsr13(state: tuple[int, ...], taps: tuple[int, ...], n: int, reset: int | N
     -------
     numpy.ndarray
         uint8 0/1 chips, length ``n``.
+
+    Notes
+    -----
+    The chips are read from the register's cycle through the all-ones state
+    (:func:`_cycle`, one pass of at most 8191 steps per tap set and process), at the
+    position of ``state`` on it; a state off that cycle (a tap set that is not maximal)
+    is stepped chip by chip (:func:`_lfsr13_steps`). The same chips either way: the
+    register is deterministic; stepping each PRN's 10230 chips in Python cost about 5 ms
+    per code at a run's start.
     """
     # Integer register: bit (13 - k) holds stage k, so stage 13 is bit 0 (the output) and a
     # shift toward higher stages is a right shift with the feedback entering at bit 12.
@@ -105,6 +114,17 @@ def lfsr13(state: tuple[int, ...], taps: tuple[int, ...], n: int, reset: int | N
     mask = 0
     for t in taps:
         mask |= 1 << (13 - t)
+    chips, pos = _cycle(mask)
+    if pos[init] < 0:
+        return _lfsr13_steps(init, mask, n, reset)
+    i = np.arange(n, dtype=np.int64)
+    if reset is not None:
+        i %= reset
+    return chips[(i + pos[init]) % chips.size]
+
+
+def _lfsr13_steps(init: int, mask: int, n: int, reset: int | None = None) -> np.ndarray:
+    """:func:`lfsr13` chip by chip from register ``init`` with feedback mask ``mask``."""
     out = np.empty(n, dtype=np.uint8)
     s = init
     for i in range(n):
@@ -114,6 +134,30 @@ def lfsr13(state: tuple[int, ...], taps: tuple[int, ...], n: int, reset: int | N
         fb = (s & mask).bit_count() & 1
         s = (s >> 1) | (fb << 12)
     return out
+
+
+@functools.lru_cache(maxsize=8)
+def _cycle(mask: int) -> tuple[np.ndarray, np.ndarray]:
+    """The output chips of one period of the register with feedback mask ``mask`` from the
+    all-ones state (uint8, read-only), and each 13-bit state's step on that period (int64
+    (8192,), -1 for a state not on it)."""
+    ones = (1 << 13) - 1
+    pos = np.full(1 << 13, -1, dtype=np.int64)
+    chips = []
+    s = ones
+    for i in range(1 << 13):
+        pos[s] = i
+        chips.append(s & 1)
+        fb = (s & mask).bit_count() & 1
+        s = (s >> 1) | (fb << 12)
+        if s == ones:
+            break
+    else:                                  # a tail into a cycle without all ones: no table
+        pos[:] = -1
+    out = np.array(chips, dtype=np.uint8)
+    out.setflags(write=False)
+    pos.setflags(write=False)
+    return out, pos
 
 
 @functools.lru_cache(maxsize=1)
