@@ -745,7 +745,7 @@ def _dedup(recs: Iterable[Ephemeris]) -> tuple[dict[int, list[Ephemeris]], int, 
         healthy = [r for r in g if r.healthy]
         keep = healthy[0] if healthy else g[0]
         n_dup += len(g) - 1
-        if any(dataclasses.astuple(r) != dataclasses.astuple(keep) for r in g):
+        if any(r != keep for r in g):      # dataclass __eq__: the fields, no deep copy
             n_conf += 1
         out.setdefault(key[0], []).append(keep)
     return out, n_dup, n_conf
