@@ -711,7 +711,10 @@ def _cmd_study(args: argparse.Namespace) -> int:
                         report=not args.no_report, names=STUDY_FLAGS)
     spec = opts.load_spec()     # refused here in one line, before the bar
     opts = dataclasses.replace(opts, spec=spec)
-    show = StudyProgress(len(spec.cells) * (args.runs or spec.runs))
+    # the training runs of a tuned study come first and count on the same bar
+    n_train = (sum(c.name in spec.tuning.cells for c in spec.cells) * spec.tuning.runs
+               if spec.tuning is not None else 0)
+    show = StudyProgress(len(spec.cells) * (args.runs or spec.runs) + n_train)
     preload = [*dask.config.get("distributed.worker.preload", []), WORKERS_IGNORE_SIGINT]
     with dask.config.set({"distributed.worker.preload": preload}), show:
         res = study_with(opts, on_record=show)

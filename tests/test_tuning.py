@@ -255,7 +255,8 @@ def test_mean_ratio_of_the_report_and_the_comparison_is_one_function():
 
 def test_the_cli_says_when_a_tuned_point_lies_on_the_grid_edge(tmp_path, capsys):
     """``sdr-di study`` prints each tuned entry; one on an edge of its grid (cell b's optimum
-    q_scale = 8 is the grid's highest value) says so, as tuning.csv's ``edge`` does."""
+    q_scale = 8 is the grid's highest value) says so, as tuning.csv's ``edge`` does. Its
+    progress bar counts the training runs too."""
     from sdr_di.cli import main
 
     spec = tmp_path / "toy.toml"
@@ -281,7 +282,10 @@ per_cell = true
 grid = { ekf = { q_scale = [0.5, 2.0, 8] } }
 """)
     assert main(["study", str(spec), "--out", str(tmp_path / "out"), "--workers", "0"]) == 0
-    lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("tuned:")]
+    cap = capsys.readouterr()
+    # the bar counts the 2 x 4 training runs beside the 2 x 3 evaluation runs
+    assert "14/14" in cap.err.replace("\r", "\n").splitlines()[-1], cap.err[-300:]
+    lines = [ln for ln in cap.out.splitlines() if ln.startswith("tuned:")]
     a = next(ln for ln in lines if " in a " in ln)
     b = next(ln for ln in lines if " in b " in ln)
     assert "q_scale=2" in a and "edge" not in a, a
