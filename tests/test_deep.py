@@ -637,7 +637,7 @@ def test_bit_power_is_the_same_with_integer_counts_and_equals_cn0_known_noise():
     """The loop passes sample counts as int64 (their sums are exact either way) and
     :meth:`BitPower.cn0_dbhz` skips :func:`cn0_known_noise`'s argument checks: the ring, the
     carried bit and the estimates are those of float counts and of the checked function,
-    bit for bit."""
+    bit for bit, also when its tests of one interval share the per-sum terms."""
     from sdr_di.receiver.lock import cn0_known_noise
 
     rng = np.random.default_rng(11)
@@ -655,10 +655,13 @@ def test_bit_power_is_the_same_with_integer_counts_and_equals_cn0_known_noise():
             b.add(p, n, ep % bit_ms == 0)
             assert (a.count, a.new, a._acc_p, a._acc_n) == (b.count, b.new, b._acc_p, b._acc_n)
             assert np.array_equal(a.p, b.p) and np.array_equal(a.n, b.n)
-            for last in (None, 3, 1):
+            # (the per-sum terms are kept between calls: a new sum, noise power or rate
+            # must make them again)
+            for last, npow, fs in ((None, 2.5, 25e6), (3, 2.5, 25e6), (1, 3.5, 25e6),
+                                   (3, 2.5, 25e6), (None, 2.5, 2.5e6)):
                 k = b.count if last is None else min(last, b.count)
-                got = b.cn0_dbhz(2.5, 25e6, last)
-                want = (cn0_known_noise(b.p[-k:], 2.5 * b.n[-k:], b.n[-k:] / 25e6) if k
+                got = b.cn0_dbhz(npow, fs, last)
+                want = (cn0_known_noise(b.p[-k:], npow * b.n[-k:], b.n[-k:] / fs) if k
                         else math.nan)
                 assert got == want or (math.isnan(got) and math.isnan(want))
 

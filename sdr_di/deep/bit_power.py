@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from ..receiver.lock import cn0_of_sums
+from ..receiver.lock import cn0_of_terms
 
 __all__ = ["BitPower"]
 
@@ -63,12 +63,14 @@ class BitPower:
         self.new = 0
         self._acc_p = 0j
         self._acc_n = 0.0
+        self._terms: tuple | None = None   # (noise_power, fs, |P_b|^2 - N_b, N_b T_b)
 
     def clear(self) -> None:
         """Forget every sum (and the bit being accumulated)."""
         self.count = 0
         self._acc_p = 0j
         self._acc_n = 0.0
+        self._terms = None
 
     def _push(self, p: np.ndarray, n: np.ndarray) -> None:
         m = min(p.size, self.p.size)
@@ -108,6 +110,7 @@ class BitPower:
             are carried to the next.
         """
         self.new = 0
+        self._terms = None
         p = np.asarray(prompts, np.complex128)
         n = np.asarray(n_samples)
         if p.size == 0:
@@ -150,6 +153,13 @@ class BitPower:
         k = self.count if last is None else min(int(last), self.count)
         if k <= 0 or not noise_power > 0.0:
             return math.nan
-        n = self.n[-k:]
-        # (cn0_known_noise less its argument checks: twice per channel and interval)
-        return cn0_of_sums(self.p[-k:], noise_power * n, n / fs)
+        # cn0_of_sums's per-sum terms of every sum held, made once for the tests of one
+        # interval (the same element-wise operations; each test then sums its last k: the
+        # same values and reductions as cn0_of_sums(p[-k:], N n[-k:], n[-k:] / fs))
+        terms = self._terms
+        if terms is None or terms[0] != noise_power or terms[1] != fs:
+            p, n = self.p, self.n
+            nb = noise_power * n
+            terms = self._terms = (noise_power, fs, p.real * p.real + p.imag * p.imag - nb,
+                                   nb * (n / fs))
+        return cn0_of_terms(terms[2][-k:], terms[3][-k:])

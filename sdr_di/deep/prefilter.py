@@ -156,10 +156,11 @@ def discriminator_variances(cn0_hz: float, t_epoch: np.ndarray, spacing: float
     """``(r_tau [chips^2], r_phi [rad^2])`` per epoch (module notes) at ``cn0_hz`` (linear)."""
     t = np.asarray(t_epoch, float)
     c = max(float(cn0_hz), 1.0)                  # (NaN stays NaN, as np.maximum's)
-    if t.ndim == 1 and t.size <= _FEW_BLOCKS and not (t == 0.0).any():
+    tl = t.tolist() if t.ndim == 1 and t.size <= _FEW_BLOCKS else None
+    if tl is not None and 0.0 not in tl:        # (as (t == 0.0).any(): -0.0 too, NaN not)
         # the loop's blocks (one or two per interval): the same IEEE operations on Python
         # floats, without a dozen numpy calls on one-element arrays (bit for bit, tested)
-        snr = [c * v for v in t.tolist()]
+        snr = [c * v for v in tl]
         return (np.array([spacing / (2.0 * s) * (1.0 + 1.0 / s) for s in snr]),
                 np.array([1.0 / (2.0 * s) * (1.0 + 1.0 / (2.0 * s)) for s in snr]))
     snr = c * t

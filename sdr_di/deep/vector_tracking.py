@@ -424,10 +424,13 @@ class VectorTracking:
         if cnt:
             fs = self.fs
             c.noise.add_values(noise)
-            self._test_channel(c, P, nsamp, epochs, iv.k1 / fs)
+            bit_start = epochs % c.bit_ms == 0
+            self._test_channel(c, P, nsamp, epochs, iv.k1 / fs, bit_start)
             cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
+            block = min(c.bit_ms, self.block_ms)
+            # (the bit starts when blocks are bits: neither call writes to it)
             self.pre.process(c.idx, E, P, L, nsamp / fs, cn0_lin,
-                             block_start=epochs % min(c.bit_ms, self.block_ms) == 0)
+                             block_start=bit_start if block == c.bit_ms else epochs % block == 0)
         if self._shift_end is not None:
             # NCOs one interval ahead: the step of the feedback made during the interval
             self._shift_prefilters(*self._shift_end, (c.idx,))
@@ -435,14 +438,16 @@ class VectorTracking:
         c.used = good
         return good
 
-    def _test_channel(self, c: VectorChannel, prompts, nsamp, epochs, t_s: float) -> None:
+    def _test_channel(self, c: VectorChannel, prompts, nsamp, epochs, t_s: float,
+                      bit_start: np.ndarray) -> None:
         """Channel management on this interval's prompts (module notes): bit sums for the
         C/N0, navigation decoding, the fast test (interval left out), the loss test (channel
-        lost, its C/N0 window emptied) and the C/N0 taken up once the window allows."""
+        lost, its C/N0 window emptied) and the C/N0 taken up once the window allows.
+        ``bit_start``: the epochs that begin a data bit."""
         cfg, fs = self.cfg, self.fs
         npow = c.noise.noise_power(self.npow)
         mon = c.power
-        mon.add(prompts, nsamp, epochs % c.bit_ms == 0)
+        mon.add(prompts, nsamp, bit_start)
         self.nav_log.demodulate(c, prompts, epochs, t_s)
         if mon.new:
             # tests on the last bit sums: _FAST_MS to leave the interval out,

@@ -72,6 +72,7 @@ __all__ = [
     "carrier_lock_metric",
     "cn0_known_noise",
     "cn0_of_sums",
+    "cn0_of_terms",
     "cn0_m2m4",
     "m2m4_powers",
     "noise_code_phase",
@@ -139,9 +140,17 @@ def cn0_of_sums(prompts: np.ndarray, noise_power: np.ndarray, t_coh_s: np.ndarra
     """:func:`cn0_known_noise` of prompt sums with per-sum noise powers and lengths, given
     as arrays of the prompts' shape (no checks): ``10 log10(sum(|P_b|^2 - N_b) /
     sum(N_b T_b))`` [dB-Hz], NaN when either sum is not positive."""
-    p, add = prompts, np.add.reduce             # (x.sum()'s reduction, one call less)
-    pd = float(add(p.real * p.real + p.imag * p.imag - noise_power, axis=None))
-    den = float(add(noise_power * t_coh_s, axis=None))
+    p = prompts
+    return cn0_of_terms(p.real * p.real + p.imag * p.imag - noise_power, noise_power * t_coh_s)
+
+
+def cn0_of_terms(signal_terms: np.ndarray, noise_terms: np.ndarray) -> float:
+    """:func:`cn0_of_sums` from its per-sum terms ``|P_b|^2 - N_b`` and ``N_b T_b``
+    (contiguous 1-d arrays): ``10 log10(sum(signal_terms) / sum(noise_terms))`` [dB-Hz], NaN
+    when either sum is not positive."""
+    add = np.add.reduce                         # (x.sum()'s reduction, one call less)
+    pd = float(add(signal_terms, axis=None))
+    den = float(add(noise_terms, axis=None))
     if not (pd > 0.0 and den > 0.0):
         return math.nan
     return 10.0 * math.log10(pd / den)
