@@ -115,7 +115,8 @@ class BitPower:
         n = np.asarray(n_samples)
         if p.size == 0:
             return
-        if n.dtype.kind not in "iu":
+        whole = n.dtype.kind in "iu"
+        if not whole:
             # (sample counts are whole numbers: their sums are exact in int64 as in float64)
             n = np.asarray(n, float)
         idx = np.asarray(bit_start, bool).nonzero()[0]
@@ -124,14 +125,16 @@ class BitPower:
             self._acc_n += float(n.sum())
             return
         head = int(idx[0])
+        # (whole counts: Python's exact integer sums, the values of numpy's int64 sums)
+        nl = n.tolist() if whole else None
         self._acc_p += complex(p[:head].sum())
-        self._acc_n += float(n[:head].sum())
+        self._acc_n += float(sum(nl[:head]) if nl is not None else n[:head].sum())
         if self._acc_n > 0.0:
             self._push_one(self._acc_p, self._acc_n)
         ps = np.add.reduceat(p, idx)         # (not p[a:b].sum(): another order)
         if idx.size == 1:        # one edge (the usual interval): the tail is the bit carried
             self._acc_p = complex(ps[0])
-            self._acc_n = float(n[head:].sum())
+            self._acc_n = float(sum(nl[head:]) if nl is not None else n[head:].sum())
             return
         ns = np.add.reduceat(n, idx).astype(float)
         self._push(ps[:-1], ns[:-1])
