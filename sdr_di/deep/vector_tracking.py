@@ -414,12 +414,14 @@ class VectorTracking:
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
         return epl, pending
 
-    def prefilter(self, iv: Interval, c: VectorChannel, E, P, L, nsamp, epochs, noise) -> bool:
-        """Channel ``c``'s epochs of the interval (NH wiped off; their sample counts and
-        epoch numbers): its noise-correlator values ``noise`` (:func:`~sdr_di.receiver.lock.
-        noise_values`) to its :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, C/N0
-        tests and navigation decoding, pre-filter over its epochs (coherent blocks, module
-        notes); returns the measurement-vector gate (:meth:`_usable`)."""
+    def prefilter(self, iv: Interval, c: VectorChannel, E, P, L, nsamp, epochs, noise,
+                  t_epoch) -> bool:
+        """Channel ``c``'s epochs of the interval (NH wiped off; their sample counts, epoch
+        numbers and durations ``t_epoch = nsamp / fs`` [s]): its noise-correlator values
+        ``noise`` (:func:`~sdr_di.receiver.lock.noise_values`) to its
+        :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, C/N0 tests and navigation
+        decoding, pre-filter over its epochs (coherent blocks, module notes); returns the
+        measurement-vector gate (:meth:`_usable`)."""
         cnt = nsamp.size
         if cnt:
             fs = self.fs
@@ -429,7 +431,7 @@ class VectorTracking:
             cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
             block = min(c.bit_ms, self.block_ms)
             # (the bit starts when blocks are bits: neither call writes to it)
-            self.pre.process(c.idx, E, P, L, nsamp / fs, cn0_lin,
+            self.pre.process(c.idx, E, P, L, t_epoch, cn0_lin,
                              block_start=bit_start if block == c.bit_ms else epochs % block == 0)
         if self._shift_end is not None:
             # NCOs one interval ahead: the step of the feedback made during the interval
@@ -622,6 +624,7 @@ class _ChannelPass:
             every = bool(ok.all())
             noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], n_nz if every else
                                  np.where(ok, n_nz, 1))
+            t_epoch = rows.nsamp[a0:a1] / vt.fs       # (element-wise: as per channel)
             s = 0
             for k in range(self.next, j):
                 c, cnt = vt.chans[k], reps[k]
@@ -629,7 +632,7 @@ class _ChannelPass:
                 good = vt.prefilter(self.iv, c, E[sl], P[sl], L[sl],
                                     rows.nsamp[a0 + s:a0 + s + cnt],
                                     rows.epoch[a0 + s:a0 + s + cnt],
-                                    noise[sl] if every else noise[sl][ok[sl]])
+                                    noise[sl] if every else noise[sl][ok[sl]], t_epoch[sl])
                 self.use.append(good)
                 if good and vt.fusing:
                     dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)
