@@ -150,7 +150,12 @@ class DiscriminatorBank:
         t = np.ascontiguousarray(t_epoch, dtype=np.float64)
         if t.size == 0:
             return
-        early, prompt, late, t = coherent_blocks(early, prompt, late, t, block_start)
+        self.process_blocks(i, *coherent_blocks(early, prompt, late, t, block_start), cn0_hz)
+
+    def process_blocks(self, i: int, early, prompt, late, t, cn0_hz: float) -> None:
+        """:meth:`process` of channel ``i``'s coherent blocks (at least one; their sums and
+        durations ``t`` [s], :func:`~sdr_di.deep.prefilter.coherent_blocks`)."""
+        t = np.ascontiguousarray(t, dtype=np.float64)
         r_tau, r_phi = discriminator_variances(cn0_hz, t, self.spacing)
         dtau, df, v_tau, v_f, nis = interval_discriminators(
             np.ascontiguousarray(early, np.complex128),

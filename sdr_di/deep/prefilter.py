@@ -99,7 +99,8 @@ from ..constants import C_LIGHT, CHIP_RATE_B3I, F_B3I
 from ..ins.imu import ImuErrorModel
 from ._numba_prefilter import prefilter_epochs
 
-__all__ = ["PreFilterBank", "ResetPreFilterBank", "coherent_blocks", "discriminator_variances",
+__all__ = ["PreFilterBank", "ResetPreFilterBank", "coherent_blocks", "coherent_blocks_of_channels",
+           "discriminator_variances",
            "model_process_noise", "nis_test"]
 
 
@@ -149,6 +150,24 @@ def coherent_blocks(early, prompt, late, t_epoch: np.ndarray, block_start=None):
                                    for a in (early, prompt, late))
             t = np.add.reduceat(t, idx)
     return early, prompt, late, t
+
+
+def coherent_blocks_of_channels(early, prompt, late, t_epoch: np.ndarray, block_start,
+                                counts):
+    """:func:`coherent_blocks` of several channels' epochs at once (one call per array, not
+    per channel): the epochs of channel ``k`` are the next ``counts[k]`` of the arrays, its
+    first epoch starts a block. Returns ``(early, prompt, late, t, bounds)``: channel ``k``'s
+    blocks are ``[bounds[k]:bounds[k + 1]]`` of the arrays, equal to :func:`coherent_blocks`
+    of its epochs alone (``np.add.reduceat`` sums each block by itself)."""
+    offs = np.zeros(len(counts) + 1, np.int64)
+    np.cumsum(counts, out=offs[1:])
+    b = np.asarray(block_start, bool).copy()
+    b[offs[:-1][offs[:-1] < offs[1:]]] = True
+    idx = b.nonzero()[0]
+    if idx.size < b.size:
+        early, prompt, late, t_epoch = (np.add.reduceat(np.asarray(a), idx)
+                                        for a in (early, prompt, late, t_epoch))
+    return early, prompt, late, t_epoch, np.searchsorted(idx, offs).tolist()
 
 
 def discriminator_variances(cn0_hz: float, t_epoch: np.ndarray, spacing: float
@@ -281,7 +300,12 @@ class PreFilterBank:
         t = np.ascontiguousarray(t_epoch, dtype=np.float64)
         if t.size == 0:
             return
-        early, prompt, late, t = coherent_blocks(early, prompt, late, t, block_start)
+        self.process_blocks(i, *coherent_blocks(early, prompt, late, t, block_start), cn0_hz)
+
+    def process_blocks(self, i: int, early, prompt, late, t, cn0_hz: float) -> None:
+        """:meth:`process` of channel ``i``'s coherent blocks (at least one; their sums and
+        durations ``t`` [s], :func:`coherent_blocks`)."""
+        t = np.ascontiguousarray(t, dtype=np.float64)
         r_tau, r_phi = discriminator_variances(cn0_hz, t, self.spacing)
         # the channel's rows of x, P, C are contiguous views: updated in place
         nis = prefilter_epochs(self.x[i], self.P[i], np.ascontiguousarray(early, np.complex128),

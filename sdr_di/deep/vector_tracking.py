@@ -51,6 +51,7 @@ from ._numba_epoch_rows import epoch_rows
 from .bit_power import BitPower
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
+from .prefilter import coherent_blocks_of_channels
 from .architectures import block_ms, make_measurement_bank
 
 __all__ = ["SampleClock", "VectorChannel", "VectorTracking"]
@@ -414,25 +415,21 @@ class VectorTracking:
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
         return epl, pending
 
-    def prefilter(self, iv: Interval, c: VectorChannel, E, P, L, nsamp, epochs, noise,
-                  t_epoch) -> bool:
-        """Channel ``c``'s epochs of the interval (NH wiped off; their sample counts, epoch
-        numbers and durations ``t_epoch = nsamp / fs`` [s]): its noise-correlator values
+    def prefilter(self, iv: Interval, c: VectorChannel, P, nsamp, epochs, noise, bit_start,
+                  blocks) -> bool:
+        """Channel ``c``'s epochs of the interval (prompts ``P``, NH wiped off; their sample
+        counts, epoch numbers and data-bit starts ``bit_start``): its noise-correlator values
         ``noise`` (:func:`~sdr_di.receiver.lock.noise_values`) to its
         :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, C/N0 tests and navigation
-        decoding, pre-filter over its epochs (coherent blocks, module notes); returns the
-        measurement-vector gate (:meth:`_usable`)."""
+        decoding, pre-filter over its coherent ``blocks`` (early, prompt, late sums and
+        durations [s], :func:`~sdr_di.deep.prefilter.coherent_blocks`; module notes);
+        returns the measurement-vector gate (:meth:`_usable`)."""
         cnt = nsamp.size
         if cnt:
-            fs = self.fs
             c.noise.add_values(noise)
-            bit_start = epochs % c.bit_ms == 0
-            self._test_channel(c, P, nsamp, epochs, iv.k1 / fs, bit_start)
+            self._test_channel(c, P, nsamp, epochs, iv.k1 / self.fs, bit_start)
             cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
-            block = min(c.bit_ms, self.block_ms)
-            # (the bit starts when blocks are bits: neither call writes to it)
-            self.pre.process(c.idx, E, P, L, t_epoch, cn0_lin,
-                             block_start=bit_start if block == c.bit_ms else epochs % block == 0)
+            self.pre.process_blocks(c.idx, *blocks, cn0_lin)
         if self._shift_end is not None:
             # NCOs one interval ahead: the step of the feedback made during the interval
             self._shift_prefilters(*self._shift_end, (c.idx,))
@@ -624,15 +621,24 @@ class _ChannelPass:
             every = bool(ok.all())
             noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], n_nz if every else
                                  np.where(ok, n_nz, 1))
-            t_epoch = rows.nsamp[a0:a1] / vt.fs       # (element-wise: as per channel)
+            # the element-wise work and the coherent blocks of these channels at once, each
+            # channel then slices (the same values as per channel: module notes of
+            # prefilter.coherent_blocks_of_channels)
+            t_epoch = rows.nsamp[a0:a1] / vt.fs
+            epochs = rows.epoch[a0:a1]
+            chans, counts = vt.chans[self.next:j], reps[self.next:j]
+            bit_ms = [c.bit_ms for c in chans]
+            bit_start = epochs % np.repeat(bit_ms, counts) == 0
+            block = [min(b, vt.block_ms) for b in bit_ms]
+            Eb, Pb, Lb, Tb, bounds = coherent_blocks_of_channels(
+                E, P, L, t_epoch, bit_start if block == bit_ms else
+                epochs % np.repeat(block, counts) == 0, counts)
             s = 0
-            for k in range(self.next, j):
-                c, cnt = vt.chans[k], reps[k]
-                sl = slice(s, s + cnt)
-                good = vt.prefilter(self.iv, c, E[sl], P[sl], L[sl],
-                                    rows.nsamp[a0 + s:a0 + s + cnt],
-                                    rows.epoch[a0 + s:a0 + s + cnt],
-                                    noise[sl] if every else noise[sl][ok[sl]], t_epoch[sl])
+            for m, (c, cnt) in enumerate(zip(chans, counts)):
+                sl, bl = slice(s, s + cnt), slice(bounds[m], bounds[m + 1])
+                good = vt.prefilter(self.iv, c, P[sl], rows.nsamp[a0 + s:a0 + s + cnt],
+                                    epochs[sl], noise[sl] if every else noise[sl][ok[sl]],
+                                    bit_start[sl], (Eb[bl], Pb[bl], Lb[bl], Tb[bl]))
                 self.use.append(good)
                 if good and vt.fusing:
                     dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)
