@@ -682,3 +682,31 @@ def test_discriminator_variances_of_a_few_blocks_equal_the_array_form():
         arr = discriminator_variances(cn0, np.r_[t, pad], d)
         for a, b in zip(few, arr):
             assert np.array_equal(a, b[:t.size], equal_nan=True)
+
+
+def test_coherent_blocks_of_channels_equal_each_channels_blocks():
+    """The vector loop sums the blocks of a pass's channels at once: every channel's
+    blocks equal those of :func:`coherent_blocks` of its epochs alone, bit for bit (empty
+    channels, a first epoch that is no block start, every epoch its own block)."""
+    from sdr_di.deep.prefilter import coherent_blocks, coherent_blocks_of_channels
+
+    rng = np.random.default_rng(47)
+    for _ in range(300):
+        counts = [int(c) for c in rng.integers(0, 45, size=int(rng.integers(1, 9)))]
+        m = sum(counts)
+        e, p, l = ((rng.normal(size=m) + 1j * rng.normal(size=m)) * 10 ** rng.uniform(-3, 5)
+                   for _ in range(3))
+        t = rng.integers(24000, 26000, size=m) / 2.5e6
+        starts = (rng.random(m) < rng.choice([0.05, 0.3, 1.0])) if m else np.zeros(0, bool)
+        E, P, L, T, bounds = coherent_blocks_of_channels(e, p, l, t, starts, counts)
+        assert len(bounds) == len(counts) + 1
+        s = 0
+        for k, cnt in enumerate(counts):
+            sl, bl = slice(s, s + cnt), slice(bounds[k], bounds[k + 1])
+            s += cnt
+            if cnt == 0:
+                assert bounds[k] == bounds[k + 1]
+                continue
+            want = coherent_blocks(e[sl], p[sl], l[sl], t[sl], starts[sl])
+            for got_a, want_a in zip((E[bl], P[bl], L[bl], T[bl]), want):
+                assert np.array_equal(got_a, want_a)
