@@ -262,6 +262,20 @@ def _rates(lat, h, v):
     return w_ie, w_en, RN_h, cl
 
 
+def residual_biases(X: np.ndarray, layout: StateLayout, f_b: np.ndarray,
+                    w_ib_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The gyro [rad/s] and accelerometer [m/s^2] residual biases of error rows ``X`` (p, n):
+    the bias states, plus with scale-factor states the scale factors times the compensated
+    rate ``w_ib_b`` and specific force ``f_b`` (the effective residual biases of the
+    compensated IMU, module notes)."""
+    L = layout
+    eps, nab = X[:, L.gyro_bias], X[:, L.accel_bias]
+    if L.scale_factors:
+        eps = eps + X[:, L.gyro_scale] * np.asarray(w_ib_b, float)
+        nab = nab + X[:, L.accel_scale] * np.asarray(f_b, float)
+    return eps, nab
+
+
 def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.ndarray,
                      clock: ClockModel, layout: StateLayout = _NONE,
                      bias_tau_s: tuple[float, float] = (3600.0, 3600.0)) -> np.ndarray:
@@ -276,11 +290,7 @@ def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.n
     X = np.atleast_2d(X)
     L = layout
     phi, dv, dp = X[:, L.att], X[:, L.vel], X[:, L.pos]
-    eps, nab = X[:, L.gyro_bias], X[:, L.accel_bias]
-    if L.scale_factors:
-        # effective residual biases of the compensated IMU (module notes)
-        eps = eps + X[:, L.gyro_scale] * np.asarray(w_ib_b, float)
-        nab = nab + X[:, L.accel_scale] * np.asarray(f_b, float)
+    eps, nab = residual_biases(X, L, f_b, w_ib_b)
     Cb = nav.C_b_n
     lat_c, h_c = nav.llh[0], nav.llh[2]
     v_c = nav.v_n
@@ -364,10 +374,7 @@ def error_derivative_kernel(X: np.ndarray, nav: NavState, f_b: np.ndarray,
     w = np.empty(p)
     K = np.empty((p, 3, 3))
     _nb.true_state_terms(X, float(nav.llh[0]), float(nav.llh[2]), w, K)
-    eps, nab = X[:, L.gyro_bias], X[:, L.accel_bias]
-    if L.scale_factors:
-        eps = eps + X[:, L.gyro_scale] * np.asarray(w_ib_b, float)
-        nab = nab + X[:, L.accel_scale] * np.asarray(f_b, float)
+    eps, nab = residual_biases(X, L, f_b, w_ib_b)
     CbT = nav.C_b_n.T
     out = np.empty(X.shape)
     _nb.error_rows(X, cs, w ** 1.5, K, K @ K, eps @ CbT, nab @ CbT, L.gauss_markov,
