@@ -9,7 +9,7 @@ import numpy as np
 
 from sdr_di.receiver._numba_channel import plan_block
 from sdr_di.receiver.channel import _HIST, Channel
-from sdr_di.receiver.lock import _NOISE_LAG_STEP, NOISE_MIN_LAG_CHIPS, NOISE_SAMPLES
+from sdr_di.receiver.lock import _NOISE_LAG_STEP, NOISE_MIN_LAG_CHIPS, noise_samples
 from sdr_di.receiver.run_scalar import open_source, sidecar_assistance
 from sdr_di.receiver.scalar import ScalarReceiver
 from sdr_di.receiver.tracking import ChannelState
@@ -35,9 +35,10 @@ def test_plan_block_equals_reference():
                 fd + float(rng.normal()), float(rng.normal()), start + 0.5 * m * L * fs / rate)
         ref = [np.full_like(a, -1.0) for a in (ch._hist, ch._rows, ch._ends)]
         ch._hist, ch._rows, ch._ends = ref
+        ch.n_noise = noise_samples(fs)
         ch._plan_reference(*args)
         jit = [np.full_like(a, -1.0) for a in ref]
-        plan_block(*args, L, NOISE_SAMPLES, NOISE_MIN_LAG_CHIPS, _NOISE_LAG_STEP, *jit)
+        plan_block(*args, L, ch.n_noise, NOISE_MIN_LAG_CHIPS, _NOISE_LAG_STEP, *jit)
         for a, b in zip(ref, jit):
             np.testing.assert_array_equal(a, b)
         assert np.count_nonzero(ref[0][:, 5] >= 0) == min(m, _HIST)

@@ -40,7 +40,7 @@ from ..receiver.correlator import (  # the kernel: receiver._numba_correlate_bit
     reduce_code_phase,
 )
 from ..receiver.ifreader import IfSource
-from ..receiver.lock import (NOISE_SAMPLES, PostCorrelationNoise, noise_code_phases,
+from ..receiver.lock import (PostCorrelationNoise, noise_code_phases, noise_samples,
                              noise_values)
 from ..receiver.navdata import NavDataInForce
 from ..receiver.observables import ReceiverTime
@@ -173,6 +173,9 @@ class VectorTracking:
                  handover: tuple, spacing_chips: float) -> None:
         self.cfg, self.source, self.chans, self.clock = cfg, source, chans, clock
         self.fs = source.sampling_rate_hz
+        #: Samples of each epoch's noise correlator (:func:`~sdr_di.receiver.lock.
+        #: noise_samples`, as the scalar channels').
+        self.n_noise = noise_samples(self.fs)
         self.stop, self.profile = stop, profile
         self.n_channels = len(chans)
         self.iono = navdata.klobuchar
@@ -355,7 +358,7 @@ class VectorTracking:
                   detach: bool = False) -> tuple[np.ndarray, RowsCall]:
         """Early, prompt, late of every epoch of every channel: one call of the receiver's
         kernel on the stored samples (bit-window replicas, one rotation row per epoch).
-        The same call runs each epoch's noise correlator (its first ``NOISE_SAMPLES``
+        The same call runs each epoch's noise correlator (its first :attr:`n_noise`
         samples, far from the prompt's code phase: :mod:`~sdr_di.receiver.lock` notes).
         Returns ``(epl, pending)``: ``epl`` complex (2 n_epochs, 3), E, P, L of epoch ``e``
         in row ``2 e``, of its noise correlator in row ``2 e + 1`` (NH code not wiped off:
@@ -376,7 +379,7 @@ class VectorTracking:
             t_before[0] += time.perf_counter() - tb
         n_rows = rows.starts.size
         th = reduce_code_phase(rows.theta, CODE_LENGTH_B3I)
-        n_noise = np.minimum(rows.nsamp, NOISE_SAMPLES)
+        n_noise = np.minimum(rows.nsamp, self.n_noise)
         th_noise = noise_code_phases(th, rows.epoch)
 
         def pair(a, b=None):
@@ -616,7 +619,7 @@ class _ChannelPass:
             ep, nz = epl[2 * a0:2 * a1:2], epl[2 * a0 + 1:2 * a1:2]
             nh = rows.nh[a0:a1]
             E, P, L = ep[:, 0] * nh, ep[:, 1] * nh, ep[:, 2] * nh
-            n_nz = np.minimum(rows.nsamp[a0:a1], NOISE_SAMPLES)
+            n_nz = np.minimum(rows.nsamp[a0:a1], vt.n_noise)
             ok = n_nz > 0
             every = bool(ok.all())
             noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], n_nz if every else

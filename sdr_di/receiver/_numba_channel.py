@@ -52,8 +52,9 @@ def plan_block(m, start, th, ph, dph, ep, rate, dchip, dphi, ddop, fd, f_est, f_
     code_len : int
         Chips per code period ``L``.
     noise_samples, noise_min_lag, noise_lag_step : int
-        :data:`~sdr_di.receiver.lock.NOISE_SAMPLES`, ``NOISE_MIN_LAG_CHIPS`` and the lag step
-        of :func:`~sdr_di.receiver.lock.noise_code_phase`.
+        The noise row's most samples (:func:`~sdr_di.receiver.lock.noise_samples`),
+        ``NOISE_MIN_LAG_CHIPS`` and the lag step of
+        :func:`~sdr_di.receiver.lock.noise_code_phase`.
     hist : float64 (H, 9)
         History ring, written at row ``ep % H``: ``(start, theta, rate, dphase, fd, ep,
         f_est, f_rate, f_mid)``.

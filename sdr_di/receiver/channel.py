@@ -70,12 +70,12 @@ from ._numba_channel import plain_epochs, plan_block
 from .correlator import check_prn
 from .lock import (
     NOISE_MIN_LAG_CHIPS,
-    NOISE_SAMPLES,
     LockCounter,
     PostCorrelationNoise,
     carrier_lock_metric,
     m2m4_powers,
     noise_code_phase,
+    noise_samples,
     prompt_signal_power,
 )
 from .lock import _NOISE_LAG_STEP
@@ -146,6 +146,9 @@ class Channel:
         self.nav = nav_type(self.prn)
         self.is_d1 = self.nav == "D1"
         self.fs = float(sampling_rate_hz)
+        #: Samples of each epoch's noise-correlator row (:func:`~sdr_di.receiver.lock.
+        #: noise_samples`).
+        self.n_noise = noise_samples(self.fs)
         self.if_hz = float(if_hz)
         self.carrier_hz = float(carrier_hz)
         self.cfg = config or TrackingConfig()
@@ -335,7 +338,7 @@ class Channel:
         shorter). The rows of :attr:`block_rows` are the kernel parameters of each epoch:
         ``(start, n, theta, dchip, phi, dphi)``; ``block_end`` is one past the last sample.
         Each of the :attr:`n_block_epochs` epoch rows is followed by its noise-correlator row
-        (its first ``NOISE_SAMPLES`` samples, code phase far from the prompt's:
+        (its first :attr:`n_noise` samples, code phase far from the prompt's:
         :mod:`~sdr_di.receiver.lock` notes). The loop over the epochs is
         :func:`~sdr_di.receiver._numba_channel.plan_block` (:attr:`jit`), or its plain form
         :meth:`_plan_reference`.
@@ -359,7 +362,7 @@ class Channel:
         args = (m, start, self.theta, self.phi, self.dphase, self.epoch, rate, dchip, dphi,
                 ddop, fd, f_est, f_rate, f_mid)
         if self.jit:
-            plan_block(*args, _L, NOISE_SAMPLES, NOISE_MIN_LAG_CHIPS, _NOISE_LAG_STEP,
+            plan_block(*args, _L, self.n_noise, NOISE_MIN_LAG_CHIPS, _NOISE_LAG_STEP,
                        self._hist, self._rows, self._ends)
         else:
             self._plan_reference(*args)
@@ -384,7 +387,7 @@ class Channel:
             # each epoch's noise row right after it: the kernel's threads take contiguous
             # halves of the rows, which then hold equal work
             rows[2 * i] = (start, n, th, dchip, ph, dphi)
-            rows[2 * i + 1] = (start, n if n < NOISE_SAMPLES else NOISE_SAMPLES,
+            rows[2 * i + 1] = (start, n if n < self.n_noise else self.n_noise,
                                noise_code_phase(th, ep), dchip, ph, dphi)
             hist[ep % _HIST] = (start, th, rate, dph, fd, ep, f_est, f_rate, f_mid)
             th = th + n * dchip - _LF

@@ -32,12 +32,17 @@ low, or NaN, under one near the nulls. Each receiver therefore also runs a **noi
 correlator**: the channel's own code at a lag of at least :data:`NOISE_MIN_LAG_CHIPS` from
 the prompt (:func:`noise_code_phase`: a different lag each epoch, so that the few hundred
 chips it spans are a different stretch of the code each time: a fixed stretch has a fixed,
-lumpy spectrum, which read a 2 MHz jammer 13 % low), over the first :data:`NOISE_SAMPLES`
-samples of each epoch, at the channel's carrier. Its
+lumpy spectrum, which read a 2 MHz jammer 13 % low), over the first samples of each epoch
+that span :data:`NOISE_SPAN_CHIPS` chips (:func:`noise_samples`: 1024 at 25 MHz, 103 at
+2.5 MHz, at most :data:`NOISE_SAMPLES`), at the channel's carrier. Its
 early, prompt and late sums hold no signal (Gold-code sidelobes ~1/sqrt(L) of the amplitude)
 and the noise the prompt sees, so ``(|E|^2 + |P|^2 + |L|^2) / (3 n)`` estimates the
 post-correlation noise power per sample (the three are 0.25 correlated in power: together
-worth about 2.25 independent values). :class:`PostCorrelationNoise` keeps the last 1000 (1 s
+worth about 2.25 independent values). A value's distribution does not depend on the
+number of samples ``n``: on noise alone each sum is ``CN(0, n sigma^2)``, so ``|S|^2 / n``
+is ``sigma^2`` times an exponential variate whatever ``n`` (the Gold-code leakage
+``|S_sig|^2 / n`` does not grow with ``n`` either); the span in chips, not in samples, sets
+how lumpy each value's spectral weighting is. :class:`PostCorrelationNoise` keeps the last 1000 (1 s
 at one per epoch) and chooses the noise power the C/N0 uses: the input power while the two
 agree within ``z`` (6) standard errors of the post-correlation mean (it is the lower-variance
 estimate, and C/N0 outputs without interference stay what they were), the post-correlation
@@ -62,11 +67,12 @@ import math
 
 import numpy as np
 
-from ..constants import CODE_LENGTH_B3I
+from ..constants import CHIP_RATE_B3I, CODE_LENGTH_B3I
 
 __all__ = [
     "NOISE_MIN_LAG_CHIPS",
     "NOISE_SAMPLES",
+    "NOISE_SPAN_CHIPS",
     "LockCounter",
     "PostCorrelationNoise",
     "carrier_lock_metric",
@@ -77,6 +83,7 @@ __all__ = [
     "m2m4_powers",
     "noise_code_phase",
     "noise_code_phases",
+    "noise_samples",
     "noise_values",
     "prompt_signal_power",
 ]
@@ -251,9 +258,21 @@ class LockCounter:
 
 #: Smallest code lag of the noise correlator from the prompt [chips] (either side).
 NOISE_MIN_LAG_CHIPS = 64
-#: Samples of each epoch the noise correlator sums (about 4 % of a 1 ms epoch at 25 MHz).
+#: Most samples of each epoch the noise correlator sums (:func:`noise_samples`).
 NOISE_SAMPLES = 1024
+#: Code chips the noise correlator spans in each epoch (about 4 % of a period: 1024 samples
+#: at 25 MHz; :func:`noise_samples`).
+NOISE_SPAN_CHIPS = 419.0
 _NOISE_LAG_STEP = 3989  # chips per epoch (prime, near L (3 - sqrt 5) / 2: well spread lags)
+
+
+def noise_samples(sampling_rate_hz: float) -> int:
+    """Samples of each epoch the noise correlator sums at ``sampling_rate_hz`` [Hz]: those
+    that span :data:`NOISE_SPAN_CHIPS` chips at the nominal chip rate, at most
+    :data:`NOISE_SAMPLES` (1024 at 25 MHz and above, 103 at 2.5 MHz; module notes: the
+    values' statistics do not depend on it, the correlator's cost does)."""
+    n = math.ceil(NOISE_SPAN_CHIPS * float(sampling_rate_hz) / CHIP_RATE_B3I)
+    return max(1, min(NOISE_SAMPLES, n))
 
 
 def noise_code_phase(theta: float, epoch: int) -> float:
