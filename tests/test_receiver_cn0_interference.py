@@ -149,13 +149,15 @@ def test_cn0_follows_the_effective_cn0_under_a_noise_jammer(clean_file, offset_h
     assert drop == pytest.approx(theory_drop, abs=1.5)
 
 
-def test_cn0_within_1p5_db_of_the_sidecar_effective_cn0(tmp_path):
+@pytest.mark.parametrize("fs", [5e6, 2.5e6])
+def test_cn0_within_1p5_db_of_the_sidecar_effective_cn0(tmp_path, fs):
     """Generator's noise jammer (J/S 29 dB, 1 MHz, centred; theory about 7 dB below the
-    nominal 45 dB-Hz) on 16-bit output at 5 MHz, 1 s, one satellite."""
+    nominal 45 dB-Hz) on 16-bit output at 5 MHz (205 noise samples an epoch) and 2.5 MHz
+    (103), 1 s, one satellite."""
     sc0 = load_scenario(DEFAULT_SCENARIO)
     raw = json.loads(json.dumps(sc0.raw, default=str))
     raw["scenario"]["duration_s"] = 1.0
-    raw["signal"].update(sampling_rate_hz=5e6, sample_format="iq_int16",
+    raw["signal"].update(sampling_rate_hz=fs, sample_format="iq_int16",
                          quantization_bits=16)
     raw["satellites"]["cn0_dbhz"] = 45.0
     prn = next(s.prn for s in make_generator(parse_scenario(raw, base_dir=sc0.source.parent))
