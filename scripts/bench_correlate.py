@@ -4,7 +4,7 @@
 Usage::
 
     python scripts/bench_correlate.py [--channels 7] [--fs 25e6] [--ms 1] [--seconds 2]
-                                      [--threads 1 2] [--real]
+                                      [--threads 1 2] [--real] [--noise-samples N]
 
 For each kernel and thread count, correlates ``--channels`` channels (E/P/L) over 1-ms
 coherent intervals at ``--fs`` for ``--seconds`` seconds of data (random samples, random code
@@ -29,6 +29,12 @@ first). Kernels:
 
 ``ns/s-ch`` is the CPU time per sample and channel [ns] (the three taps E, P, L and the
 wipe-off of one sample for one channel).
+
+``--noise-samples N`` (``receiver`` and ``recv_f32``): each interval's row of a channel is
+followed by a noise-correlator row of its first ``N`` samples at another code phase, as the
+receivers call the kernel (``rate``: :func:`~sdr_di.receiver.lock.noise_samples` of
+``--fs``); ``ns/s-ch`` still divides by the interval's samples only, so it carries the noise
+rows' cost.
 
 ``run(args)`` is the entry point for a later ``scripts/bench.py correlate`` dispatcher; ``args``
 needs the attributes ``channels``, ``fs``, ``ms``, ``seconds``, ``threads`` and ``real``.
@@ -73,8 +79,13 @@ def _one_rate(x: np.ndarray, table: np.ndarray, n_int: int, n_intervals: int, fs
 
 def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int: int,
                        n_intervals: int, fs: float, rng: np.random.Generator,
-                       kernel=correlate_epl_bits) -> float:
-    """The receiver's kernel on the same intervals (all channels in one call, as the bank)."""
+                       kernel=correlate_epl_bits, n_noise: int = 0) -> float:
+    """The receiver's kernel on the same intervals (all channels in one call, as the bank;
+    with ``n_noise`` > 0 each channel's row followed by its noise row of ``n_noise``
+    samples)."""
+    if n_noise > 0:
+        return _one_rate_receiver_noise(xs, is_complex, bits, n_int, n_intervals, fs, rng,
+                                        kernel, n_noise)
     n_ch = bits.shape[0]
     n_comp = 2 if is_complex else 1
     n_x = xs.size // n_comp
@@ -92,6 +103,35 @@ def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int
         off = (j * n_int) % (n_x - n_int + 1)
         kernel(xs, n_comp, bits, idx, CODE_PAD, 10230, np.full(n_ch, off, np.int64), nsamp,
                theta, dchip, phi, dphi, rot_re, rot_im, idx, 0.5, n_sub, out)
+        theta = reduce_code_phase(theta + n_int * dchip, 10230)
+        phi = phi + n_int * dphi
+        phi -= np.floor(phi)
+    return time.perf_counter() - t0
+
+
+def _one_rate_receiver_noise(xs, is_complex, bits, n_int, n_intervals, fs, rng, kernel,
+                             n_noise) -> float:
+    """:func:`_one_rate_receiver` with a noise row after each channel's row (rows ``2 c``
+    and ``2 c + 1``, the noise row at a code phase 5000 chips away, the same carrier)."""
+    n_ch = bits.shape[0]
+    n_comp = 2 if is_complex else 1
+    n_x = xs.size // n_comp
+    theta = rng.uniform(0, 10230, n_ch)
+    dchip = 10.23e6 * (1 + rng.uniform(-3e-6, 3e-6, n_ch)) / fs
+    phi = rng.uniform(0, 1, n_ch)
+    dphi = rng.uniform(-5e3, 5e3, n_ch) / fs
+    rot_re, rot_im = carrier_rotation(dphi)
+    tab = np.repeat(np.arange(n_ch, dtype=np.int64), 2)
+    nsamp = np.tile(np.array([n_int, min(n_noise, n_int)], np.int64), n_ch)
+    out = np.empty((2 * n_ch, 3, 2))
+    t0 = time.perf_counter()
+    for j in range(n_intervals):
+        off = (j * n_int) % (n_x - n_int + 1)
+        th2 = np.repeat(theta, 2)
+        th2[1::2] = reduce_code_phase(theta + 5000.0, 10230)
+        kernel(xs, n_comp, bits, tab, CODE_PAD, 10230, np.full(2 * n_ch, off, np.int64),
+               nsamp, th2, np.repeat(dchip, 2), np.repeat(phi, 2), np.repeat(dphi, 2),
+               rot_re, rot_im, tab, 0.5, 1, out)
         theta = reduce_code_phase(theta + n_int * dchip, 10230)
         phi = phi + n_int * dphi
         phi -= np.floor(phi)
@@ -229,8 +269,10 @@ def run(args: argparse.Namespace) -> list[dict]:
     max_threads = numba.config.NUMBA_NUM_THREADS
     threads = [t for t in args.threads if 1 <= t <= max_threads] or [numba.get_num_threads()]
     print(f"machine: {os.cpu_count()} cores, numba threads available: {max_threads}")
+    n_noise = _noise_samples(args, fs)
     print(f"correlator: {n_ch} channels x E/P/L, {'real' if args.real else 'complex'} input, "
-          f"fs = {fs / 1e6:g} MHz, {args.ms:g} ms intervals, {args.seconds:g} s of data")
+          f"fs = {fs / 1e6:g} MHz, {args.ms:g} ms intervals, {args.seconds:g} s of data"
+          + (f", noise rows of {n_noise} samples" if n_noise else ""))
     print(f"{'kernel':>8} {'threads':>7} {'wall s':>8} {'CPU s':>7} {'Msample-ch/s':>13} "
           f"{'x real time':>12} {'ns/s-ch':>8}")
     rows = []
@@ -247,7 +289,7 @@ def run(args: argparse.Namespace) -> list[dict]:
 
                     def one(n_iv, fn=fn):
                         return _one_rate_receiver(xs, not args.real, bits, n_int, n_iv, fs,
-                                                  rng, fn)
+                                                  rng, fn, n_noise)
                 one(2)  # compile / warm up
                 c0 = time.thread_time() if t == 1 else time.process_time()
                 wall = one(n_intervals)
@@ -274,6 +316,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, nargs="+",
                         default=sorted({1, numba.config.NUMBA_NUM_THREADS}))
     parser.add_argument("--real", action="store_true", help="real (float32) input")
+    parser.add_argument("--noise-samples", default="0",
+                        help="noise row after each row: samples, or 'rate' (the receivers' "
+                             "count at --fs); 0: none")
+
+
+def _noise_samples(args: argparse.Namespace, fs: float) -> int:
+    """The noise rows' samples of ``--noise-samples`` (0: none)."""
+    v = str(getattr(args, "noise_samples", "0"))
+    if v == "rate":
+        from sdr_di.receiver.lock import noise_samples
+        return noise_samples(fs)
+    return int(v)
 
 
 def main(argv: list[str] | None = None) -> None:
