@@ -81,11 +81,8 @@ def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int
                        n_intervals: int, fs: float, rng: np.random.Generator,
                        kernel=correlate_epl_bits, n_noise: int = 0) -> float:
     """The receiver's kernel on the same intervals (all channels in one call, as the bank;
-    with ``n_noise`` > 0 each channel's row followed by its noise row of ``n_noise``
-    samples)."""
-    if n_noise > 0:
-        return _one_rate_receiver_noise(xs, is_complex, bits, n_int, n_intervals, fs, rng,
-                                        kernel, n_noise)
+    with ``n_noise`` > 0 each channel's row followed by its noise row of ``n_noise`` samples
+    at a code phase 5000 chips away and the same carrier, as the receivers order them)."""
     n_ch = bits.shape[0]
     n_comp = 2 if is_complex else 1
     n_x = xs.size // n_comp
@@ -94,44 +91,22 @@ def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int
     phi = rng.uniform(0, 1, n_ch)
     dphi = rng.uniform(-5e3, 5e3, n_ch) / fs
     rot_re, rot_im = carrier_rotation(dphi)
-    idx = np.arange(n_ch, dtype=np.int64)
-    nsamp = np.full(n_ch, n_int, np.int64)
-    out = np.empty((n_ch, 3, 2))
-    n_sub = kernel_tasks(n_ch, n_int)
+    k = 2 if n_noise > 0 else 1                      # rows per channel
+    idx = np.repeat(np.arange(n_ch, dtype=np.int64), k)
+    nsamp = np.full(k * n_ch, n_int, np.int64)
+    nsamp[1::k] = min(n_noise, n_int) if k == 2 else n_int
+    out = np.empty((k * n_ch, 3, 2))
+    n_sub = kernel_tasks(n_ch, n_int) if k == 1 else 1
+    dchip_k, dphi_k = np.repeat(dchip, k), np.repeat(dphi, k)
     t0 = time.perf_counter()
     for j in range(n_intervals):
         off = (j * n_int) % (n_x - n_int + 1)
-        kernel(xs, n_comp, bits, idx, CODE_PAD, 10230, np.full(n_ch, off, np.int64), nsamp,
-               theta, dchip, phi, dphi, rot_re, rot_im, idx, 0.5, n_sub, out)
-        theta = reduce_code_phase(theta + n_int * dchip, 10230)
-        phi = phi + n_int * dphi
-        phi -= np.floor(phi)
-    return time.perf_counter() - t0
-
-
-def _one_rate_receiver_noise(xs, is_complex, bits, n_int, n_intervals, fs, rng, kernel,
-                             n_noise) -> float:
-    """:func:`_one_rate_receiver` with a noise row after each channel's row (rows ``2 c``
-    and ``2 c + 1``, the noise row at a code phase 5000 chips away, the same carrier)."""
-    n_ch = bits.shape[0]
-    n_comp = 2 if is_complex else 1
-    n_x = xs.size // n_comp
-    theta = rng.uniform(0, 10230, n_ch)
-    dchip = 10.23e6 * (1 + rng.uniform(-3e-6, 3e-6, n_ch)) / fs
-    phi = rng.uniform(0, 1, n_ch)
-    dphi = rng.uniform(-5e3, 5e3, n_ch) / fs
-    rot_re, rot_im = carrier_rotation(dphi)
-    tab = np.repeat(np.arange(n_ch, dtype=np.int64), 2)
-    nsamp = np.tile(np.array([n_int, min(n_noise, n_int)], np.int64), n_ch)
-    out = np.empty((2 * n_ch, 3, 2))
-    t0 = time.perf_counter()
-    for j in range(n_intervals):
-        off = (j * n_int) % (n_x - n_int + 1)
-        th2 = np.repeat(theta, 2)
-        th2[1::2] = reduce_code_phase(theta + 5000.0, 10230)
-        kernel(xs, n_comp, bits, tab, CODE_PAD, 10230, np.full(2 * n_ch, off, np.int64),
-               nsamp, th2, np.repeat(dchip, 2), np.repeat(phi, 2), np.repeat(dphi, 2),
-               rot_re, rot_im, tab, 0.5, 1, out)
+        th, ph = theta, phi
+        if k == 2:
+            th, ph = np.repeat(theta, 2), np.repeat(phi, 2)
+            th[1::2] = reduce_code_phase(theta + 5000.0, 10230)
+        kernel(xs, n_comp, bits, idx, CODE_PAD, 10230, np.full(k * n_ch, off, np.int64), nsamp,
+               th, dchip_k, ph, dphi_k, rot_re, rot_im, idx, 0.5, n_sub, out)
         theta = reduce_code_phase(theta + n_int * dchip, 10230)
         phi = phi + n_int * dphi
         phi -= np.floor(phi)
