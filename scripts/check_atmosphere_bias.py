@@ -28,6 +28,11 @@ from pathlib import Path
 import numpy as np
 
 
+def fmt(v) -> str:
+    """Three values [m] as a table row."""
+    return "  ".join(f"{x:+7.3f}" for x in v)
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -39,8 +44,8 @@ def main(argv: list[str] | None = None) -> None:
 
     from sdr_di.io.imu_files import read_truth
     from sdr_di.orbits.atmosphere import iono_delay_b3i_m
-    from sdr_di.scenario.schema import AtmosphereSpec
     from sdr_di.orbits.ephemeris import Klobuchar
+    from sdr_di.scenario.schema import AtmosphereSpec
     from sdr_di.sim.atmosphere import AtmosphereTruth
 
     side = json.loads(Path(args.sidecar).read_text())
@@ -79,7 +84,6 @@ def main(argv: list[str] | None = None) -> None:
     bias = np.linalg.lstsq(np.array(rows), np.array(dr), rcond=None)[0]
     err = np.array([sol[f"pos_err_{c}_m"][keep] for c in "enu"])
     sd = np.array([sol[f"pos_sd_{c}_m"][keep] for c in "enu"])
-    fmt = lambda v: "  ".join(f"{x:+7.3f}" for x in v)  # noqa: E731
     print(f"ENU [m]                      {'e':>7s}  {'n':>7s}  {'u':>7s}")
     print(f"residuals projected (LS):    {fmt(bias[:3])}   (clock {bias[3]:+.2f} m)")
     print(f"run's mean error:            {fmt(err.mean(axis=1))}")
