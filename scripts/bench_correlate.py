@@ -37,7 +37,8 @@ receivers call the kernel (``rate``: :func:`~sdr_di.receiver.lock.noise_samples`
 rows' cost.
 
 ``run(args)`` is the entry point for a later ``scripts/bench.py correlate`` dispatcher; ``args``
-needs the attributes ``channels``, ``fs``, ``ms``, ``seconds``, ``threads`` and ``real``.
+needs the attributes ``channels``, ``fs``, ``ms``, ``seconds``, ``threads`` and ``real``
+(``noise_samples`` optional, default none).
 """
 
 from __future__ import annotations
@@ -94,7 +95,8 @@ def _one_rate_receiver(xs: np.ndarray, is_complex: bool, bits: np.ndarray, n_int
     k = 2 if n_noise > 0 else 1                      # rows per channel
     idx = np.repeat(np.arange(n_ch, dtype=np.int64), k)
     nsamp = np.full(k * n_ch, n_int, np.int64)
-    nsamp[1::k] = min(n_noise, n_int) if k == 2 else n_int
+    if k == 2:
+        nsamp[1::2] = min(n_noise, n_int)
     out = np.empty((k * n_ch, 3, 2))
     n_sub = kernel_tasks(n_ch, n_int) if k == 1 else 1
     dchip_k, dphi_k = np.repeat(dchip, k), np.repeat(dphi, k)

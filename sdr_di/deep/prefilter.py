@@ -100,8 +100,7 @@ from ..ins.imu import ImuErrorModel
 from ._numba_prefilter import prefilter_epochs
 
 __all__ = ["PreFilterBank", "ResetPreFilterBank", "coherent_blocks", "coherent_blocks_of_channels",
-           "discriminator_variances",
-           "model_process_noise", "nis_test"]
+           "discriminator_variances", "model_process_noise", "nis_test"]
 
 
 def model_process_noise(imu: ImuErrorModel | None, carrier_hz: float = F_B3I

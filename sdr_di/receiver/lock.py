@@ -43,10 +43,11 @@ number of samples ``n``: on noise alone each sum is ``CN(0, n sigma^2)``, so ``|
 is ``sigma^2`` times an exponential variate whatever ``n`` (the Gold-code leakage
 ``|S_sig|^2 / n`` does not grow with ``n`` either); the span in chips, not in samples, sets
 how lumpy each value's spectral weighting is. :class:`PostCorrelationNoise` keeps the last
-1000 (1 s at one per epoch) and chooses the noise power the C/N0 uses: the input power while the two
-agree within ``z`` (6) standard errors of the post-correlation mean (it is the lower-variance
-estimate, and C/N0 outputs without interference stay what they were), the post-correlation
-mean when they do not (interference, or a front end whose filter shapes the noise).
+1000 (1 s at one per epoch) and chooses the noise power the C/N0 uses: the input power while
+the two agree within ``z`` (6) standard errors of the post-correlation mean (it is the
+lower-variance estimate, and C/N0 outputs without interference stay what they were), the
+post-correlation mean when they do not (interference, or a front end whose filter shapes the
+noise).
 
 Carrier lock (normalized I^2 - Q^2)
 ----------------------------------
