@@ -65,6 +65,7 @@ import numpy as np
 
 from ..constants import A_CGCS, E2_CGCS, F_CGCS, OMEGA_E
 from ..frames import C_b_n_to_euler, euler_to_C_b_n
+from . import _numba_mechanization as _nb
 from .gravity import GAMMA_E, K_SOMIGLIANA, M_CGCS
 from .rotation import dcm_from_quat, quat_from_dcm, quat_from_rotvec, quat_mult
 
@@ -99,6 +100,15 @@ def _cross(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> 
     """``a x b`` of float components (the products and differences of :func:`.rotation.cross`)."""
     return (a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
 
+
+def _mat_vec(C: np.ndarray, v) -> list:
+    """``C v`` (3x3 by 3) as floats, each row summed left to right (the kernel's order;
+    numpy's ``matmul`` hands this to BLAS, whose fused multiply-adds follow the CPU)."""
+    (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = C.tolist()
+    v0, v1, v2 = v
+    return [c00 * v0 + c01 * v1 + c02 * v2, c10 * v0 + c11 * v1 + c12 * v2,
+            c20 * v0 + c21 * v1 + c22 * v2]
+
 class StrapdownINS:
     """Strapdown inertial navigator (ENU, Right-Front-Up body, CGCS2000).
 
@@ -132,6 +142,10 @@ class StrapdownINS:
         Scale-factor error estimates [-] divided out of every sample after the bias (start
         at zero; updated by :meth:`correct`).
     """
+
+    #: Whether :meth:`step_many` runs the numba kernel (else :meth:`step` row by row, the
+    #: tested reference).
+    jit = True
 
     def __init__(self, llh, v_n, att=None, C_b_n=None, t: float = 0.0):
         if (att is None) == (C_b_n is None):
@@ -203,8 +217,8 @@ class StrapdownINS:
             Interval length [s], > 0.
         """
         # Components as Python floats (the same IEEE operations as on numpy scalars, at a
-        # fraction of the cost per operation); the matrix-vector and dot products stay numpy
-        # calls so their (BLAS) summation is unchanged.
+        # fraction of the cost per operation), every sum written out left to right (no BLAS
+        # or SIMD reduction): the operations of the numba kernel (step_many), bit for bit.
         if self._scaled:
             f, w = self.compensate(f_b, w_ib_b)
             dth, dv = w * dt, f * dt
@@ -237,7 +251,7 @@ class StrapdownINS:
         # 2. velocity
         C = dcm_from_quat(self.q_b_n)
         a_x_v = _cross(a0, a1, a2_, u0, u1, u2)
-        a2 = float(dth @ dth)
+        a2 = a0 * a0 + a1 * a1 + a2_ * a2_
         if a2 < 1e-6:  # series of Savage's exact coefficients (error < 1e-14)
             c1, c2 = 0.5 - a2 / 24.0 + a2 * a2 / 720.0, 1.0 / 6.0 - a2 / 120.0 + a2 * a2 / 5040.0
         else:
@@ -246,12 +260,12 @@ class StrapdownINS:
         r = _cross(a0, a1, a2_, *a_x_v)
         m = _cross(p0, p1, p2, u0, u1, u2)
         n = _cross(s0, s1, s2, a0, a1, a2_)
-        dv_b = np.array([u0 + c1 * a_x_v[0] + c2 * r[0] + (m[0] + n[0]) / 12.0,
-                         u1 + c1 * a_x_v[1] + c2 * r[1] + (m[1] + n[1]) / 12.0,
-                         u2 + c1 * a_x_v[2] + c2 * r[2] + (m[2] + n[2]) / 12.0])
-        Cdv = (C @ dv).tolist()
-        dvn = (C @ dv_b).tolist()
-        Caxv = (C @ np.array(a_x_v)).tolist()
+        dv_b = (u0 + c1 * a_x_v[0] + c2 * r[0] + (m[0] + n[0]) / 12.0,
+                u1 + c1 * a_x_v[1] + c2 * r[1] + (m[1] + n[1]) / 12.0,
+                u2 + c1 * a_x_v[2] + c2 * r[2] + (m[2] + n[2]) / 12.0)
+        Cdv = _mat_vec(C, (u0, u1, u2))
+        dvn = _mat_vec(C, dv_b)
+        Caxv = _mat_vec(C, a_x_v)
         z0, z1, z2 = zeta
         k = _cross(z0, z1, z2, *dvn)
         zz = _cross(z0, z1, z2, *_cross(z0, z1, z2, *Cdv))
@@ -280,14 +294,78 @@ class StrapdownINS:
                          (w_ie_m[2] + w_en_m[2]) * dt])
         cpd = _cross(p0, p1, p2, a0, a1, a2_)
         phi = np.array([a0 + cpd[0] / 12.0, a1 + cpd[1] / 12.0, a2_ + cpd[2] / 12.0])
-        q = quat_mult(quat_from_rotvec(-zeta), quat_mult(self.q_b_n, quat_from_rotvec(phi)))
-        self.q_b_n = q / math.sqrt(float(q @ q))
+        q0, q1, q2, q3 = quat_mult(quat_from_rotvec(-zeta),
+                                   quat_mult(self.q_b_n, quat_from_rotvec(phi))).tolist()
+        norm = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+        self.q_b_n = np.array([q0 / norm, q1 / norm, q2 / norm, q3 / norm])
 
         self._v_prev, self._llh_prev, self._dt_prev = v0, self.llh, dt
         self._dth_prev, self._dv_prev = dth, dv
         self.v_n = np.array(v1)
         self.llh = np.array([lat1, lon1, h1])
         self.t += dt
+
+    def step_many(self, f_b, w_ib_b, dt) -> None:
+        """Propagate the state over consecutive IMU intervals: :meth:`step` for each row.
+
+        The numba kernel (:func:`sdr_di.ins._numba_mechanization.strapdown_steps`) makes
+        the same operations as :meth:`step` in one call (tested bit for bit); with
+        :attr:`jit` false, :meth:`step` runs row by row (the reference).
+
+        Parameters
+        ----------
+        f_b, w_ib_b : array_like (N, 3)
+            Average specific force [m/s^2] and angular rate [rad/s] over each interval,
+            body axes.
+        dt : array_like (N,)
+            Interval lengths [s], > 0.
+        """
+        f_b = np.asarray(f_b, float)
+        w_ib_b = np.asarray(w_ib_b, float)
+        dt = np.asarray(dt, float)
+        if not self.jit:
+            for j in range(dt.size):
+                self.step(f_b[j], w_ib_b[j], float(dt[j]))
+            return
+        state, flags, comp = self._packed()
+        _nb.strapdown_steps(state, flags, comp, np.ascontiguousarray(f_b),
+                            np.ascontiguousarray(w_ib_b), dt)
+        self._unpack(state, flags)
+
+    def _packed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The state, flags and compensation arrays of the kernel (its module notes)."""
+        state = np.zeros(_nb.STATE_LEN)
+        state[_nb.S_Q:_nb.S_Q + 4] = self.q_b_n
+        state[_nb.S_V:_nb.S_V + 3] = self.v_n
+        state[_nb.S_LLH:_nb.S_LLH + 3] = self.llh
+        flags = np.zeros(2, np.int64)
+        if self._v_prev is not None:
+            flags[0] = 1
+            state[_nb.S_V_PREV:_nb.S_V_PREV + 3] = self._v_prev
+            state[_nb.S_LLH_PREV:_nb.S_LLH_PREV + 3] = self._llh_prev
+        state[_nb.S_DT_PREV] = self._dt_prev
+        if self._dth_prev is not None:
+            flags[1] = 1
+            state[_nb.S_DTH_PREV:_nb.S_DTH_PREV + 3] = self._dth_prev
+            state[_nb.S_DV_PREV:_nb.S_DV_PREV + 3] = self._dv_prev
+        state[_nb.S_T] = self.t
+        comp = np.concatenate([self.gyro_bias, self.accel_bias, self.gyro_scale,
+                               self.accel_scale, [1.0 if self._scaled else 0.0]])
+        return state, flags, comp
+
+    def _unpack(self, state: np.ndarray, flags: np.ndarray) -> None:
+        """Take the kernel's state back (new arrays: holders of the old ones keep them)."""
+        self.q_b_n = state[_nb.S_Q:_nb.S_Q + 4].copy()
+        self.v_n = state[_nb.S_V:_nb.S_V + 3].copy()
+        self.llh = state[_nb.S_LLH:_nb.S_LLH + 3].copy()
+        if flags[0]:
+            self._v_prev = state[_nb.S_V_PREV:_nb.S_V_PREV + 3].copy()
+            self._llh_prev = state[_nb.S_LLH_PREV:_nb.S_LLH_PREV + 3].copy()
+        self._dt_prev = float(state[_nb.S_DT_PREV])
+        if flags[1]:
+            self._dth_prev = state[_nb.S_DTH_PREV:_nb.S_DTH_PREV + 3].copy()
+            self._dv_prev = state[_nb.S_DV_PREV:_nb.S_DV_PREV + 3].copy()
+        self.t = float(state[_nb.S_T])
 
     # --- closed-loop feedback ------------------------------------------------------------
     def correct(self, d_att, d_v_n, d_llh, d_gyro_bias=None, d_accel_bias=None, *,

@@ -46,8 +46,7 @@ def align_ins(cfg: IntegrationConfig, imu, truth, sol, t_if: np.ndarray, i_h: in
         ins = StrapdownINS(truth.llh[0], truth.v_n[0], C_b_n=truth.C_b_n[0],
                            t=float(imu.t[0]))
         ins.set_previous_increments(imu.f_b[0], imu.w_ib_b[0], dt_imu)
-        for i in range(1, i_h + 1):
-            ins.step(imu.f_b[i], imu.w_ib_b[i], float(imu.t[i] - imu.t[i - 1]))
+        ins.step_many(imu.f_b[1:i_h + 1], imu.w_ib_b[1:i_h + 1], np.diff(imu.t[:i_h + 1]))
         ins.llh = np.array(llh_fix, float)
         ins.v_n = np.array(sol.v_n, float)
         att_sig = np.radians(np.asarray(cfg.p0_att_deg, float))

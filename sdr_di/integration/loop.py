@@ -282,8 +282,8 @@ class IntegrationLoop:
         f_b = imu.f_b[i0 + 1:i1 + 1]
         w_ib_b = imu.w_ib_b[i0 + 1:i1 + 1]
         iv.f_mean, iv.w_mean = ins.compensate(f_b.mean(axis=0), w_ib_b.mean(axis=0))
-        for m in range(self.n_per):
-            ins.step(f_b[m], w_ib_b[m], float(imu.t[i0 + m + 1] - imu.t[i0 + m]))
+        n = self.n_per
+        ins.step_many(f_b[:n], w_ib_b[:n], np.diff(imu.t[i0:i0 + n + 1]))
         iv.nav1 = NavState.from_ins(ins)
         iv.clock_bias_m = self.clock_bias_m + self.clock_drift_mps * self.T
         self.profile["ins"] += time.perf_counter() - ta

@@ -420,8 +420,7 @@ def run_loose(truth, imu, imu_model: ImuErrorModel, settings: LcSettings, *,
         fs = imu.f_b[k + 1:k + n_per + 1]
         ws = imu.w_ib_b[k + 1:k + n_per + 1]
         f_mean, w_mean = ins.compensate(fs.mean(axis=0), ws.mean(axis=0))
-        for j in range(n_per):
-            ins.step(fs[j], ws[j], float(imu.t[k + j + 1] - imu.t[k + j]))
+        ins.step_many(fs, ws, np.diff(imu.t[k:k + n_per + 1]))
         k += n_per
         tk = float(imu.t[k])
         process.set_interval(nav0, NavState.from_ins(ins), f_mean, w_mean)
