@@ -169,7 +169,9 @@ def test_skew_of_rows_is_exactly_the_cross_product_matrix():
 
 def _step_numpy(ins, f_b, w_ib_b, dt):
     """The strapdown step of the module notes written with numpy 3-vectors and quaternions
-    (the form before the float components): the reference the step must equal bit for bit."""
+    (the form before the float components): the reference the step must equal bit for bit.
+    Its dot and matrix-vector products are sums of numpy products reduced along the row,
+    ``(a0 + a1) + a2``: the step's order (not ``matmul``'s BLAS order, which follows the CPU)."""
     from sdr_di.constants import OMEGA_E
     from sdr_di.ins.mechanization import _gravity, _radii
     from sdr_di.ins.rotation import cross
@@ -216,7 +218,7 @@ def _step_numpy(ins, f_b, w_ib_b, dt):
     w_ie, w_en = rates(lat_mid, h_mid, v_mid)
     g = _gravity(lat_mid, h_mid)
     a_x_v = cross(dth, dv)
-    a2 = float(dth @ dth)
+    a2 = float(np.sum(dth * dth))
     if a2 < 1e-6:
         c1, c2 = 0.5 - a2 / 24.0 + a2 * a2 / 720.0, 1.0 / 6.0 - a2 / 120.0 + a2 * a2 / 5040.0
     else:
@@ -225,10 +227,10 @@ def _step_numpy(ins, f_b, w_ib_b, dt):
     dv_b = (dv + c1 * a_x_v + c2 * cross(dth, a_x_v)
             + (cross(dth_p, dv) + cross(dv_p, dth)) / 12.0)
     zeta = (w_ie + w_en) * dt
-    Cdv = C @ dv
-    dv_n = C @ dv_b
+    Cdv = (C * dv).sum(axis=1)
+    dv_n = (C * dv_b).sum(axis=1)
     dv_n = (dv_n - 0.5 * cross(zeta, dv_n) + cross(zeta, cross(zeta, Cdv)) / 6.0
-            - cross(zeta, C @ a_x_v) / 12.0)
+            - cross(zeta, (C * a_x_v).sum(axis=1)) / 12.0)
     cor = cross(2.0 * w_ie + w_en, v_mid)
     v1 = v0 + dv_n + dt * np.array([-cor[0], -cor[1], -g - cor[2]])
     v_avg = 0.5 * (v0 + v1)
@@ -244,7 +246,7 @@ def _step_numpy(ins, f_b, w_ib_b, dt):
     w_ie_m, w_en_m = rates(lat_m, h_m, v_avg)
     phi = dth + cross(dth_p, dth) / 12.0
     q = qmul(quat(-(w_ie_m + w_en_m) * dt), qmul(ins.q_b_n, quat(phi)))
-    return q / math.sqrt(float(q @ q)), v1, np.array([lat1, lon1, h1])
+    return q / math.sqrt(float(np.sum(q * q))), v1, np.array([lat1, lon1, h1])
 
 
 def test_step_equals_numpy_vector_form_bit_for_bit():
