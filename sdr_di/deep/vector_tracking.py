@@ -127,6 +127,7 @@ class _EpochRows:
     nh: np.ndarray           # NH20 sign (D1) or 1
     epoch: np.ndarray        # epoch number (ms since S0 on the satellite clock)
     dchip: np.ndarray        # code NCO rate of each channel [chips/sample]
+    n_noise: np.ndarray | None = None   # samples of each noise row (set by correlate)
 
 
 class VectorTracking:
@@ -379,7 +380,7 @@ class VectorTracking:
             t_before[0] += time.perf_counter() - tb
         n_rows = rows.starts.size
         th = reduce_code_phase(rows.theta, CODE_LENGTH_B3I)
-        n_noise = np.minimum(rows.nsamp, self.n_noise)
+        n_noise = rows.n_noise = np.minimum(rows.nsamp, self.n_noise)
         th_noise = noise_code_phases(th, rows.epoch)
 
         def pair(a, b=None):
@@ -619,7 +620,7 @@ class _ChannelPass:
             ep, nz = epl[2 * a0:2 * a1:2], epl[2 * a0 + 1:2 * a1:2]
             nh = rows.nh[a0:a1]
             E, P, L = ep[:, 0] * nh, ep[:, 1] * nh, ep[:, 2] * nh
-            n_nz = np.minimum(rows.nsamp[a0:a1], vt.n_noise)
+            n_nz = rows.n_noise[a0:a1]
             ok = n_nz > 0
             every = bool(ok.all())
             noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], n_nz if every else
