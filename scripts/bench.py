@@ -37,10 +37,17 @@ CPU seconds, stage shares); ``--gnss-sdr`` also runs GNSS-SDR 0.0.17 with the pi
 ``scripts/gnss_sdr_b3i.conf`` on the same file (its process wall and CPU time, the channels
 that started tracking) and prints the wall-time ratio against 0.5; ``--pocketsdr PATH``
 runs PocketSDR's ``pocket_trk`` (built from its ``app/pocket_trk``, ``make USE_SOAPY=0``) on
-the same file right after each assisted run (``-sig B3I -fmt CS8 -tscale 2``: it replays the
-file at twice real time, so its CPU time is the figure) and prints the CPU ratio of each
-interleaved pair and their mean (issue 29: at most 1; run one after the other, the VM's
-speed changed between the two sets and moved the ratio by 0.1-0.2). With ``--mode deep``
+the same file right after each assisted run (``-sig B3I -fmt CS8 -tscale T``: it replays the
+file at ``T`` times real time, so its CPU time is the figure) and prints the CPU ratio of
+each interleaved pair and their mean. ``T`` (``--pocketsdr-tscale``) is 8 for files at 5 MHz
+or less and 2 above: while it waits for the replay, ``pocket_trk``'s reader sleeps and its
+channel threads poll, CPU that grows with the replay's wall time and with idle cores. On
+the 2.5 MHz default file (session 26, quiet VM) it took 5.5-10.0 CPU-s at ``-tscale 2``,
+4.0-4.8 at 8 (every channel kept) and lost channels at 16; so 8 gives the steadier figure,
+closer to its tracking work. A pair where ``pocket_trk`` lost a channel is flagged. Before
+session 26 every pair ran at 2. The pairs are interleaved (issue 29's target: at most 1;
+run one set after the other, the VM's speed changed between the two sets and moved the
+ratio by 0.1-0.2). With ``--mode deep``
 (or loose, tight, all) it also runs after each run of those modes, and pairs the run's
 whole-process CPU with ``pocket_trk``'s (scalar: PocketSDR has no other) on the same file,
 as issue 47's targets are stated; at any sample rate of the file (``-f`` from its sidecar,
@@ -279,7 +286,7 @@ def _bench_modes(files: list[Path], modes: tuple[str, ...], args: argparse.Names
                       f"{r['maxrss'] / 2**20:12.1f}" + stolen_note(r))
                 if args.pocketsdr and pocket is not None:
                     # right after each run, so that both see the same minutes of the VM
-                    g = _run_pocketsdr(args.pocketsdr, f, args.pocketsdr_tscale,
+                    g = _run_pocketsdr(args.pocketsdr, f, _pocket_tscale(args, f),
                                        out / "pocketsdr")
                     pocket.setdefault((f, mode), []).append((r["cpu_s"], g, _load()))
                 b = best.setdefault(f, {})
@@ -393,6 +400,18 @@ def _run_pocketsdr(exe: str, path: Path, tscale: float, work: Path) -> dict:
             "stdout_tail": res.stdout[-4000:], "n_sat": len(prns)}
 
 
+def _pocket_tscale(args: argparse.Namespace, path: Path) -> float:
+    """``pocket_trk``'s replay speed for ``path``: ``--pocketsdr-tscale``, else 8 for files
+    at 5 MHz or less and 2 above (module notes: its reader sleeps and its channel threads
+    poll while it waits for data, CPU that grows with the replay's wall time and falls with
+    the load; 8 is the fastest replay that keeps every channel of the 2.5 MHz default file
+    on the development VM, 16 loses some)."""
+    if args.pocketsdr_tscale is not None:
+        return float(args.pocketsdr_tscale)
+    mhz = _file_rate_mhz(path)
+    return 8.0 if mhz is not None and mhz <= 5.0 else 2.0
+
+
 def _load() -> float:
     """The machine's 1-minute load average now (NaN where unknown)."""
     return os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
@@ -417,11 +436,17 @@ def _print_pocket_pairs(f: Path, mode: str, pairs: list) -> None:
     ``pocket_trk``'s run right after it, the load average then) and their mean ratio, with
     issue 47's target for the file's rate."""
     what = "sdr-di run" if mode == "scalar" else f"sdr-di run --mode {mode}"
+    lost = False
     for cpu, g, load in pairs:
         print(f"  PocketSDR pocket_trk ({g['cmd']}) on {f.name}, right after {what} of "
               f"{cpu:.1f} CPU s: {g['wall_s']:.2f} s wall, CPU {g['cpu_s']:.1f} s, "
               f"{g['locked']} channels locked at the end, exit {g['rc']}; load average "
               f"{load:.2f}; sdr-di / pocket_trk CPU = {cpu / g['cpu_s']:.2f}")
+        lost = lost or g["locked"] != f"{g['n_sat']} of {g['n_sat']}"
+    if lost:
+        print("  WARNING: pocket_trk did not keep every channel in some pairs (above): at "
+              "its -tscale it could not follow the replay, so its CPU is not the whole "
+              "tracking work; rerun with a lower --pocketsdr-tscale")
     ratios = [cpu / g["cpu_s"] for cpu, g, _ in pairs]
     mhz = _file_rate_mhz(f)
     target = ""
@@ -501,7 +526,7 @@ def bench_run(args: argparse.Namespace) -> None:
                                "idle": r["cpu_main"] + r["split"]["wait_cpu_s"]}
                 if search == "assisted" and args.pocketsdr:
                     # right after each run, so that both see the same minutes of the VM
-                    g = _run_pocketsdr(args.pocketsdr, f, args.pocketsdr_tscale,
+                    g = _run_pocketsdr(args.pocketsdr, f, _pocket_tscale(args, f),
                                        out / "pocketsdr")
                     pocket.setdefault((f, "scalar"), []).append((r["cpu_s"], g, _load()))
         if searches:
@@ -559,8 +584,9 @@ def main(argv: list[str] | None = None) -> None:
                    help="also run PocketSDR's pocket_trk (PATH) on the same file after each "
                    "assisted scalar run and each --mode deep/loose/tight run (CPU time in "
                    "interleaved pairs; issues 29 and 47)")
-    r.add_argument("--pocketsdr-tscale", type=float, default=2.0,
-                   help="pocket_trk's -tscale (replay speed, x real time; default 2)")
+    r.add_argument("--pocketsdr-tscale", type=float, default=None,
+                   help="pocket_trk's -tscale (replay speed, x real time; default 8 for "
+                   "files at 5 MHz or less, 2 above: module notes)")
     r.add_argument("--pocketsdr-show", action="store_true",
                    help="print the end of pocket_trk's last status screen")
     r.add_argument("--out", default=None, help="work directory (default: a temp dir)")
