@@ -444,9 +444,9 @@ def _print_pocket_pairs(f: Path, mode: str, pairs: list) -> None:
               f"{load:.2f}; sdr-di / pocket_trk CPU = {cpu / g['cpu_s']:.2f}")
         lost = lost or g["locked"] != f"{g['n_sat']} of {g['n_sat']}"
     if lost:
-        print("  WARNING: pocket_trk did not keep every channel in some pairs (above): at "
-              "its -tscale it could not follow the replay, so its CPU is not the whole "
-              "tracking work; rerun with a lower --pocketsdr-tscale")
+        print("  WARNING: pocket_trk did not end with every channel locked in some pairs "
+              "(above): at its -tscale it may not have followed the replay, so its CPU may "
+              "not be the whole tracking work; rerun with a lower --pocketsdr-tscale")
     ratios = [cpu / g["cpu_s"] for cpu, g, _ in pairs]
     mhz = _file_rate_mhz(f)
     target = ""

@@ -4,10 +4,12 @@ Plain arrays only; the algorithm, frames and notation are those of
 :mod:`sdr_di.ins.mechanization` (Savage's velocity and attitude updates with two-sample
 sculling and coning). :func:`strapdown_steps` runs ``N`` IMU samples in one call: the deep
 loop steps its INS 4 times a 20 ms interval (200 Hz IMU), and the Python step's cost was
-per call, not per operation (about 75 us a step, session 26).
+per call, not per operation (about 31 us a step; the kernel takes 15 us for the 4,
+docs/notes/speed.md, session 26).
 
 The kernel makes the same IEEE operations, in the same order, as the Python reference
-``StrapdownINS.step(..., jit=False)`` (tested bit for bit, ``tests/test_ins_mechanization_kernel.py``):
+:meth:`StrapdownINS.step <sdr_di.ins.mechanization.StrapdownINS.step>` (``StrapdownINS.jit =
+False`` runs it; tested bit for bit, ``tests/test_ins_mechanization_kernel.py``):
 every sum is written out left to right (``a + b + c`` is ``(a + b) + c``), the matrix-vector
 products as ``C[i, 0] v0 + C[i, 1] v1 + C[i, 2] v2``, and no BLAS or SIMD reduction is
 involved, so neither form depends on the CPU's vector units.

@@ -109,6 +109,7 @@ def _mat_vec(C: np.ndarray, v) -> list:
     return [c00 * v0 + c01 * v1 + c02 * v2, c10 * v0 + c11 * v1 + c12 * v2,
             c20 * v0 + c21 * v1 + c22 * v2]
 
+
 class StrapdownINS:
     """Strapdown inertial navigator (ENU, Right-Front-Up body, CGCS2000).
 
