@@ -74,7 +74,7 @@ def test_epoch_rows_are_contiguous_whole_code_periods():
 
     fs = 5e6
     c = VectorChannel(prn=27, idx=0, is_d1=True, eph=None, next_start=1003, epoch=40,
-              phase=0.25, power=BitPower(4))
+              phase=0.25)
     dc = CHIP_RATE_B3I * (1 + 1.7e-6) / fs
     c0 = 40 * CODE_LENGTH_B3I + 0.3 - 1003 * dc      # chips(k) = c0 + k dc: 0.3 chip into 40
     dp = 1234.5 / fs
@@ -92,8 +92,7 @@ def test_epoch_rows_are_contiguous_whole_code_periods():
     assert np.allclose(dph, dp)
     # a Doppler ramp: frequencies interpolated between the two interval averages, and the
     # phase advance over the interval equals the new average times the interval
-    c2 = VectorChannel(prn=27, idx=0, is_d1=False, eph=None, next_start=0, epoch=0, phase=0.0,
-               power=BitPower(4))
+    c2 = VectorChannel(prn=27, idx=0, is_d1=False, eph=None, next_start=0, epoch=0, phase=0.0)
     s2, n2, _, _, dph2, nh2, _ = _epoch_rows(c2, 0.0, dc, 1000.0 / fs, 1010.0 / fs, 0, 100_000)
     mid = (s2 + 0.5 * n2) / 100_000
     assert np.allclose(dph2 * fs, 1000.0 + 10.0 * (mid + 0.5))

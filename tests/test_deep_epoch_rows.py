@@ -4,7 +4,6 @@ import numpy as np
 
 from sdr_di.constants import CODE_LENGTH_B3I
 from sdr_di.deep._numba_epoch_rows import epoch_rows
-from sdr_di.deep.bit_power import BitPower
 from sdr_di.deep.vector_tracking import VectorChannel, _epoch_rows
 from sdr_di.signal.codes import NH20
 
@@ -27,8 +26,7 @@ def test_epoch_rows_kernel_equals_plain_form():
             # chip count at k0 consistent with epoch e starting at s
             c0[i] = e * L - (s - k0) * dc[i] + rng.uniform(-0.4, 0.4)
             chans.append(VectorChannel(prn=i + 1, idx=i, is_d1=bool(rng.integers(0, 2)), eph=None,
-                               next_start=s, epoch=e, phase=float(rng.uniform(0, 1)),
-                               power=BitPower(4)))
+                               next_start=s, epoch=e, phase=float(rng.uniform(0, 1))))
         dp0 = rng.uniform(-0.3, 0.3, n_ch)
         dp1 = dp0 + rng.uniform(-1e-6, 1e-6, n_ch)
         nxt = np.array([c.next_start for c in chans], np.int64)

@@ -179,6 +179,53 @@ def prefilter_epochs(x, P, early, prompt, late, t_epoch, spacing, beta, r_tau, r
     return nis
 
 
+@numba.njit(cache=True)
+def prefilter_channels(ch0, counts, bounds, early, prompt, late, t_block, cn0_lin, spacing,
+                       beta, x, P, C, q_tau, q_phi, s_f, q_phi_m, s_f_m, nis):
+    """:func:`prefilter_epochs` of channels ``ch0, ch0 + 1, ...`` over their coherent blocks
+    of one pass, with each block's discriminator variances from the channel's C/N0
+    (:func:`~sdr_di.deep.prefilter.discriminator_variances`, the same operations).
+
+    Parameters
+    ----------
+    ch0 : int
+        First channel of the pass.
+    counts : int64 (m,)
+        Epochs of each of the pass's channels (a channel without one is left alone).
+    bounds : int64 (m + 1,)
+        Channel ``k``'s blocks are ``[bounds[k], bounds[k + 1])`` of the block arrays.
+    early, prompt, late : complex128 (b,)
+        Correlator sums of the blocks.
+    t_block : float64 (b,)
+        Block durations [s].
+    cn0_lin : float64 (m,)
+        C/N0 of each channel [Hz] (not NaN; at least 1 Hz is used).
+    spacing, beta, q_tau, q_phi, s_f, q_phi_m, s_f_m : float
+        As :func:`prefilter_epochs` (``q_tau_m = 0``).
+    x, P, C : float64 (n, 3), (n, 3, 3), (n, 3, 3)
+        Every channel's state, design covariance and error covariance (updated in place).
+    nis : float64 (m,)
+        Sum of the normalized innovations squared of each channel (out; left alone for a
+        channel without epochs).
+    """
+    for k in range(counts.shape[0]):
+        if counts[k] == 0:
+            continue
+        i = ch0 + k
+        b0 = bounds[k]
+        b1 = bounds[k + 1]
+        c = max(cn0_lin[k], 1.0)
+        r_tau = np.empty(b1 - b0)
+        r_phi = np.empty(b1 - b0)
+        for j in range(b1 - b0):
+            snr = c * t_block[b0 + j]
+            r_tau[j] = spacing / (2.0 * snr) * (1.0 + 1.0 / snr)
+            r_phi[j] = 1.0 / (2.0 * snr) * (1.0 + 1.0 / (2.0 * snr))
+        nis[k] = prefilter_epochs(x[i], P[i], early[b0:b1], prompt[b0:b1], late[b0:b1],
+                                  t_block[b0:b1], spacing, beta, r_tau, r_phi, q_tau, q_phi,
+                                  s_f, C[i], 0.0, q_phi_m, s_f_m)
+
+
 def _warm() -> None:  # pragma: no cover - compile on import of the bank when cached
     x = np.zeros(3)
     P = np.eye(3)

@@ -166,6 +166,16 @@ class DiscriminatorBank:
         o[0], o[1], o[2], o[3] = dtau, df, v_tau, v_f
         self.nis[i], self.nis_p[i] = nis_test(nis, 2 * t.size - 3)
 
+    def process_channels(self, ch0: int, counts, bounds, early, prompt, late, t,
+                         cn0_hz) -> None:
+        """:meth:`process_blocks` of channels ``ch0, ch0 + 1, ...`` (arguments as
+        :meth:`~sdr_di.deep.prefilter.PreFilterBank.process_channels`), one after the
+        other."""
+        for k, cnt in enumerate(counts):
+            if cnt:
+                b = slice(bounds[k], bounds[k + 1])
+                self.process_blocks(ch0 + k, early[b], prompt[b], late[b], t[b], cn0_hz[k])
+
     def outputs(self, i: int) -> tuple[float, float, float, float]:
         """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])`` of channel ``i``'s
         last interval."""

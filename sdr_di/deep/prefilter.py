@@ -97,7 +97,7 @@ from scipy.special import gammaincc
 
 from ..constants import C_LIGHT, CHIP_RATE_B3I, F_B3I
 from ..ins.imu import ImuErrorModel
-from ._numba_prefilter import prefilter_epochs
+from ._numba_prefilter import prefilter_channels, prefilter_epochs
 
 __all__ = ["PreFilterBank", "ResetPreFilterBank", "coherent_blocks", "coherent_blocks_of_channels",
            "discriminator_variances", "model_process_noise", "nis_test"]
@@ -319,6 +319,37 @@ class PreFilterBank:
         chi-square tail probability (2 per block)."""
         self.nis[i], self.nis_p[i] = nis_test(nis, 2 * t.size)
 
+    def process_channels(self, ch0: int, counts: np.ndarray, bounds, early, prompt, late,
+                         t, cn0_hz) -> None:
+        """:meth:`process_blocks` of channels ``ch0, ch0 + 1, ...`` in one kernel call
+        (:func:`~sdr_di.deep._numba_prefilter.prefilter_channels`; the same values): channel
+        ``k`` of the pass has ``counts[k]`` epochs (none: left alone) and the blocks
+        ``[bounds[k], bounds[k + 1])`` of ``early, prompt, late, t``; ``cn0_hz`` its C/N0
+        (linear)."""
+        counts = np.asarray(counts, np.int64)
+        bounds = np.asarray(bounds, np.int64)
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        nis = np.empty(counts.size)
+        prefilter_channels(int(ch0), counts, bounds,
+                           np.ascontiguousarray(early, np.complex128),
+                           np.ascontiguousarray(prompt, np.complex128),
+                           np.ascontiguousarray(late, np.complex128), t,
+                           np.asarray(cn0_hz, np.float64), self.spacing, self.beta, self.x,
+                           self.P, self.C, self.q_tau, self.q_phi, self.s_f,
+                           self.q_phi_model, self.s_f_model, nis)
+        self._after_channels(int(ch0), counts, bounds, nis, t)
+
+    def _after_channels(self, ch0: int, counts: np.ndarray, bounds: np.ndarray,
+                        nis: np.ndarray, t: np.ndarray) -> None:
+        """:meth:`_after_blocks` of the channels of :meth:`process_channels` (those with
+        epochs), as arrays: the same values (:func:`nis_test` is element-wise)."""
+        k = counts.nonzero()[0]
+        if k.size == 0:
+            return
+        dof = 2 * (bounds[k + 1] - bounds[k])
+        self.nis[ch0 + k] = nis[k] / dof
+        self.nis_p[ch0 + k] = gammaincc(0.5 * dof, 0.5 * nis[k])
+
     def set_frequency(self, i: int, df_hz: float) -> None:
         """Channel ``i``'s frequency error estimate [Hz] (the loop's first interval: the
         scalar loop's Doppler minus the INS prediction)."""
@@ -457,6 +488,13 @@ class ResetPreFilterBank(PreFilterBank):
         fitted = min(int(self.unfitted[i]), 2 * t.size)
         self.unfitted[i] -= fitted
         self.nis[i], self.nis_p[i] = nis_test(nis, 2 * t.size - fitted)
+
+    def _after_channels(self, ch0: int, counts: np.ndarray, bounds: np.ndarray,
+                        nis: np.ndarray, t: np.ndarray) -> None:
+        """:meth:`_after_blocks` of each channel of :meth:`~PreFilterBank.process_channels`
+        with epochs (the window's prior is propagated channel by channel)."""
+        for k in counts.nonzero()[0].tolist():
+            self._after_blocks(ch0 + k, float(nis[k]), t[bounds[k]:bounds[k + 1]])
 
     def outputs(self, i: int) -> tuple[float, float, float, float]:
         """``(dtau [chips], df [Hz], var_tau [chips^2], var_f [Hz^2])``: the window's

@@ -16,7 +16,6 @@ thresholds, navigation data) are the notes of :mod:`sdr_di.integration.receiver`
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 import time
@@ -40,15 +39,14 @@ from ..receiver.correlator import (  # the kernel: receiver._numba_correlate_bit
     reduce_code_phase,
 )
 from ..receiver.ifreader import IfSource
-from ..receiver.lock import (PostCorrelationNoise, noise_code_phases, noise_samples,
-                             noise_values)
+from ..receiver.lock import noise_code_phases, noise_samples, noise_values
 from ..receiver.navdata import NavDataInForce
 from ..receiver.observables import ReceiverTime
 from ..receiver.scalar import ScalarReceiver
 from ..receiver.threads import KernelThreads, RowsCall
 from ..signal.codes import NH20, b3i_code
 from ._numba_epoch_rows import epoch_rows
-from .bit_power import BitPower
+from .channel_tests import FAST_MS, ChannelTests
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
 from .prefilter import coherent_blocks_of_channels
@@ -56,9 +54,6 @@ from .architectures import block_ms, make_measurement_bank
 
 __all__ = ["SampleClock", "VectorChannel", "VectorTracking"]
 
-_FAST_MS = 60        # bit sums of the fast test (interval left out) [ms]
-_LOSS_MS = 120       # bit sums of the loss test [ms]
-_CN0_MIN_MS = 40     # bit sums before the loop's own C/N0 replaces the scalar loop's [ms]
 _SIGMA_F_MIN = 0.5   # floor of a restarted pre-filter's frequency sigma [Hz]
 _SIGMA_TAU_MIN = 0.01  # floor of a reset pre-filter's code prior sigma [chips] (0.3 m)
 
@@ -74,7 +69,6 @@ class VectorChannel:
     next_start: int          # first sample of the next code epoch
     epoch: int               # its number (ms since S0)
     phase: float             # carrier NCO phase at next_start [cycles]
-    power: BitPower          # recent bit sums of the prompts (C/N0, loss test)
     bit_ms: int = 20         # data bit [ms]: D1 20, D2 2
     cn0_dbhz: float = math.nan
     used: bool = True
@@ -82,8 +76,6 @@ class VectorChannel:
     rejoining: bool = False  # lost: waits for a whole window of fresh prompts
     fast_fail: int = 0       # last tests: 0 pass, 1 fast test failed, 2 loss test too
     nav: ChannelNavDecoder | None = None   # navigation message after the hand-over
-    #: noise-correlator values (receiver.lock notes), continued from the scalar channel
-    noise: PostCorrelationNoise = dataclasses.field(default_factory=PostCorrelationNoise)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,10 +134,12 @@ class VectorTracking:
         correlate          E/P/L of every epoch of every channel (one numba kernel call);
                            meanwhile, on this thread, the filter's predict and the
                            channels the kernel's leading part has correlated
-        prefilter          per channel (:class:`_ChannelPass`, in channel order): noise
-                           sums, NH wipe-off, C/N0 tests and navigation decoding
-                           (:meth:`_test_channel`), pre-filter, measurement-vector gate
-                           (:meth:`_usable`) -> z, R (eq 7-9, 34)
+        prefilter          the channels in their order (:class:`_ChannelPass`): NH
+                           wipe-off, noise sums, C/N0 tests (one kernel call for the
+                           pass's channels, :class:`~sdr_di.deep.channel_tests.
+                           ChannelTests`), navigation decoding, pre-filters (one kernel
+                           call), measurement-vector gate (:meth:`_usable`) -> z, R
+                           (eq 7-9, 34)
 
     then :meth:`feed_back` (NCO ranges and pre-filters moved by the filter's correction,
     lost or inconsistent pre-filters restarted) and :meth:`take_up_navigation_data`.
@@ -192,6 +186,14 @@ class VectorTracking:
                                  self.fusion_every)
         self.n_measured = 0
         self.fusing = True
+        # the channels' bit sums, noise rings and tests (the state of the C/N0 tests as
+        # arrays over the channels: channel_tests notes)
+        self.tests = ChannelTests([c.bit_ms for c in chans], cfg.cn0_window_ms, self.fs,
+                                  cfg.cn0_min_dbhz - cfg.fast_margin_db,
+                                  cfg.cn0_min_dbhz - cfg.loss_margin_db)
+        self.cn0 = np.array([c.cn0_dbhz for c in chans], np.float64)
+        self.rejoining = np.array([c.rejoining for c in chans], bool)
+        self.fast_fail = np.array([c.fast_fail for c in chans], np.int64)
         self.bits = bit_windows(np.stack([padded_replicas(np.asarray(b3i_code(c.prn)))[0]
                                           for c in chans]))
         self.chan_idx = np.arange(self.n_channels, dtype=np.int64)
@@ -237,7 +239,7 @@ class VectorTracking:
             dtau = c.epoch * CODE_LENGTH_B3I + float(sc.theta) - chips_deep
             pre.reset(c.idx, dtau=dtau, df=0.0, sigma_tau=0.1, sigma_phi=0.3, sigma_f=3.0)
             c.f_scalar = float(sc.fd)
-            c.noise = copy.deepcopy(sc.noise)
+            self.tests.take_noise(c.idx, sc.noise)
         self.tau_prev = pred0.tau
 
     def close(self) -> None:
@@ -419,62 +421,48 @@ class VectorTracking:
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
         return epl, pending
 
-    def prefilter(self, iv: Interval, c: VectorChannel, P, nsamp, epochs, noise, bit_start,
-                  blocks) -> bool:
-        """Channel ``c``'s epochs of the interval (prompts ``P``, NH wiped off; their sample
-        counts, epoch numbers and data-bit starts ``bit_start``): its noise-correlator values
-        ``noise`` (:func:`~sdr_di.receiver.lock.noise_values`) to its
-        :class:`~sdr_di.receiver.lock.PostCorrelationNoise`, C/N0 tests and navigation
-        decoding, pre-filter over its coherent ``blocks`` (early, prompt, late sums and
-        durations [s], :func:`~sdr_di.deep.prefilter.coherent_blocks`; module notes);
-        returns the measurement-vector gate (:meth:`_usable`)."""
-        cnt = nsamp.size
-        if cnt:
-            c.noise.add_values(noise)
-            self._test_channel(c, P, nsamp, epochs, iv.k1 / self.fs, bit_start)
-            cn0_lin = 10.0 ** (c.cn0_dbhz / 10.0) if math.isfinite(c.cn0_dbhz) else 100.0
-            self.pre.process_blocks(c.idx, *blocks, cn0_lin)
-        if self._shift_end is not None:
-            # NCOs one interval ahead: the step of the feedback made during the interval
-            self._shift_prefilters(*self._shift_end, (c.idx,))
-        good = self._usable(c, cnt)
-        c.used = good
+    def prefilter(self, iv: Interval, ch0: int, counts: list, P, nsamp, epochs, noise,
+                  noise_ok, bit_start, blocks) -> list[bool]:
+        """Channels ``ch0, ch0 + 1, ...`` of a pass, with ``counts[k]`` epochs each,
+        consecutive in the arrays (prompts ``P``, NH wiped off; their sample counts, epoch
+        numbers and data-bit starts ``bit_start``; noise-correlator values ``noise`` where
+        ``noise_ok``, :func:`~sdr_di.receiver.lock.noise_values`): channel management
+        (module notes; C/N0 tests of every channel in one call, :meth:`~sdr_di.deep.
+        channel_tests.ChannelTests.run`), navigation decoding, then the pre-filters over
+        the coherent ``blocks`` (early, prompt, late sums, durations [s] and each channel's
+        bounds, :func:`~sdr_di.deep.prefilter.coherent_blocks_of_channels`; one call).
+        Returns each channel's measurement-vector gate (:meth:`_usable`)."""
+        self.tests.run(ch0, counts, P, nsamp, bit_start, noise, noise_ok, self.npow,
+                       self.cn0, self.rejoining, self.fast_fail)
+        t_s = iv.k1 / self.fs
+        new, tested = self.tests.new, self.tests.count_tested
+        chans = self.chans[ch0:ch0 + len(counts)]
+        cn0_lin = []
+        s = 0
+        for c, cnt in zip(chans, counts):
+            i = c.idx
+            if cnt:
+                c.cn0_dbhz = cn0 = float(self.cn0[i])
+                c.fast_fail, c.rejoining = int(self.fast_fail[i]), bool(self.rejoining[i])
+                self.nav_log.demodulate(c, P[s:s + cnt], epochs[s:s + cnt], t_s)
+                if new[i] and c.nav is not None:
+                    if c.fast_fail:
+                        c.nav.interrupt()  # no subframe from bits of a failing interval
+                    elif tested[i] >= FAST_MS // c.bit_ms:
+                        self.nav_log.confirm(c, FAST_MS // c.bit_ms, t_s)  # subframes before it
+                s += cnt
+            else:
+                cn0 = c.cn0_dbhz
+            cn0_lin.append(10.0 ** (cn0 / 10.0) if math.isfinite(cn0) else 100.0)
+        self.pre.process_channels(ch0, counts, blocks[4], *blocks[:4], cn0_lin)
+        good = []
+        for c, cnt in zip(chans, counts):
+            if self._shift_end is not None:
+                # NCOs one interval ahead: the step of the feedback made during the interval
+                self._shift_prefilters(*self._shift_end, (c.idx,))
+            c.used = self._usable(c, cnt)
+            good.append(c.used)
         return good
-
-    def _test_channel(self, c: VectorChannel, prompts, nsamp, epochs, t_s: float,
-                      bit_start: np.ndarray) -> None:
-        """Channel management on this interval's prompts (module notes): bit sums for the
-        C/N0, navigation decoding, the fast test (interval left out), the loss test (channel
-        lost, its C/N0 window emptied) and the C/N0 taken up once the window allows.
-        ``bit_start``: the epochs that begin a data bit."""
-        cfg, fs = self.cfg, self.fs
-        npow = c.noise.noise_power(self.npow)
-        mon = c.power
-        mon.add(prompts, nsamp, bit_start)
-        self.nav_log.demodulate(c, prompts, epochs, t_s)
-        if mon.new:
-            # tests on the last bit sums: _FAST_MS to leave the interval out,
-            # _LOSS_MS to declare the channel lost (module notes)
-            fast = mon.cn0_dbhz(npow, fs, last=_FAST_MS // c.bit_ms)
-            c.fast_fail = 0 if fast >= cfg.cn0_min_dbhz - cfg.fast_margin_db else 1
-            if c.fast_fail and not mon.cn0_dbhz(
-                    npow, fs, last=_LOSS_MS // c.bit_ms) >= \
-                    cfg.cn0_min_dbhz - cfg.loss_margin_db:
-                c.fast_fail = 2
-            if c.fast_fail and c.nav is not None:
-                c.nav.interrupt()  # no subframe from bits of a failing interval
-            elif c.nav is not None and mon.count >= _FAST_MS // c.bit_ms:
-                self.nav_log.confirm(c, _FAST_MS // c.bit_ms, t_s)  # subframes before it
-            if c.fast_fail >= 2:
-                # signal gone: lost, back only on a whole window of fresh bit
-                # sums, not on one still full of signal from before a blockage
-                mon.clear()
-                c.cn0_dbhz = math.nan
-                c.rejoining = True
-            elif c.fast_fail == 0 and mon.count >= (
-                    mon.p.size if c.rejoining else _CN0_MIN_MS // c.bit_ms):
-                c.rejoining = False
-                c.cn0_dbhz = mon.cn0_dbhz(npow, fs)
 
     def _usable(self, c: VectorChannel, n_epochs: int) -> bool:
         """Measurement-vector gate of channel ``c`` (module notes): C/N0 at least the gate
@@ -622,8 +610,7 @@ class _ChannelPass:
             E, P, L = ep[:, 0] * nh, ep[:, 1] * nh, ep[:, 2] * nh
             n_nz = rows.n_noise[a0:a1]
             ok = n_nz > 0
-            every = bool(ok.all())
-            noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], n_nz if every else
+            noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], n_nz if ok.all() else
                                  np.where(ok, n_nz, 1))
             # the element-wise work and the coherent blocks of these channels at once, each
             # channel then slices (the same values as per channel: module notes of
@@ -634,23 +621,20 @@ class _ChannelPass:
             bit_ms = [c.bit_ms for c in chans]
             bit_start = epochs % np.repeat(bit_ms, counts) == 0
             block = [min(b, vt.block_ms) for b in bit_ms]
-            Eb, Pb, Lb, Tb, bounds = coherent_blocks_of_channels(
+            blocks = coherent_blocks_of_channels(
                 E, P, L, t_epoch, bit_start if block == bit_ms else
                 epochs % np.repeat(block, counts) == 0, counts)
-            s = 0
-            for m, (c, cnt) in enumerate(zip(chans, counts)):
-                sl, bl = slice(s, s + cnt), slice(bounds[m], bounds[m + 1])
-                good = vt.prefilter(self.iv, c, P[sl], rows.nsamp[a0 + s:a0 + s + cnt],
-                                    epochs[sl], noise[sl] if every else noise[sl][ok[sl]],
-                                    bit_start[sl], (Eb[bl], Pb[bl], Lb[bl], Tb[bl]))
-                self.use.append(good)
-                if good and vt.fusing:
-                    dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)
-                    self.z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
-                    self.z_rate.append(LAMBDA_B3I * df)
-                    self.r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * v_tau)
-                    self.r_rate.append(LAMBDA_B3I ** 2 * v_f)
-                s += cnt
+            good = vt.prefilter(self.iv, self.next, counts, P, rows.nsamp[a0:a1], epochs,
+                                noise, ok, bit_start, blocks)
+            self.use += good
+            if vt.fusing:
+                for c, g in zip(chans, good):
+                    if g:
+                        dtau, df, v_tau, v_f = vt.pre.outputs(c.idx)
+                        self.z_rho.append(C_LIGHT / CHIP_RATE_B3I * dtau)
+                        self.z_rate.append(LAMBDA_B3I * df)
+                        self.r_rho.append((C_LIGHT / CHIP_RATE_B3I) ** 2 * v_tau)
+                        self.r_rate.append(LAMBDA_B3I ** 2 * v_f)
             self.next, self.a = j, a1
         vt.profile["prefilter"] += time.perf_counter() - te
 

@@ -18,7 +18,6 @@ import dataclasses
 from typing import Any
 
 from ..coupling.config import IntegrationConfig
-from ..deep.bit_power import BitPower
 from ..deep.navdecode import ChannelNavDecoder
 from ..deep.vector_tracking import SampleClock, VectorChannel
 from ..errors import HandoverError  # noqa: F401  (defined in sdr_di.errors, imported from here)
@@ -101,7 +100,6 @@ def handover_channels(cfg: IntegrationConfig, rx: ScalarReceiver, navdata: NavDa
         bit_ms = 20 if c.is_d1 else 2
         chans.append(VectorChannel(prn=prn, idx=i, is_d1=c.is_d1, eph=eph, next_start=s,
                                    epoch=e, phase=float(c.phi),
-                                   power=BitPower(max(cfg.cn0_window_ms // bit_ms, 2)),
                                    bit_ms=bit_ms, cn0_dbhz=float(c.cn0_dbhz),
                                    nav=handover_decoder(c, e, round(S0 * 1000.0))))
     return chans

@@ -382,7 +382,9 @@ class PostCorrelationNoise:
         if self._dirty:
             held = self._v[:self.count]
             self._s = float(held.sum())
-            self._s2 = float(np.dot(held, held))
+            # (numpy's pairwise sum, not BLAS's dot: the vector loop's kernel,
+            # deep._numba_channel_tests, sums the squares in the same order)
+            self._s2 = float(np.add.reduce(held * held))
             self._dirty = False
         return self._s, self._s2
 
