@@ -11,7 +11,7 @@ from sdr_di.deep.bit_power import BitPower
 from sdr_di.deep.channel_tests import CN0_MIN_MS, FAST_MS, LOSS_MS, ChannelTests
 from sdr_di.deep.discriminators import DiscriminatorBank
 from sdr_di.deep.prefilter import PreFilterBank, ResetPreFilterBank, coherent_blocks_of_channels
-from sdr_di.receiver._numba_sums import (pairwise_sum, pairwise_sum_complex,
+from sdr_di.receiver.pairwise_sums import (pairwise_sum, pairwise_sum_complex,
                                          pairwise_sum_squares, segment_sum_complex)
 from sdr_di.receiver.lock import PostCorrelationNoise
 

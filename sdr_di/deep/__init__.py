@@ -6,7 +6,9 @@ vector-tracking measurement source.
                      data)
 ``nco``              predicted ranges and NCO commands from the INS
 ``prefilter``        per-channel pre-filters (``_numba_prefilter`` kernel)
-``bit_power``        C/N0 from bit-synchronous prompt sums
+``bit_power``        C/N0 from bit-synchronous prompt sums (one channel, the plain form)
+``channel_tests``    every channel's bit sums, noise rings, C/N0 and loss tests as arrays
+                     (``_numba_channel_tests`` kernel, one call per pass)
 ``navdecode``        navigation message decoding after the hand-over
 
 The receiver that runs every coupling mode (scalar start-up, hand-over, the integration

@@ -6,7 +6,7 @@ tested references (``tests/test_deep_channel_tests.py``, bit for bit):
 and :meth:`~sdr_di.receiver.lock.PostCorrelationNoise.noise_power`,
 :meth:`BitPower.add <sdr_di.deep.bit_power.BitPower.add>` and
 :meth:`~sdr_di.deep.bit_power.BitPower.cn0_dbhz`, and the fast and loss tests of
-:mod:`sdr_di.deep.channel_tests`. Sums are numpy's (:mod:`sdr_di.receiver._numba_sums`).
+:mod:`sdr_di.deep.channel_tests`. Sums are numpy's (:mod:`sdr_di.receiver.pairwise_sums`).
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ import math
 import numpy as np
 from numba import njit
 
-from ..receiver._numba_sums import (pairwise_sum, pairwise_sum_complex, pairwise_sum_squares,
-                                    segment_sum_complex)
+from ..receiver.pairwise_sums import (pairwise_sum, pairwise_sum_complex,
+                                      pairwise_sum_squares, segment_sum_complex)
 
 
 @njit(cache=True, boundscheck=False)

@@ -87,7 +87,8 @@ Decisions
   restarted pre-filter takes its frequency prior from the integration filter (below), not
   from a wide default.
 * **Channel management**: C/N0 comes from bit-synchronous prompt sums
-  (:class:`~sdr_di.deep.bit_power.BitPower`, known-noise estimator, ``cn0_window_ms`` =
+  (:class:`~sdr_di.deep.bit_power.BitPower`, known-noise estimator, run for every channel
+  at once by :class:`~sdr_di.deep.channel_tests.ChannelTests`, ``cn0_window_ms`` =
   200 ms). A channel joins the measurement vector when that C/N0 is at least
   ``cn0_min_dbhz`` (20 dB-Hz) and stays while it is no more than ``cn0_hysteresis_db``
   (2 dB) below that, while its last 60 ms of bit sums read at least
