@@ -12,7 +12,8 @@ from sdr_di.deep.channel_tests import CN0_MIN_MS, FAST_MS, LOSS_MS, ChannelTests
 from sdr_di.deep.discriminators import DiscriminatorBank
 from sdr_di.deep.prefilter import PreFilterBank, ResetPreFilterBank, coherent_blocks_of_channels
 from sdr_di.receiver.pairwise_sums import (pairwise_sum, pairwise_sum_complex,
-                                         pairwise_sum_squares, segment_sum_complex)
+                                         pairwise_sum_squares, segment_sum,
+                                         segment_sum_complex)
 from sdr_di.receiver.lock import PostCorrelationNoise
 
 LENGTHS = list(range(0, 140)) + [255, 256, 257, 999, 1000, 1001, 2049]
@@ -35,6 +36,16 @@ def test_kernel_sums_are_numpys_bit_for_bit():
         assert pairwise_sum_complex(c, lo, n) == np.add.reduce(c[lo:lo + n]), n
         if n:
             assert segment_sum_complex(c, lo, n) == np.add.reduceat(c[lo:lo + n], [0])[0], n
+            assert segment_sum(a, lo, n) == np.add.reduceat(a[lo:lo + n], [0])[0], n
+    # signed zeros: reduce starts from its identity, a reduceat segment from its first value
+    for n in (1, 2, 3, 9, 200):
+        z = np.full(n, -0.0)
+        zc = np.full(n, complex(-0.0, -0.0))
+        assert _bits(pairwise_sum(z, 0, n)) == _bits(np.add.reduce(z))
+        assert _bits(pairwise_sum_squares(z, 0, n)) == _bits(np.add.reduce(z * z))
+        assert _bits(pairwise_sum_complex(zc, 0, n)) == _bits(np.add.reduce(zc))
+        assert _bits(segment_sum_complex(zc, 0, n)) == _bits(np.add.reduceat(zc, [0]))
+        assert _bits(segment_sum(z, 0, n)) == _bits(np.add.reduceat(z, [0]))
     # a plain left-to-right sum differs: the test can tell the orders apart
     a = rng.standard_normal(1000) * 10.0 ** rng.uniform(-4, 4, 1000)
     plain = 0.0
@@ -182,3 +193,37 @@ def test_prefilters_of_a_pass_equal_the_channel_by_channel_form(bank_of):
                 bank.shift(2, 0.01, 0.5)
                 if hasattr(bank, "decorrelate"):
                     bank.decorrelate(1)
+
+
+@pytest.mark.parametrize("block_ms", [20, 10, 5, 1])
+def test_pass_epochs_kernel_equals_the_numpy_form_bit_for_bit(block_ms):
+    from sdr_di.deep.pass_epochs import pass_epochs_kernel_form, pass_epochs_numpy
+
+    rng = np.random.default_rng(block_ms)
+    for trial in range(30):
+        bit_ms = [int(b) for b in rng.choice([20, 2], 5)]
+        counts = [int(c) for c in rng.choice([0, 1, 19, 20, 21, 41], 5)]
+        n_all = sum(counts) + 7
+        out = rng.standard_normal((2 * n_all, 3, 2)) * 1e3
+        out[3] = 0.0                              # a zero row
+        epl = out.view(np.complex128)[..., 0]
+        nh = rng.choice([-1.0, 1.0], n_all)
+        n_noise = rng.integers(0, 3, n_all) * 400 if trial % 3 == 0 else \
+            np.full(n_all, 1200, np.int64)
+        nsamp = rng.integers(2490, 2510, n_all).astype(np.int64)
+        epoch = np.concatenate([rng.integers(0, 10 ** 6) + np.arange(c) for c in counts]
+                               + [np.arange(7)]).astype(np.int64)
+        ms0 = [int(v) for v in rng.integers(0, 10 ** 8, 5) // 1000 * 1000]
+        a0 = 3
+        epoch = np.concatenate([np.arange(a0), epoch])[:n_all]
+        a1 = a0 + sum(counts)
+        got = pass_epochs_kernel_form(epl, a0, a1, nh, n_noise, nsamp, epoch, 2.5e6, counts,
+                                      bit_ms, block_ms, ms0)
+        ref = pass_epochs_numpy(epl, a0, a1, nh, n_noise, nsamp, epoch, 2.5e6, counts, bit_ms,
+                                block_ms, ms0)
+        for name in ("E", "P", "L", "ok", "bit_start", "nav_bits", "nav_sums", "nav_bounds"):
+            assert _bits(getattr(got, name)) == _bits(getattr(ref, name)), (trial, name)
+        assert _bits(got.noise[got.ok]) == _bits(ref.noise[ref.ok]), trial
+        for q in range(4):
+            assert _bits(got.blocks[q]) == _bits(ref.blocks[q]), (trial, q)
+        assert list(got.blocks[4]) == list(ref.blocks[4]), trial

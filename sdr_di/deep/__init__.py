@@ -9,6 +9,8 @@ vector-tracking measurement source.
 ``bit_power``        C/N0 from bit-synchronous prompt sums (one channel, the plain form)
 ``channel_tests``    every channel's bit sums, noise rings, C/N0 and loss tests as arrays
                      (``_numba_channel_tests`` kernel, one call per pass)
+``pass_epochs``      a pass's correlator outputs made ready for the channels (NH wipe-off,
+                     noise values, coherent blocks, bit sums; ``_numba_pass_epochs`` kernel)
 ``navdecode``        navigation message decoding after the hand-over
 
 The receiver that runs every coupling mode (scalar start-up, hand-over, the integration

@@ -133,7 +133,14 @@ class ChannelNavDecoder:
         np.not_equal(bitno[1:], bitno[:-1], out=first[1:])
         edges = first.nonzero()[0]
         sums = np.add.reduceat(np.asarray(prompts, np.complex128), edges)
-        for k, s in zip(bitno[edges].tolist(), sums.tolist()):
+        self.add_sums(bitno[edges].tolist(), sums.tolist())
+
+    def add_sums(self, bits: list, sums: list) -> None:
+        """:meth:`add` of the prompts' sums over the bits they fall in: bit numbers
+        (satellite-clock ms of the week // ``bit_ms``, increasing) and the sum of each
+        bit's prompts in this call (``np.add.reduceat`` over the bits' first epochs; the
+        vector loop makes them for a pass's channels at once)."""
+        for k, s in zip(bits, sums):
             if self._acc_bit is not None and k == self._acc_bit:
                 self._acc += s
                 continue

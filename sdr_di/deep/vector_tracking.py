@@ -39,7 +39,7 @@ from ..receiver.correlator import (  # the kernel: receiver._numba_correlate_bit
     reduce_code_phase,
 )
 from ..receiver.ifreader import IfSource
-from ..receiver.lock import noise_code_phases, noise_samples, noise_values
+from ..receiver.lock import noise_code_phases, noise_samples
 from ..receiver.navdata import NavDataInForce
 from ..receiver.observables import ReceiverTime
 from ..receiver.scalar import ScalarReceiver
@@ -49,7 +49,7 @@ from ._numba_epoch_rows import epoch_rows
 from .channel_tests import FAST_MS, ChannelTests
 from .navdecode import ChannelNavDecoder
 from .nco import nco_commands, predict_ranges
-from .prefilter import coherent_blocks_of_channels
+from .pass_epochs import PassEpochs, pass_epochs
 from .architectures import block_ms, make_measurement_bank
 
 __all__ = ["SampleClock", "VectorChannel", "VectorTracking"]
@@ -191,6 +191,8 @@ class VectorTracking:
         self.tests = ChannelTests([c.bit_ms for c in chans], cfg.cn0_window_ms, self.fs,
                                   cfg.cn0_min_dbhz - cfg.fast_margin_db,
                                   cfg.cn0_min_dbhz - cfg.loss_margin_db)
+        self.bit_ms = [c.bit_ms for c in chans]
+        self.nav_ms0 = [c.nav.ms0 if c.nav is not None else 0 for c in chans]
         self.cn0 = np.array([c.cn0_dbhz for c in chans], np.float64)
         self.rejoining = np.array([c.rejoining for c in chans], bool)
         self.fast_fail = np.array([c.fast_fail for c in chans], np.int64)
@@ -421,40 +423,37 @@ class VectorTracking:
         self.profile["correlate"] += time.perf_counter() - td - t_before[0]
         return epl, pending
 
-    def prefilter(self, iv: Interval, ch0: int, counts: list, P, nsamp, epochs, noise,
-                  noise_ok, bit_start, blocks) -> list[bool]:
+    def prefilter(self, iv: Interval, ch0: int, counts: list, pe: PassEpochs,
+                  nsamp: np.ndarray) -> list[bool]:
         """Channels ``ch0, ch0 + 1, ...`` of a pass, with ``counts[k]`` epochs each,
-        consecutive in the arrays (prompts ``P``, NH wiped off; their sample counts, epoch
-        numbers and data-bit starts ``bit_start``; noise-correlator values ``noise`` where
-        ``noise_ok``, :func:`~sdr_di.receiver.lock.noise_values`): channel management
-        (module notes; C/N0 tests of every channel in one call, :meth:`~sdr_di.deep.
-        channel_tests.ChannelTests.run`), navigation decoding, then the pre-filters over
-        the coherent ``blocks`` (early, prompt, late sums, durations [s] and each channel's
-        bounds, :func:`~sdr_di.deep.prefilter.coherent_blocks_of_channels`; one call).
-        Returns each channel's measurement-vector gate (:meth:`_usable`)."""
-        self.tests.run(ch0, counts, P, nsamp, bit_start, noise, noise_ok, self.npow,
+        consecutive in the arrays (``pe``: their outputs, :func:`~sdr_di.deep.pass_epochs.
+        pass_epochs`; ``nsamp`` their sample counts): channel management (module notes; C/N0
+        tests of every channel in one call, :meth:`~sdr_di.deep.channel_tests.ChannelTests.
+        run`), navigation decoding, then the pre-filters over the coherent blocks (one
+        call). Returns each channel's measurement-vector gate (:meth:`_usable`)."""
+        self.tests.run(ch0, counts, pe.P, nsamp, pe.bit_start, pe.noise, pe.ok, self.npow,
                        self.cn0, self.rejoining, self.fast_fail)
         t_s = iv.k1 / self.fs
         new, tested = self.tests.new, self.tests.count_tested
         chans = self.chans[ch0:ch0 + len(counts)]
+        nav_bits, nav_sums = pe.nav_bits.tolist(), pe.nav_sums.tolist()
+        nb = pe.nav_bounds.tolist()
         cn0_lin = []
-        s = 0
-        for c, cnt in zip(chans, counts):
+        for k, (c, cnt) in enumerate(zip(chans, counts)):
             i = c.idx
             if cnt:
                 c.cn0_dbhz = cn0 = float(self.cn0[i])
                 c.fast_fail, c.rejoining = int(self.fast_fail[i]), bool(self.rejoining[i])
-                self.nav_log.demodulate(c, P[s:s + cnt], epochs[s:s + cnt], t_s)
+                self.nav_log.demodulate(c, nav_bits[nb[k]:nb[k + 1]], nav_sums[nb[k]:nb[k + 1]])
                 if new[i] and c.nav is not None:
                     if c.fast_fail:
                         c.nav.interrupt()  # no subframe from bits of a failing interval
                     elif tested[i] >= FAST_MS // c.bit_ms:
                         self.nav_log.confirm(c, FAST_MS // c.bit_ms, t_s)  # subframes before it
-                s += cnt
             else:
                 cn0 = c.cn0_dbhz
             cn0_lin.append(10.0 ** (cn0 / 10.0) if math.isfinite(cn0) else 100.0)
-        self.pre.process_channels(ch0, counts, blocks[4], *blocks[:4], cn0_lin)
+        self.pre.process_channels(ch0, counts, pe.blocks[4], *pe.blocks[:4], cn0_lin)
         good = []
         for c, cnt in zip(chans, counts):
             if self._shift_end is not None:
@@ -603,29 +602,14 @@ class _ChannelPass:
             a1 += reps[j]
             j += 1
         if j > self.next:
-            # the outputs of these channels' epochs at once, each channel then a slice: NH
-            # wiped off, the noise correlators' values (epochs of no sample left out)
-            ep, nz = epl[2 * a0:2 * a1:2], epl[2 * a0 + 1:2 * a1:2]
-            nh = rows.nh[a0:a1]
-            E, P, L = ep[:, 0] * nh, ep[:, 1] * nh, ep[:, 2] * nh
-            n_nz = rows.n_noise[a0:a1]
-            ok = n_nz > 0
-            noise = noise_values(nz[:, 0], nz[:, 1], nz[:, 2], n_nz if ok.all() else
-                                 np.where(ok, n_nz, 1))
-            # the element-wise work and the coherent blocks of these channels at once, each
-            # channel then slices (the same values as per channel: module notes of
-            # prefilter.coherent_blocks_of_channels)
-            t_epoch = rows.nsamp[a0:a1] / vt.fs
-            epochs = rows.epoch[a0:a1]
-            chans, counts = vt.chans[self.next:j], reps[self.next:j]
-            bit_ms = [c.bit_ms for c in chans]
-            bit_start = epochs % np.repeat(bit_ms, counts) == 0
-            block = [min(b, vt.block_ms) for b in bit_ms]
-            blocks = coherent_blocks_of_channels(
-                E, P, L, t_epoch, bit_start if block == bit_ms else
-                epochs % np.repeat(block, counts) == 0, counts)
-            good = vt.prefilter(self.iv, self.next, counts, P, rows.nsamp[a0:a1], epochs,
-                                noise, ok, bit_start, blocks)
+            # the outputs of these channels' epochs made ready at once (NH wiped off, noise
+            # values, coherent blocks, bit sums: pass_epochs), then their tests, decoders
+            # and pre-filters (prefilter)
+            ch0 = self.next
+            chans, counts = vt.chans[ch0:j], reps[ch0:j]
+            pe = pass_epochs(epl, a0, a1, rows.nh, rows.n_noise, rows.nsamp, rows.epoch, vt.fs,
+                             counts, vt.bit_ms[ch0:j], vt.block_ms, vt.nav_ms0[ch0:j])
+            good = vt.prefilter(self.iv, ch0, counts, pe, rows.nsamp[a0:a1])
             self.use += good
             if vt.fusing:
                 for c, g in zip(chans, good):
@@ -716,9 +700,10 @@ class _NavLog:
             self._eph_entry(t_s, c.prn, c.eph, navdata.select_with_source(c.prn, week, sow)[1])
         self._iono_entry(t_s, iono)
 
-    def demodulate(self, c: VectorChannel, prompts, epochs, t_s: float) -> None:
-        """Feed channel ``c``'s prompts to its decoder (it holds what it decodes)."""
-        c.nav.add(prompts, epochs)
+    def demodulate(self, c: VectorChannel, bits: list, sums: list) -> None:
+        """Feed channel ``c``'s prompt sums over its bits to its decoder (it holds what it
+        decodes; :meth:`~sdr_di.deep.navdecode.ChannelNavDecoder.add_sums`)."""
+        c.nav.add_sums(bits, sums)
 
     def confirm(self, c: VectorChannel, n_bits: int, t_s: float) -> None:
         """Channel ``c``'s test passed on its last ``n_bits`` bit sums: offer what the

@@ -2,13 +2,14 @@
 reference's bit for bit.
 
 numpy adds a contiguous float array by pairwise summation (``np.add.reduce``, ``x.sum()``):
-below 8 values one after the other from 0; up to 128 values in 8 running partial sums
+below 8 values one after the other from -0.0; up to 128 values in 8 running partial sums
 (every 8th value), combined as ``((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))``, then
 the remainder; above 128 the two halves (the first a multiple of 8 long) summed alike and
 added. Complex arrays are summed as their interleaved real and imaginary parts, so the same
 rule runs on 4 complex values per block of 8 reals (the real parts in ``r0, r2, r4, r6``).
 ``np.add.reduceat`` starts each segment from its first value and adds the pairwise sum of
-the rest. (numpy 2.x; ``tests/test_deep_channel_tests.py`` checks these against numpy.)
+the rest; ``np.add.reduce`` adds the pairwise sum to its identity, 0.0 (so a sum of
+negative zeros is +0.0 there and -0.0 in a segment of ``reduceat``). (numpy 2.x; ``tests/test_deep_channel_tests.py`` checks these against numpy.)
 
 The halves are walked with an explicit stack, not by recursion: numba's cache does not
 reload a recursive kernel called from another (a segmentation fault on the second run).
@@ -28,7 +29,7 @@ def _leaf(a, lo, n, squares):
     """One leaf of the pairwise sum of floats (``n <= 128``), of the values or their
     squares."""
     if n < 8:
-        res = 0.0
+        res = -0.0
         for i in range(lo, lo + n):
             res += a[i] * a[i] if squares else a[i]
         return res
@@ -74,8 +75,8 @@ def _leaf(a, lo, n, squares):
 def _leaf_complex(a, lo, n):
     """One leaf of the pairwise sum of complex values (``n <= 64``)."""
     if n < 4:
-        rr = 0.0
-        ri = 0.0
+        rr = -0.0
+        ri = -0.0
         for i in range(lo, lo + n):
             rr += a[i].real
             ri += a[i].imag
@@ -176,30 +177,34 @@ def _walk_complex(a, lo, n):
 @njit(cache=True, boundscheck=False)
 def pairwise_sum(a, lo, n):
     """``np.add.reduce(a[lo:lo + n])`` of a float64 array, bit for bit (module notes)."""
-    if n <= _BLOCK:
-        return _leaf(a, lo, n, False)
-    return _walk(a, lo, n, False)
+    return 0.0 + (_leaf(a, lo, n, False) if n <= _BLOCK else _walk(a, lo, n, False))
 
 
 @njit(cache=True, boundscheck=False)
 def pairwise_sum_squares(a, lo, n):
     """``np.add.reduce(a[lo:lo + n] * a[lo:lo + n])`` of a float64 array, bit for bit."""
-    if n <= _BLOCK:
-        return _leaf(a, lo, n, True)
-    return _walk(a, lo, n, True)
+    return 0.0 + (_leaf(a, lo, n, True) if n <= _BLOCK else _walk(a, lo, n, True))
 
 
 @njit(cache=True, boundscheck=False)
 def pairwise_sum_complex(a, lo, n):
     """``np.add.reduce(a[lo:lo + n])`` of a complex128 array, bit for bit (module notes)."""
-    if n <= _BLOCK // 2:
-        return _leaf_complex(a, lo, n)
-    return _walk_complex(a, lo, n)
+    s = _leaf_complex(a, lo, n) if n <= _BLOCK // 2 else _walk_complex(a, lo, n)
+    return complex(0.0 + s.real, 0.0 + s.imag)
 
 
 @njit(cache=True, boundscheck=False)
 def segment_sum_complex(a, lo, n):
     """One segment of ``np.add.reduceat`` of a complex128 array, ``a[lo:lo + n]`` (n >= 1):
     its first value plus the pairwise sum of the rest, bit for bit."""
-    s = pairwise_sum_complex(a, lo + 1, n - 1)
+    m = n - 1
+    s = _leaf_complex(a, lo + 1, m) if m <= _BLOCK // 2 else _walk_complex(a, lo + 1, m)
     return complex(a[lo].real + s.real, a[lo].imag + s.imag)
+
+
+@njit(cache=True, boundscheck=False)
+def segment_sum(a, lo, n):
+    """One segment of ``np.add.reduceat`` of a float64 array, ``a[lo:lo + n]`` (n >= 1): its
+    first value plus the pairwise sum of the rest, bit for bit."""
+    m = n - 1
+    return a[lo] + (_leaf(a, lo + 1, m, False) if m <= _BLOCK else _walk(a, lo + 1, m, False))
