@@ -3,13 +3,13 @@
 Plain arrays only; the model and notation are those of :mod:`sdr_di.ins.error_model`. The
 kernels are the per-row work of ``error_derivative`` in the same IEEE operations, in the
 same order, as the numpy form, so that their rows are its rows bit for bit (tested,
-``tests/test_ins_error_model_kernel.py``). Three kinds of numpy operation are left to numpy,
-between the two kernels, because their arithmetic is not a plain loop that a kernel can
-repeat on every machine:
-
-* the 3x3 products ``[phi x]^2`` and ``eps C_b^n^T``, ``nabla C_b^n^T`` (``matmul`` calls
-  BLAS, whose small kernels fuse multiply-adds in an order of their own, per CPU);
-* ``w ** 1.5`` in the meridian radius (numpy's ``power`` is a SIMD library's on AVX-512).
+``tests/test_ins_error_model_kernel.py``). The numpy form avoids the operations whose
+arithmetic no kernel can repeat on every machine: its 3x3 products ``[phi x]^2`` and
+``eps C_b^n^T``, ``nabla C_b^n^T`` are sums left to right (``matmul`` would call BLAS, whose
+small kernels fuse multiply-adds in an order of their own, per CPU) and its meridian radius
+is ``R_N (1 - e^2) / w`` (``w ** 1.5`` would be numpy's ``power``, a SIMD library's on
+AVX-512). So :func:`improved_euler` runs a whole ``f_batch`` (both derivatives of the
+improved-Euler step) in one call.
 
 The orders the kernels repeat: ``np.einsum("pij,pj->pi")`` and ``("pij,j->pi")`` sum a row
 of a contiguous matrix as ``0 + ((m0 v0 + m2 v2) + m1 v1)`` (numpy's two-lane dot), of a
@@ -17,8 +17,9 @@ strided one (``A^T``) as ``((0 + m0 v0) + m1 v1) + m2 v2``; ``np.sum(axis=-1)`` 
 as ``(a0 + a1) + a2``.
 
 Per row ``p`` of ``X`` (p, n) the stages are: :func:`true_state_terms` (``w = 1 - e^2
-sin^2 L`` of the true latitude and ``[phi x]``), numpy's products, then
-:func:`error_rows` (everything else). ``cs`` packs the computed (INS) state's quantities,
+sin^2 L`` of the true latitude and ``[phi x]``), :func:`products` (``[phi x]^2`` and the
+residual biases in the navigation frame), then :func:`error_rows` (everything else);
+:func:`derivative_rows` runs the three. ``cs`` packs the computed (INS) state's quantities,
 which every row shares (:data:`CS_*` offsets).
 """
 
@@ -39,7 +40,6 @@ CS_WIN, CS_WIE, CS_WEN, CS_W2, CS_CF, CS_V = 0, 3, 6, 9, 12, 15
 CS_LAT, CS_H, CS_G, CS_LONDOT = 18, 19, 20, 21
 CS_LEN = 22
 
-_RM_NUM = A_CGCS * (1.0 - E2_CGCS)          # as radii_of_curvature's A (1 - e^2)
 _G_H1 = 2.0 / A_CGCS                        # normal_gravity's height terms
 _G_F = 1.0 + F_CGCS + M_CGCS
 _G_F2 = 2.0 * F_CGCS
@@ -72,7 +72,7 @@ def _dot_m(M, r, v0, v1, v2):
 
 
 @numba.njit(cache=True)
-def error_rows(X, cs, w15, K, KK, eps_c, nab_c, gauss_markov, tau_g, tau_a, tau_clk, out):
+def error_rows(X, cs, w, K, KK, eps_c, nab_c, gauss_markov, tau_g, tau_a, tau_clk, out):
     """Rows of ``xdot = fbar(x)`` (:func:`~sdr_di.ins.error_model.error_derivative`) into
     ``out`` (p, n), zero where the model has no dynamics.
 
@@ -82,12 +82,13 @@ def error_rows(X, cs, w15, K, KK, eps_c, nab_c, gauss_markov, tau_g, tau_a, tau_
         Error states (layout of :mod:`sdr_di.filters.state`).
     cs : float64 (CS_LEN,)
         The computed state's shared quantities (module notes).
-    w15 : float64 (p,)
-        ``w ** 1.5`` of :func:`true_state_terms`'s ``w`` (numpy's power).
+    w : float64 (p,)
+        :func:`true_state_terms`'s ``w``.
     K, KK : float64 (p, 3, 3)
-        ``[phi x]`` and ``[phi x] @ [phi x]`` (numpy's matmul).
+        ``[phi x]`` and ``[phi x] @ [phi x]`` (:func:`products`).
     eps_c, nab_c : float64 (p, 3)
-        Effective residual gyro and accelerometer biases times ``C_b^n^T`` (numpy's matmul).
+        Effective residual gyro and accelerometer biases times ``C_b^n^T``
+        (:func:`products`).
     gauss_markov : bool
         First-order Gauss-Markov biases (``gm``) of correlation times ``tau_g``, ``tau_a``
         [s]; ``tau_clk`` the clock drift's [s].
@@ -114,7 +115,7 @@ def error_rows(X, cs, w15, K, KK, eps_c, nab_c, gauss_markov, tau_g, tau_a, tau_
         sl = math.sin(lat_t)
         cl = math.cos(lat_t)
         R_N = A_CGCS / math.sqrt(1.0 - E2_CGCS * (sl * sl))
-        R_M = _RM_NUM / w15[p]
+        R_M = R_N * (1.0 - E2_CGCS) / w[p]
         RNh_t = R_N + h_t
         d_wie[0] = cs[CS_WIE] - 0.0
         d_wie[1] = cs[CS_WIE + 1] - OMEGA_E * cl
@@ -183,3 +184,92 @@ def error_rows(X, cs, w15, K, KK, eps_c, nab_c, gauss_markov, tau_g, tau_a, tau_
         # clock (eq 4)
         out[p, 15] = X[p, 16]
         out[p, 16] = -X[p, 16] / tau_clk
+
+
+@numba.njit(cache=True)
+def products(X, K, CT, w_ib_b, f_b, scale_start, KK, eps_c, nab_c):
+    """``KK = K @ K`` (p, 3, 3) and the residual gyro and accelerometer biases of the rows of
+    ``X`` times ``C_b^n^T`` (``CT`` = ``C_b^n^T``, contiguous), ``eps_c``, ``nab_c`` (p, 3):
+    each entry summed left to right (``error_model._skew_squares``,
+    ``_rows_times_transpose``). The biases are states 9-11 and 12-14, plus, with scale-factor
+    states (``scale_start`` >= 0: gyro at ``scale_start``, accelerometer 3 after), those
+    times ``w_ib_b`` and ``f_b`` (``error_model.residual_biases``)."""
+    e = np.empty(3)
+    a = np.empty(3)
+    for p in range(X.shape[0]):
+        for i in range(3):
+            for j in range(3):
+                KK[p, i, j] = (K[p, i, 0] * K[p, 0, j] + K[p, i, 1] * K[p, 1, j]) \
+                    + K[p, i, 2] * K[p, 2, j]
+        for k in range(3):
+            e[k] = X[p, 9 + k]
+            a[k] = X[p, 12 + k]
+            if scale_start >= 0:
+                e[k] = e[k] + X[p, scale_start + k] * w_ib_b[k]
+                a[k] = a[k] + X[p, scale_start + 3 + k] * f_b[k]
+        for j in range(3):
+            eps_c[p, j] = (e[0] * CT[0, j] + e[1] * CT[1, j]) + e[2] * CT[2, j]
+            nab_c[p, j] = (a[0] * CT[0, j] + a[1] * CT[1, j]) + a[2] * CT[2, j]
+
+
+@numba.njit(cache=True)
+def derivative_rows(X, cs, CT, w_ib_b, f_b, scale_start, gauss_markov, tau_g, tau_a,
+                    tau_clk, out):
+    """``xdot = fbar(x)`` of the rows of ``X`` into ``out`` (p, n): :func:`true_state_terms`,
+    :func:`products` and :func:`error_rows` (``error_model.error_derivative``)."""
+    p = X.shape[0]
+    w = np.empty(p)
+    K = np.empty((p, 3, 3))
+    KK = np.empty((p, 3, 3))
+    eps_c = np.empty((p, 3))
+    nab_c = np.empty((p, 3))
+    true_state_terms(X, cs[CS_LAT], cs[CS_H], w, K)
+    products(X, K, CT, w_ib_b, f_b, scale_start, KK, eps_c, nab_c)
+    error_rows(X, cs, w, K, KK, eps_c, nab_c, gauss_markov, tau_g, tau_a, tau_clk, out)
+
+
+@numba.njit(cache=True)
+def improved_euler(X, dt, cs0, cs1, C0T, C1T, w_ib_b, f_b, scale_start, gauss_markov, tau_g,
+                   tau_a, tau_clk, out):
+    """One improved-Euler step of the rows of ``X`` over ``dt`` [s] (``InsErrorModel.
+    f_batch``): ``out = X + (dt / 2) (g0 + g1)``, ``g0 = fbar(X)`` on the computed state at
+    the interval start (``cs0``, ``C0T``), ``g1 = fbar(X + dt g0)`` at its end (``cs1``,
+    ``C1T``); the same element-wise operations as the numpy form."""
+    g0 = np.empty(X.shape)
+    g1 = np.empty(X.shape)
+    X1 = np.empty(X.shape)
+    derivative_rows(X, cs0, C0T, w_ib_b, f_b, scale_start, gauss_markov, tau_g, tau_a,
+                    tau_clk, g0)
+    for p in range(X.shape[0]):
+        for j in range(X.shape[1]):
+            X1[p, j] = X[p, j] + dt * g0[p, j]
+    derivative_rows(X1, cs1, C1T, w_ib_b, f_b, scale_start, gauss_markov, tau_g, tau_a,
+                    tau_clk, g1)
+    h = 0.5 * dt
+    for p in range(X.shape[0]):
+        for j in range(X.shape[1]):
+            out[p, j] = X[p, j] + h * (g0[p, j] + g1[p, j])
+
+
+@numba.njit(cache=True)
+def f_and_jacobian(x, steps, dt, cs0, cs1, C0T, C1T, w_ib_b, f_b, scale_start, gauss_markov,
+                   tau_g, tau_a, tau_clk, fx, F):
+    """``InsErrorModel.f_and_F``: :func:`improved_euler` of the ``2 n + 1`` rows ``x + e_i
+    h_i``, ``x - e_i h_i`` (``h = steps``) and ``x``; ``fx`` (n,) the last row, ``F`` (n, n)
+    the central differences ``F[j, i] = (Y[i, j] - Y[n + i, j]) / (2 h_i)``."""
+    n = x.shape[0]
+    X = np.empty((2 * n + 1, n))
+    for i in range(n):
+        for j in range(n):
+            d = steps[i] if i == j else 0.0
+            X[i, j] = x[j] + d
+            X[n + i, j] = x[j] - d
+    for j in range(n):
+        X[2 * n, j] = x[j]
+    Y = np.empty(X.shape)
+    improved_euler(X, dt, cs0, cs1, C0T, C1T, w_ib_b, f_b, scale_start, gauss_markov, tau_g,
+                   tau_a, tau_clk, Y)
+    for j in range(n):
+        fx[j] = Y[2 * n, j]
+        for i in range(n):
+            F[j, i] = (Y[i, j] - Y[n + i, j]) / (2.0 * steps[i])

@@ -90,7 +90,7 @@ import math
 
 import numpy as np
 
-from ..constants import OMEGA_E
+from ..constants import A_CGCS, E2_CGCS, OMEGA_E
 from ..filters.models import ProcessModel, numerical_jacobian
 from ..filters.state import StateLayout
 from ..frames import radii_of_curvature, skew
@@ -247,9 +247,21 @@ def dcm_to_rotvec(C: np.ndarray) -> np.ndarray:
     return k[..., None] * w
 
 
+def _radii(lat) -> tuple[np.ndarray, np.ndarray]:
+    """Meridian and prime-vertical radii [m] at latitude [rad], vectorized, in the scalar
+    form of the INS (``mechanization._radii``: ``R_M = R_N (1 - e^2) / w``, no power), which
+    the error model's kernel repeats bit for bit; :func:`~sdr_di.frames.radii_of_curvature`
+    takes ``w^1.5`` from numpy's ``power``, a SIMD library's on AVX-512 that no kernel
+    can follow. (The two agree to a few ulp.)"""
+    sl = np.sin(np.asarray(lat, float))
+    w = 1.0 - E2_CGCS * (sl * sl)
+    R_N = A_CGCS / np.sqrt(w)
+    return R_N * (1.0 - E2_CGCS) / w, R_N
+
+
 def _rates(lat, h, v):
     """w_ie^n, w_en^n (..., 3), ``R_N + h`` and ``cos(lat)``, vectorized."""
-    R_M, R_N = radii_of_curvature(lat)
+    R_M, R_N = _radii(lat)
     sl, cl = np.sin(lat), np.cos(lat)
     RN_h = R_N + h
     w_ie = np.zeros(np.shape(lat) + (3,))            # filled in place: cheaper than stacking
@@ -274,6 +286,18 @@ def residual_biases(X: np.ndarray, layout: StateLayout, f_b: np.ndarray,
         eps = eps + X[:, L.gyro_scale] * np.asarray(w_ib_b, float)
         nab = nab + X[:, L.accel_scale] * np.asarray(f_b, float)
     return eps, nab
+
+
+def _skew_squares(K: np.ndarray) -> np.ndarray:
+    """``K @ K`` of 3x3 matrices (p, 3, 3), each entry summed left to right (the kernels'
+    order; numpy's ``matmul`` calls BLAS, whose fused multiply-adds follow the CPU)."""
+    return (K[:, :, 0, None] * K[:, None, 0, :] + K[:, :, 1, None] * K[:, None, 1, :]) \
+        + K[:, :, 2, None] * K[:, None, 2, :]
+
+
+def _rows_times_transpose(r: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """``r @ C.T`` of rows ``r`` (p, 3), summed left to right (as :func:`_skew_squares`)."""
+    return (r[:, 0, None] * C[:, 0] + r[:, 1, None] * C[:, 1]) + r[:, 2, None] * C[:, 2]
 
 
 def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.ndarray,
@@ -308,18 +332,19 @@ def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.n
     # C_w^-1 also needs (negation is exact: the same values as rotvec_to_dcm(-phi))
     th2 = np.sum(phi * phi, axis=-1)[..., None, None]
     K = skew(phi)
-    KK = K @ K
+    KK = _skew_squares(K)
     a, b, c = _so3_coefficients(th2, jacobian=True)
     A = _I3 - a * K + b * KK
     At = np.swapaxes(A, -1, -2)
     I = _I3
     # attitude (eq 2, line 1)
     u = (np.einsum("pij,j->pi", I - A, win_c) + np.einsum("pij,pj->pi", A, d_wie + d_wen)
-         - eps @ Cb.T)
+         - _rows_times_transpose(eps, Cb))
     phi_dot = np.einsum("pij,pj->pi", _I3 + 0.5 * K + c * KK, u)
     # velocity (eq 2, line 2)
     Cf = Cb @ f_b
-    dv_dot = (np.einsum("pij,j->pi", I - At, Cf) + np.einsum("pij,pj->pi", At, nab @ Cb.T)
+    dv_dot = (np.einsum("pij,j->pi", I - At, Cf) + np.einsum("pij,pj->pi", At,
+                                                              _rows_times_transpose(nab, Cb))
               - cross_rows(2.0 * wie_c + wen_c, dv) - cross_rows(2.0 * d_wie + d_wen, v_t))
     g_c = float(normal_gravity(lat_c, h_c))
     dv_dot[:, 2] -= g_c - normal_gravity(lat_t, h_t)
@@ -364,22 +389,24 @@ def error_derivative_kernel(X: np.ndarray, nav: NavState, f_b: np.ndarray,
                             bias_tau_s: tuple[float, float] = (3600.0, 3600.0),
                             cs: np.ndarray | None = None) -> np.ndarray:
     """:func:`error_derivative` by the numba kernels (:mod:`sdr_di.ins._numba_error_model`):
-    the same rows bit for bit, a tenth of the time on the EKF's 35 rows. ``cs``: the
+    the same rows bit for bit. ``cs``: the
     computed state's :func:`computed_state_terms` when the caller already has them."""
-    X = np.atleast_2d(X)
+    X = np.ascontiguousarray(np.atleast_2d(X), dtype=float)
     L = layout
     if cs is None:
         cs = computed_state_terms(nav, f_b)
-    p = X.shape[0]
-    w = np.empty(p)
-    K = np.empty((p, 3, 3))
-    _nb.true_state_terms(X, float(nav.llh[0]), float(nav.llh[2]), w, K)
-    eps, nab = residual_biases(X, L, f_b, w_ib_b)
-    CbT = nav.C_b_n.T
     out = np.empty(X.shape)
-    _nb.error_rows(X, cs, w ** 1.5, K, K @ K, eps @ CbT, nab @ CbT, L.gauss_markov,
-                   float(bias_tau_s[0]), float(bias_tau_s[1]), float(clock.tau_s), out)
+    _nb.derivative_rows(X, cs, np.ascontiguousarray(nav.C_b_n.T),
+                        np.asarray(w_ib_b, float), np.asarray(f_b, float),
+                        _scale_start(L), L.gauss_markov, float(bias_tau_s[0]),
+                        float(bias_tau_s[1]), float(clock.tau_s), out)
     return out
+
+
+def _scale_start(layout: StateLayout) -> int:
+    """First scale-factor state (gyro; the accelerometer's follow), -1 without them (the
+    kernels' ``scale_start``)."""
+    return layout.gyro_scale.start if layout.gyro_scale is not None else -1
 
 
 class InsErrorModel(ProcessModel):
@@ -421,7 +448,7 @@ class InsErrorModel(ProcessModel):
         self.nav0: NavState | None = None
         self.nav1: NavState | None = None
         self.f_b = np.zeros(3)
-        self._cs: tuple | None = None   # computed_state_terms of nav0, nav1
+        self._cs: tuple | None = None   # the kernels' arguments of the interval
         self.w_ib_b = np.zeros(3)
 
     def set_interval(self, nav0: NavState, nav1: NavState, f_b, w_ib_b) -> None:
@@ -440,13 +467,25 @@ class InsErrorModel(ProcessModel):
             g0 = error_derivative(X, self.nav0, *args)
             g1 = error_derivative(X + dt * g0, self.nav1, *args)
             return X + 0.5 * dt * (g0 + g1)
+        out = np.empty(X.shape)
+        # both derivatives and the step in one kernel call (the numpy form's values, bit
+        # for bit: tests/test_ins_error_model_kernel.py)
+        _nb.improved_euler(np.ascontiguousarray(X), float(dt), *self._kernel_args(), out)
+        return out
+
+    def _kernel_args(self) -> tuple:
+        """The kernels' arguments of the interval after ``X, dt``: the computed states'
+        terms and ``C_b^n^T`` at both ends (made once per interval, :meth:`set_interval`),
+        the IMU averages and the layout's and clock's constants."""
         if self._cs is None:
-            # the computed states' terms, once per interval (set_interval)
             self._cs = (computed_state_terms(self.nav0, self.f_b),
-                        computed_state_terms(self.nav1, self.f_b))
-        g0 = error_derivative_kernel(X, self.nav0, *args, cs=self._cs[0])
-        g1 = error_derivative_kernel(X + dt * g0, self.nav1, *args, cs=self._cs[1])
-        return X + 0.5 * dt * (g0 + g1)
+                        computed_state_terms(self.nav1, self.f_b),
+                        np.ascontiguousarray(self.nav0.C_b_n.T),
+                        np.ascontiguousarray(self.nav1.C_b_n.T),
+                        self.w_ib_b, self.f_b, _scale_start(self.layout),
+                        self.layout.gauss_markov, self.bias_tau_s[0], self.bias_tau_s[1],
+                        float(self.clock.tau_s))
+        return self._cs
 
     def f(self, x: np.ndarray, dt: float) -> np.ndarray:
         return self.f_batch(np.asarray(x, float)[None, :], dt)[0]
@@ -464,6 +503,12 @@ class InsErrorModel(ProcessModel):
         x = np.asarray(x, float)
         n = x.size
         steps = self._steps
+        if self.jit and self.nav0 is not None:
+            # the rows, the step and the differences in one kernel call (the same values)
+            fx, F = np.empty(n), np.empty((n, n))
+            _nb.f_and_jacobian(np.ascontiguousarray(x), steps, float(dt), *self._kernel_args(),
+                               fx, F)
+            return fx, F
         E = np.diag(steps)
         Y = self.f_batch(np.vstack([x + E, x - E, x[None, :]]), dt)
         return Y[2 * n], ((Y[:n] - Y[n:2 * n]) / (2.0 * steps[:, None])).T
