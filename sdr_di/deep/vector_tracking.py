@@ -187,7 +187,9 @@ class VectorTracking:
         self.n_measured = 0
         self.fusing = True
         # the channels' bit sums, noise rings and tests (the state of the C/N0 tests as
-        # arrays over the channels: channel_tests notes)
+        # arrays over the channels: channel_tests notes); the C/N0, rejoining and last test
+        # of each channel are kept here for the kernel and copied to its VectorChannel
+        # after each of its passes (prefilter), which the gate and the outputs read
         self.tests = ChannelTests([c.bit_ms for c in chans], cfg.cn0_window_ms, self.fs,
                                   cfg.cn0_min_dbhz - cfg.fast_margin_db,
                                   cfg.cn0_min_dbhz - cfg.loss_margin_db)
