@@ -92,27 +92,18 @@ def _bit_sums_add(bp_p, bp_n, i, size, count, new, acc_p, acc_n, prompts, nsamp,
                   s, cnt, seg_p, seg_n):
     """BitPower.add of the epochs ``[s, s + cnt)`` (cnt >= 1) to channel ``i``."""
     new[i] = 0
-    nb = 0
-    for e in range(s, s + cnt):
-        if bit_start[e]:
-            nb += 1
-    if nb == 0:
-        ps = pairwise_sum_complex(prompts, s, cnt)
-        acc_p[i] = acc_p[i] + ps
-        ns = 0
-        for e in range(s, s + cnt):
-            ns += nsamp[e]
-        acc_n[i] = acc_n[i] + float(ns)
-        return
+    # the epochs before the first bit start complete the bit carried (all of them when no
+    # bit starts here: BitPower.add's sum of p is its sum of p[:head] with head = cnt)
     head = 0
-    while not bit_start[s + head]:
+    while head < cnt and not bit_start[s + head]:
         head += 1
-    ps = pairwise_sum_complex(prompts, s, head)
-    acc_p[i] = acc_p[i] + ps
+    acc_p[i] = acc_p[i] + pairwise_sum_complex(prompts, s, head)
     ns = 0
     for e in range(s, s + head):
         ns += nsamp[e]
     acc_n[i] = acc_n[i] + float(ns)
+    if head == cnt:
+        return
     if acc_n[i] > 0.0:
         _push(bp_p, bp_n, i, size, count, new, acc_p[i], acc_n[i])
     # the bits that start here (np.add.reduceat's segments)

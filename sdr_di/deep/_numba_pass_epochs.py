@@ -13,6 +13,33 @@ from ..receiver.pairwise_sums import segment_sum, segment_sum_complex
 
 
 @njit(cache=True, boundscheck=False)
+def _segments(first, counts):
+    """Segments of consecutive channels' epochs (``counts[k]`` each) that start where
+    ``first`` is true (every channel's first epoch must be): ``(starts, bounds)``, segment
+    ``j`` is ``[starts[j], starts[j + 1])``, channel ``k``'s segments are ``[bounds[k],
+    bounds[k + 1])``."""
+    n_ch = counts.shape[0]
+    n = 0
+    for e in range(first.shape[0]):
+        if first[e]:
+            n += 1
+    starts = np.empty(n + 1, np.int64)
+    bounds = np.empty(n_ch + 1, np.int64)
+    j = 0
+    e = 0
+    for k in range(n_ch):
+        bounds[k] = j
+        for q in range(counts[k]):
+            if first[e]:
+                starts[j] = e
+                j += 1
+            e += 1
+    starts[n] = e
+    bounds[n_ch] = j
+    return starts, bounds
+
+
+@njit(cache=True, boundscheck=False)
 def pass_epochs_kernel(out, a0, a1, nh, n_noise, nsamp, epoch, fs, counts, bit_ms, block_ms,
                        ms0):
     """The epochs ``[a0, a1)``: returns ``(E, P, L, noise, ok, bit_start, Eb, Pb, Lb, Tb,
@@ -53,63 +80,34 @@ def pass_epochs_kernel(out, a0, a1, nh, n_noise, nsamp, epoch, fs, counts, bit_m
             bitno[e] = (ms0[k] + ep) // bk
             e += 1
     # coherent blocks: reduceat over the block starts (the inputs when every epoch is one)
-    nb = 0
-    for i in range(m):
-        if block_start[i]:
-            nb += 1
-    bounds = np.empty(n_ch + 1, np.int64)
+    starts, bounds = _segments(block_start, counts)
+    nb = starts.shape[0] - 1
     if nb == m:
         Eb, Pb, Lb, Tb = E, P, L, t
-        e = 0
-        for k in range(n_ch):
-            bounds[k] = e
-            e += counts[k]
-        bounds[n_ch] = e
     else:
         Eb = np.empty(nb, np.complex128)
         Pb = np.empty(nb, np.complex128)
         Lb = np.empty(nb, np.complex128)
         Tb = np.empty(nb)
-        j = 0
-        e = 0
-        for k in range(n_ch):
-            bounds[k] = j
-            end = e + counts[k]
-            while e < end:
-                f = e + 1
-                while f < end and not block_start[f]:
-                    f += 1
-                Eb[j] = segment_sum_complex(E, e, f - e)
-                Pb[j] = segment_sum_complex(P, e, f - e)
-                Lb[j] = segment_sum_complex(L, e, f - e)
-                Tb[j] = segment_sum(t, e, f - e)
-                j += 1
-                e = f
-        bounds[n_ch] = j
+        for j in range(nb):
+            e, f = starts[j], starts[j + 1]
+            Eb[j] = segment_sum_complex(E, e, f - e)
+            Pb[j] = segment_sum_complex(P, e, f - e)
+            Lb[j] = segment_sum_complex(L, e, f - e)
+            Tb[j] = segment_sum(t, e, f - e)
     # the prompts' sums over each channel's bits (ChannelNavDecoder.add)
-    ns = 0
+    first = np.empty(m, np.bool_)
     e = 0
     for k in range(n_ch):
         for q in range(counts[k]):
-            if q == 0 or bitno[e] != bitno[e - 1]:
-                ns += 1
+            first[e] = q == 0 or bitno[e] != bitno[e - 1]
             e += 1
+    bit0, nav_bounds = _segments(first, counts)
+    ns = bit0.shape[0] - 1
     nav_bits = np.empty(ns, np.int64)
     nav_sums = np.empty(ns, np.complex128)
-    nav_bounds = np.empty(n_ch + 1, np.int64)
-    j = 0
-    e = 0
-    for k in range(n_ch):
-        nav_bounds[k] = j
-        end = e + counts[k]
-        while e < end:
-            f = e + 1
-            while f < end and bitno[f] == bitno[e]:
-                f += 1
-            nav_bits[j] = bitno[e]
-            nav_sums[j] = segment_sum_complex(P, e, f - e)
-            j += 1
-            e = f
-    nav_bounds[n_ch] = j
+    for j in range(ns):
+        nav_bits[j] = bitno[bit0[j]]
+        nav_sums[j] = segment_sum_complex(P, bit0[j], bit0[j + 1] - bit0[j])
     return E, P, L, noise, ok, bit_start, Eb, Pb, Lb, Tb, bounds, nav_bits, nav_sums, \
         nav_bounds

@@ -146,7 +146,9 @@ def _walk(a, lo, n, squares):
 
 @njit(cache=True, boundscheck=False)
 def _walk_complex(a, lo, n):
-    """:func:`_walk` of complex values (leaves of up to 64)."""
+    """:func:`_walk` of complex values (leaves of up to 64). (A second walker, not one with
+    a flag: numba types both branches of a flag, and a float leaf of complex values, or a
+    float stack of complex sums, does not type.)"""
     node_lo = np.empty(64, np.int64)
     node_n = np.empty(64, np.int64)
     stage = np.zeros(64, np.int64)
