@@ -151,8 +151,9 @@ def test_channel_tests_equal_the_plain_forms_bit_for_bit(seed):
             assert _bits(bank.p[i, size - cnt:size]) == _bits(powers[i].p[size - cnt:])
             assert _bits(bank.n[i, size - cnt:size]) == _bits(powers[i].n[size - cnt:])
             assert bank.acc_p[i] == powers[i]._acc_p and bank.acc_n[i] == powers[i]._acc_n
-            assert bank.nz_count[i] == noises[i].count and bank.nz_i[i] == noises[i]._i
-            assert _bits(bank.nz_v[i]) == _bits(noises[i]._v)
+            values, next_slot = noises[i].ring()
+            assert bank.nz_count[i] == noises[i].count and bank.nz_i[i] == next_slot
+            assert _bits(bank.nz_v[i]) == _bits(values)
             if ff[i] == 2 and i not in lost:
                 lost.add(i)
                 n_lost += 1

@@ -8,9 +8,9 @@ interval correlated:
    power the C/N0 uses (:class:`~sdr_di.receiver.lock.PostCorrelationNoise`, continued from
    the scalar channel at the hand-over);
 2. the prompts go to the channel's bit sums (:class:`~sdr_di.deep.bit_power.BitPower`);
-3. when a bit sum completed: the *fast test* on the last ``_FAST_MS`` of bit sums (C/N0 at
+3. when a bit sum completed: the *fast test* on the last ``FAST_MS`` of bit sums (C/N0 at
    least ``cn0_min_dbhz - fast_margin_db``; failed: the interval is left out of the
-   measurement vector), and where it fails the *loss test* on the last ``_LOSS_MS``
+   measurement vector), and where it fails the *loss test* on the last ``LOSS_MS``
    (``cn0_min_dbhz - loss_margin_db``; failed: the channel is lost, its bit sums emptied, and
    it rejoins only on a whole window of fresh sums); the channel's C/N0 is taken up from the
    whole window when the fast test passed and the window holds enough sums.
@@ -82,7 +82,7 @@ class ChannelTests:
         self.fast_threshold = float(fast_threshold_dbhz)
         self.loss_threshold = float(loss_threshold_dbhz)
         tpl = PostCorrelationNoise() if noise is None else noise
-        self.nz_v = np.zeros((n, tpl._v.size))
+        self.nz_v = np.zeros((n, tpl.n_values))
         self.nz_i = np.zeros(n, np.int64)
         self.nz_count = np.zeros(n, np.int64)
         self.nz_z = np.full(n, tpl.z)
@@ -93,11 +93,12 @@ class ChannelTests:
     def take_noise(self, i: int, noise: PostCorrelationNoise) -> None:
         """Channel ``i``'s noise ring continues ``noise`` (the scalar channel's values, in
         their slots)."""
-        if noise._v.size != self.nz_v.shape[1]:
-            raise ValueError(f"noise ring of {noise._v.size} values, the bank's hold "
+        values, next_slot = noise.ring()
+        if values.size != self.nz_v.shape[1]:
+            raise ValueError(f"noise ring of {values.size} values, the bank's hold "
                              f"{self.nz_v.shape[1]}")
-        self.nz_v[i] = noise._v
-        self.nz_i[i], self.nz_count[i] = noise._i, noise.count
+        self.nz_v[i] = values
+        self.nz_i[i], self.nz_count[i] = next_slot, noise.count
         self.nz_z[i], self.nz_min[i] = noise.z, noise.min_values
 
     def run(self, ch0: int, counts: np.ndarray, prompts: np.ndarray, nsamp: np.ndarray,

@@ -389,8 +389,8 @@ def error_derivative_kernel(X: np.ndarray, nav: NavState, f_b: np.ndarray,
                             bias_tau_s: tuple[float, float] = (3600.0, 3600.0),
                             cs: np.ndarray | None = None) -> np.ndarray:
     """:func:`error_derivative` by the numba kernels (:mod:`sdr_di.ins._numba_error_model`):
-    the same rows bit for bit. ``cs``: the
-    computed state's :func:`computed_state_terms` when the caller already has them."""
+    the same rows bit for bit. ``cs``: the computed state's :func:`computed_state_terms`
+    when the caller already has them."""
     X = np.ascontiguousarray(np.atleast_2d(X), dtype=float)
     L = layout
     if cs is None:

@@ -388,6 +388,17 @@ class PostCorrelationNoise:
             self._dirty = False
         return self._s, self._s2
 
+    @property
+    def n_values(self) -> int:
+        """Values the ring holds at most."""
+        return int(self._v.size)
+
+    def ring(self) -> tuple[np.ndarray, int]:
+        """The ring's values in their slots (the first :attr:`count` held) and the next slot
+        written: what the vector loop continues (:class:`~sdr_di.deep.channel_tests.
+        ChannelTests`)."""
+        return self._v, self._i
+
     def clear(self) -> None:
         """Forget every value."""
         self._i = 0
