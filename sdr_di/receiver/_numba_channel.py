@@ -15,7 +15,14 @@ these transcribe (the tested references) are in :mod:`sdr_di.receiver.channel`:
     which updates the loops): prompt ring, NH wipe-off, coherent and bit sums. It stops at
     the first epoch that needs the Python form.
 
-Both replace Python run once per epoch per channel (about 60 % of the channels' CPU time in
+:func:`prompt_moments`
+    the means :meth:`Channel._evaluate <sdr_di.receiver.channel.Channel._evaluate>`'s lock
+    detectors take of the prompt window with a known noise power
+    (:func:`~sdr_di.receiver.lock.prompt_signal_power` and the numerator of
+    :func:`~sdr_di.receiver.lock.carrier_lock_metric`), read from the ring, with numpy's
+    sums (:mod:`~sdr_di.receiver.pairwise_sums`).
+
+The first two replace Python run once per epoch per channel (about 60 % of the channels' CPU time in
 a 2.5 MHz run, ``docs/notes/speed.md`` session 23).
 """
 
@@ -23,7 +30,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
+
+from .pairwise_sums import pairwise_sum
 
 
 @njit(cache=True, boundscheck=False)
@@ -178,3 +188,21 @@ def plain_epochs(outs, i0, m, ep, bit_off, bit_ms, is_d1, nh, ring, coh_e, coh_p
         ep += 1
         i += 1
     return i, coh_e, coh_p, coh_l, bit_acc, bit_n, eval_count
+
+
+@njit(cache=True, boundscheck=False)
+def prompt_moments(ring, end, n):
+    """``(mean(I^2 + Q^2), mean(I^2 - Q^2))`` of the ``n`` prompts of ``ring`` before slot
+    ``end`` (oldest first, wrapping round the ring): ``lock._mean`` of ``p.real * p.real +
+    p.imag * p.imag`` and of ``p.real * p.real - p.imag * p.imag`` (numpy's pairwise sums
+    divided by ``n``), bit for bit."""
+    size = ring.shape[0]
+    power = np.empty(n)
+    diff = np.empty(n)
+    for k in range(n):
+        p = ring[(end - n + k) % size]
+        i2 = p.real * p.real
+        q2 = p.imag * p.imag
+        power[k] = i2 + q2
+        diff[k] = i2 - q2
+    return pairwise_sum(power, 0, n) / n, pairwise_sum(diff, 0, n) / n

@@ -66,7 +66,7 @@ from ..errors import NavMessageError
 from ..signal.codes import NH20, nav_type
 from ..signal.navmsg import EphemerisAssembler, HeldSubframes, decode_subframe, find_preamble
 from ..signal.words import PREAMBLE, SUBFRAME_BITS
-from ._numba_channel import plain_epochs, plan_block
+from ._numba_channel import plain_epochs, plan_block, prompt_moments
 from .correlator import check_prn
 from .lock import (
     NOISE_MIN_LAG_CHIPS,
@@ -567,12 +567,19 @@ class Channel:
         n = min(cfg.cn0_window_ms, self._n_tracked)
         if n < 10:
             return
-        pr = self._recent(n)
         npow = self.noise.noise_power(self.noise_power_per_sample)
+        pr = nbd = None
         if npow is not None and npow > 0.0:
             pn = npow * self.fs * _T_EPOCH
-            pd = prompt_signal_power(pr, pn)
+            if self.jit:
+                # the window's means from the ring in one kernel call (the same values)
+                m2, nbd = prompt_moments(self._ring, (self.epoch + 1) % _RING, n)
+                pd = m2 - float(pn)
+            else:
+                pr = self._recent(n)
+                pd = prompt_signal_power(pr, pn)
         else:
+            pr = self._recent(n)
             pd, pn = m2m4_powers(pr)
         if pd > 0.0 and pn > 0.0:
             self.cn0_dbhz = 10.0 * math.log10(pd / (pn * _T_EPOCH))
@@ -580,7 +587,12 @@ class Channel:
             self.cn0_dbhz = 99.0
         else:
             self.cn0_dbhz = math.nan
-        self.lock_metric = carrier_lock_metric(pr, pd if pd > 0.0 else None)
+        if nbd is not None and pd > 0.0:
+            # carrier_lock_metric with the signal power pd: its numerator's mean, clipped
+            self.lock_metric = max(-1.0, min(1.0, nbd / pd))
+        else:
+            self.lock_metric = carrier_lock_metric(self._recent(n) if pr is None else pr,
+                                                   pd if pd > 0.0 else None)
         code_ok = self.cn0_dbhz >= cfg.cn0_lock_dbhz  # NaN -> False
         carrier_ok = code_ok and self.lock_metric >= cfg.pll_lock_threshold
         self.code_lock = self._code_ctr.update(code_ok)
