@@ -383,7 +383,7 @@ class PostCorrelationNoise:
         if self._dirty:
             # numpy's pairwise sums of the values held and of their squares (not BLAS's
             # dot, whose order follows the CPU), by the kernels that repeat them bit for bit
-            # (pairwise_sums: a tenth of the numpy calls' time on a 1000-value ring); the
+            # (pairwise_sums: about a third of the numpy calls' time on a full ring); the
             # vector loop's kernel, deep._numba_channel_tests, sums them the same way
             self._s = float(pairwise_sum(self._v, 0, self.count))
             self._s2 = float(pairwise_sum_squares(self._v, 0, self.count))
