@@ -190,10 +190,10 @@ class VectorTracking:
         # arrays over the channels: channel_tests notes); the C/N0, rejoining and last test
         # of each channel are kept here for the kernel and copied to its VectorChannel
         # after each of its passes (prefilter), which the gate and the outputs read
-        self.tests = ChannelTests([c.bit_ms for c in chans], cfg.cn0_window_ms, self.fs,
+        self.bit_ms = [c.bit_ms for c in chans]
+        self.tests = ChannelTests(self.bit_ms, cfg.cn0_window_ms, self.fs,
                                   cfg.cn0_min_dbhz - cfg.fast_margin_db,
                                   cfg.cn0_min_dbhz - cfg.loss_margin_db)
-        self.bit_ms = [c.bit_ms for c in chans]
         self.nav_ms0 = [c.nav.ms0 if c.nav is not None else 0 for c in chans]
         self.cn0 = np.array([c.cn0_dbhz for c in chans], np.float64)
         self.rejoining = np.array([c.rejoining for c in chans], bool)
@@ -443,8 +443,9 @@ class VectorTracking:
         cn0_lin = []
         for k, (c, cnt) in enumerate(zip(chans, counts)):
             i = c.idx
+            cn0 = float(self.cn0[i])
             if cnt:
-                c.cn0_dbhz = cn0 = float(self.cn0[i])
+                c.cn0_dbhz = cn0
                 c.fast_fail, c.rejoining = int(self.fast_fail[i]), bool(self.rejoining[i])
                 self.nav_log.demodulate(c, nav_bits[nb[k]:nb[k + 1]], nav_sums[nb[k]:nb[k + 1]])
                 if new[i] and c.nav is not None:
@@ -452,8 +453,6 @@ class VectorTracking:
                         c.nav.interrupt()  # no subframe from bits of a failing interval
                     elif tested[i] >= FAST_MS // c.bit_ms:
                         self.nav_log.confirm(c, FAST_MS // c.bit_ms, t_s)  # subframes before it
-            else:
-                cn0 = c.cn0_dbhz
             cn0_lin.append(10.0 ** (cn0 / 10.0) if math.isfinite(cn0) else 100.0)
         self.pre.process_channels(ch0, counts, pe.blocks[4], *pe.blocks[:4], cn0_lin)
         good = []

@@ -434,8 +434,9 @@ class InsErrorModel(ProcessModel):
     """
 
     dim_x = N_STATES
-    #: Whether :meth:`f_batch` runs the numba kernels (:func:`error_derivative_kernel`);
-    #: False: the numpy reference :func:`error_derivative` (the same values, tested).
+    #: Whether :meth:`f_batch` and :meth:`f_and_F` run the numba kernels (one call each:
+    #: ``_numba_error_model.improved_euler``, ``f_and_jacobian``); False: the numpy
+    #: reference :func:`error_derivative` (the same values, tested).
     jit = True
 
     def __init__(self, clock: ClockModel | None = None, layout: StateLayout | None = None,
