@@ -9,7 +9,6 @@ R_z(-yaw) R_x(pitch) R_y(roll) (paper 004 Table 1 conventions).
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
@@ -56,34 +55,6 @@ def ecef_to_llh(r_e) -> np.ndarray:
     N = A_CGCS / np.sqrt(1.0 - E2_CGCS * sl * sl)
     h = np.where(np.abs(np.cos(lat)) > 1e-9, p / np.cos(lat) - N, np.abs(z) - A_CGCS * np.sqrt(1 - E2_CGCS))
     return _stack3(lat, lon, h)
-
-
-def ecef_to_llh_point(r_e) -> tuple[float, float, float]:
-    """:func:`ecef_to_llh` of one ECEF position [m] (3,): ``(lat [rad], lon [rad], h [m])``
-    as floats, the same values (the same operations on floats; ``arctan2`` and ``hypot``
-    stay numpy's, whose SIMD loops differ from the C library's in the last bit). About a
-    fifth of :func:`ecef_to_llh`'s cost on one point (the deep loop's range model calls it
-    every interval)."""
-    x, y, z = (np.float64(v) for v in r_e)
-    lon = float(np.arctan2(y, x))
-    p = float(np.hypot(x, y))
-    z = float(z)
-    z0 = np.empty(())
-    z0[()] = z
-    arg = np.empty(())
-    arg[()] = p * (1.0 - E2_CGCS)
-    lat = float(np.arctan2(z0, arg))
-    for _ in range(10):
-        sl = math.sin(lat)
-        N = A_CGCS / math.sqrt(1.0 - E2_CGCS * sl * sl)
-        h = p / math.cos(lat) - N
-        arg[()] = p * (1.0 - E2_CGCS * N / (N + h))
-        lat = float(np.arctan2(z0, arg))
-    sl = math.sin(lat)
-    N = A_CGCS / math.sqrt(1.0 - E2_CGCS * sl * sl)
-    cl = math.cos(lat)
-    h = p / cl - N if abs(cl) > 1e-9 else abs(z) - A_CGCS * math.sqrt(1 - E2_CGCS)
-    return lat, lon, h
 
 
 def C_e_n(lat, lon) -> np.ndarray:

@@ -1,6 +1,6 @@
-"""The range model's one-instant kernels (receiver/_numba_range_model.py) against its numpy
-form (``range_model.jit = False``), and the point forms they use (``ecef_to_llh_point``,
-``saastamoinen_zenith``) against the array forms."""
+"""The range model's one-instant kernel (receiver/_numba_range_model.py) against its numpy
+form (``range_model.jit = False``), and the point forms it uses (the kernels'
+``ecef_to_llh`` and ``saastamoinen_zenith``) against the array forms."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ import pytest
 
 from sdr_di.constants import is_geo
 from sdr_di.errors import NoEphemerisError
-from sdr_di.frames import ecef_to_llh, ecef_to_llh_point, llh_to_ecef
+from sdr_di.frames import ecef_to_llh, llh_to_ecef
 from sdr_di.orbits.atmosphere import saastamoinen_delay, saastamoinen_zenith
 from sdr_di.orbits.rinex_nav import load_nav
-from sdr_di.receiver import range_model
+from sdr_di.receiver import _numba_range_model, range_model
 from sdr_di.receiver.pvt import PvtConfig
 from sdr_di.scenario import REPO_ROOT
 from sdr_di.signal.navmsg import assistance_klobuchar
@@ -83,14 +83,14 @@ def test_several_instants_take_the_numpy_form(nav, monkeypatch):
         assert np.array_equal(getattr(fast, name), getattr(ref, name)), name
 
 
-def test_ecef_to_llh_point_equals_the_array_form():
+def test_the_kernels_ecef_to_llh_equals_the_array_form():
     rng = np.random.default_rng(1)
     for _ in range(300):
         lat, lon = rng.uniform(-math.pi / 2, math.pi / 2), rng.uniform(-math.pi, math.pi)
         h = rng.uniform(-1e3, 3e7)
         r = llh_to_ecef(lat, lon, h)
         ref = ecef_to_llh(r)
-        pt = ecef_to_llh_point(r)
+        pt = _numba_range_model.ecef_to_llh(np.asarray(r, float))
         np.testing.assert_allclose(pt[:2], ref[:2], rtol=0.0, atol=1e-15)
         assert pt[2] == pytest.approx(ref[2], rel=1e-12, abs=1e-9)
 
@@ -103,8 +103,10 @@ def test_saastamoinen_zenith_is_the_slant_delay_at_the_zenith():
     slant = saastamoinen_delay(lat, h, el)
     zen = saastamoinen_zenith(lat, h)
     np.testing.assert_allclose(slant, zen / np.sin(el), rtol=1e-15)
-    for i in range(0, 200, 20):     # one receiver as numpy scalars: as in the array
+    for i in range(0, 200, 20):     # one receiver: numpy scalars, the kernel's point form
         z = saastamoinen_zenith(np.float64(lat[i]), np.float64(h[i]))
         assert float(z) == pytest.approx(zen[i], rel=1e-15)
+        assert _numba_range_model.saastamoinen_zenith(lat[i], h[i], 0.5) == \
+            pytest.approx(zen[i], rel=1e-14)
         one = saastamoinen_delay(lat[i], h[i], el[i:i + 3])
         np.testing.assert_allclose(one, z / np.sin(el[i:i + 3]), rtol=1e-15)

@@ -4,24 +4,33 @@ commands, every interval).
 Plain arrays and scalars in and out; the model and the numpy form these transcribe (the
 tested reference) are :func:`sdr_di.receiver.range_model.predict_ranges`,
 :func:`sdr_di.orbits.broadcast.sat_pos_vel_clock_stacked`,
-:func:`sdr_di.receiver.pvt.sagnac_rotation` and :mod:`sdr_di.orbits.atmosphere`. The same
-float64 operations in the same order, so the same values: the basic operations and
-``sqrt`` are correctly rounded everywhere, and ``sin`` and ``cos`` are the C library's in
-numba and (on x86-64, numpy 2.x) in numpy as well. The functions whose numpy loops are
-SIMD library code that the C library does not repeat bit for bit (``arctan2``, ``arcsin``,
-``hypot``, ``exp``, ``power``) stay numpy calls between the kernels:
+:func:`sdr_di.orbits.broadcast.geo_to_ecef`, :func:`sdr_di.receiver.pvt.sagnac_rotation`,
+:func:`sdr_di.frames.ecef_to_llh` and :mod:`sdr_di.orbits.atmosphere`. The same float64
+operations in the same order, with the C library's ``atan2``, ``asin``, ``hypot``, ``exp``
+and ``pow`` where numpy's loops are SIMD library code: those may differ from numpy's in the
+last bit, so the kernel's ranges equal the numpy form's to a few ulp (about 1e-8 m at
+2e7 m; ``tests/test_range_model_kernels.py`` holds them to 1e-12 of each field's scale).
 
+:func:`predict_instant`
+    the whole model at one instant, in one call (the travel-time passes, the GEO frame
+    rotation, the receiver's geodetic position, the atmosphere, ``P``, ``Pc``, ``U``), made of:
 :func:`orbit_anomaly`
-    time from toe and toc, mean anomaly, Kepler's equation; the arguments of ``arctan2``
+    time from toe and toc, mean anomaly, Kepler's equation; the arguments of ``atan2``
     for the true anomaly.
 :func:`orbit_state`
     position, velocity and clock from the true anomaly (before the GEO frame rotation).
+:func:`geo_to_ecef`
+    the GEO records' rotation into ECEF (ICD 5.2.4).
 :func:`sagnac`
     the travel-time iteration of :func:`~sdr_di.receiver.pvt.sagnac_rotation`.
+:func:`ecef_to_llh`
+    the receiver's geodetic position (the iteration of :func:`sdr_di.frames.ecef_to_llh`).
 :func:`line_of_sight_enu`
-    ENU components of the lines of sight, laid out for one ``hypot`` and one ``arctan2``.
+    ENU components of the lines of sight.
 :func:`klobuchar_1`, :func:`klobuchar_2`, :func:`klobuchar_3`
-    azimuth, floored elevation and the pierce point between the ``arcsin`` calls.
+    azimuth, floored elevation and the pierce point between the ``asin`` steps.
+:func:`saastamoinen_zenith`
+    the troposphere's zenith delay (:func:`sdr_di.orbits.atmosphere.saastamoinen_zenith`).
 :func:`ranges`
     the Klobuchar delay's rest, the troposphere's slant delay, ``P``, ``Pc`` and the unit
     lines of sight.
@@ -33,7 +42,9 @@ import math
 
 from numba import njit
 
-from ..constants import C_LIGHT, OMEGA_E, SECONDS_PER_WEEK
+import numpy as np
+
+from ..constants import A_CGCS, C_LIGHT, E2_CGCS, OMEGA_E, SECONDS_PER_WEEK
 
 # rows of EphemerisStack.table (orbits.broadcast.stack_ephemerides)
 _A, _SQRTA, _N, _E, _SQ1E2, _M0, _OMEGA, _I0, _IDOT, _OMEGA0 = range(10)
@@ -245,3 +256,123 @@ def _clip(a, lo, hi):
     if a > hi:
         return hi
     return a
+
+
+@njit(cache=True, boundscheck=False)
+def geo_to_ecef(r, v, tk, geo, cx, sx):
+    """GEO rows of ``r``, ``v`` (n, 3) [m, m/s] (``geo`` (n,) bool) from their
+    inertial-like frame to ECEF in place: ``R_Z(omega_e t_k) R_X(-5 deg)`` and its time
+    derivative; ``tk`` (n,) time from toe [s]; ``cx, sx`` cosine and sine of the -5 deg."""
+    for i in range(r.shape[0]):
+        if not geo[i]:
+            continue
+        x, y, z = r[i, 0], cx * r[i, 1] + sx * r[i, 2], -sx * r[i, 1] + cx * r[i, 2]
+        vx, vy, vz = v[i, 0], cx * v[i, 1] + sx * v[i, 2], -sx * v[i, 1] + cx * v[i, 2]
+        a = OMEGA_E * tk[i]
+        sa, ca = math.sin(a), math.cos(a)
+        r[i, 0] = ca * x + sa * y
+        r[i, 1] = -sa * x + ca * y
+        r[i, 2] = z
+        v[i, 0] = ca * vx + sa * vy + OMEGA_E * (-sa * x + ca * y)
+        v[i, 1] = -sa * vx + ca * vy + OMEGA_E * (-ca * x - sa * y)
+        v[i, 2] = vz
+
+
+@njit(cache=True, boundscheck=False)
+def ecef_to_llh(r):
+    """Geodetic latitude, longitude [rad] and ellipsoidal height [m] (CGCS2000) of the ECEF
+    position ``r`` (3,) [m]: the iteration of :func:`sdr_di.frames.ecef_to_llh`."""
+    x, y, z = r[0], r[1], r[2]
+    lon = math.atan2(y, x)
+    p = math.hypot(x, y)
+    lat = math.atan2(z, p * (1.0 - E2_CGCS))
+    for _ in range(10):
+        sl = math.sin(lat)
+        N = A_CGCS / math.sqrt(1.0 - E2_CGCS * sl * sl)
+        h = p / math.cos(lat) - N
+        lat = math.atan2(z, p * (1.0 - E2_CGCS * N / (N + h)))
+    sl = math.sin(lat)
+    N = A_CGCS / math.sqrt(1.0 - E2_CGCS * sl * sl)
+    cl = math.cos(lat)
+    h = p / cl - N if abs(cl) > 1e-9 else abs(z) - A_CGCS * math.sqrt(1 - E2_CGCS)
+    return lat, lon, h
+
+
+@njit(cache=True, boundscheck=False)
+def saastamoinen_zenith(lat, h, humidity):
+    """Zenith total delay [m] of the standard atmosphere at geodetic latitude ``lat``
+    [rad] and height ``h`` [m] (clipped to 0..11000 m), relative humidity ``humidity``."""
+    hc = _clip(h, 0.0, 11000.0)
+    P = 1013.25 * (1.0 - 2.2557e-5 * hc) ** 5.2568
+    hyd = 0.0022768 * P / (1.0 - 0.00266 * math.cos(2.0 * lat) - 0.00028 * hc / 1e3)
+    T = 15.0 - 6.5e-3 * hc + 273.15
+    e = 6.108 * humidity * math.exp((17.15 * T - 4684.0) / (T - 38.45))
+    return hyd + 0.002277 * (1255.0 / T + 0.05) * e
+
+
+@njit(cache=True, boundscheck=False)
+def predict_instant(tab, geo, cx, sx, week, t_r, r_rx, b, tau, passes, ion_on, alpha, beta,
+                    trop_on, humidity, el_floor, ratio_k, iono_m_per_s,
+                    r_rot, v_sat, P, Pc, U):
+    """The range model at one receive instant (:func:`~sdr_di.receiver.range_model.
+    predict_ranges`'s numpy form, to a few ulp), in place.
+
+    ``tab`` (26, n) and ``geo`` (n,) the ephemeris stack's table and GEO flags; ``cx, sx``
+    the GEO rotation's cosine and sine; ``week`` BDT week (float); ``t_r`` BDT of reception
+    [s of week]; ``r_rx`` (3,) receiver ECEF [m]; ``b`` clock bias [m]; ``tau`` (n,) travel
+    times [s], seeds in, the last pass's out; ``passes`` travel-time passes; ``ion_on``,
+    ``trop_on`` the atmosphere switches with the Klobuchar ``alpha``, ``beta`` (4,);
+    ``humidity`` of the troposphere model; ``el_floor`` [rad], ``ratio_k = R / (R + h)``,
+    ``iono_m_per_s = c (f_B1I / f_B3I)^2`` the Klobuchar constants. Out: ``r_rot``,
+    ``v_sat`` (n, 3) [m, m/s], ``P``, ``Pc`` (n,) [m], ``U`` (n, 3)."""
+    n = tab.shape[1]
+    w = np.empty((6, n))
+    vk = np.empty(n)
+    r_sat = np.empty((n, 3))
+    dt_sv = np.empty(n)
+    rho = np.empty(n)
+    any_geo = False
+    for i in range(n):
+        any_geo = any_geo or geo[i]
+    for _ in range(passes):
+        orbit_anomaly(tab, week, t_r, tau, w)
+        for i in range(n):
+            vk[i] = math.atan2(w[4, i], w[5, i])
+        orbit_state(tab, w, vk, r_sat, v_sat, dt_sv)
+        if any_geo:
+            geo_to_ecef(r_sat, v_sat, w[0], geo, cx, sx)
+        sagnac(r_sat, r_rx, r_rot, rho)
+        for i in range(n):
+            tau[i] = rho[i] / C_LIGHT
+    # the atmosphere (pvt.atmosphere_delays) at the receiver's geodetic position
+    lat, lon, h = ecef_to_llh(r_rx)
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    h01 = np.empty((2, n))
+    y = np.empty(2 * n)
+    x = np.empty(2 * n)
+    line_of_sight_enu(r_rot, r_rx, sl, cl, so, co, h01, y, x)
+    el_az = np.empty(2 * n)
+    for i in range(n):
+        x[i] = math.hypot(h01[0, i], h01[1, i])
+    for i in range(2 * n):
+        el_az[i] = math.atan2(y[i], x[i])
+    wa = np.empty((5, n))
+    klobuchar_1(el_az, el_floor, ratio_k, wa)
+    phi_m = np.zeros(n)
+    asin_lam = np.zeros(n)
+    t_day = 0.0
+    if ion_on:
+        arg = np.empty(n)
+        asin_ratio = np.empty(n)
+        for i in range(n):
+            asin_ratio[i] = math.asin(wa[3, i])
+        klobuchar_2(wa, asin_ratio, sl, cl, arg)
+        for i in range(n):
+            phi_m[i] = math.asin(arg[i])
+        klobuchar_3(wa, phi_m, arg)
+        for i in range(n):
+            asin_lam[i] = math.asin(arg[i])
+        t_day = t_r % 86400.0
+    zenith_m = saastamoinen_zenith(lat, h, humidity) if trop_on else 0.0
+    ranges(wa, phi_m, asin_lam, lon, t_day, alpha, beta, iono_m_per_s, ion_on, zenith_m,
+           trop_on, rho, b, dt_sv, r_rot, r_rx, P, Pc, U)

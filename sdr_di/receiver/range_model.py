@@ -27,10 +27,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..constants import C_LIGHT
-from ..frames import ecef_to_llh_point
-from ..orbits.atmosphere import (B1I_TO_B3I, KLOBUCHAR_H_M, KLOBUCHAR_R_M,
-                                 saastamoinen_zenith)
-from ..orbits.broadcast import geo_to_ecef, sat_pos_vel_clock_stacked, stack_ephemerides
+from ..orbits.atmosphere import B1I_TO_B3I, KLOBUCHAR_H_M, KLOBUCHAR_R_M
+from ..orbits.broadcast import (GEO_INCLINATION_ROT, sat_pos_vel_clock_stacked,
+                                stack_ephemerides)
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from . import _numba_range_model as _k
 from .pvt import _EL_FLOOR, PvtConfig, atmosphere_delays, sagnac_rotation
@@ -38,10 +37,13 @@ from .pvt import _EL_FLOOR, PvtConfig, atmosphere_delays, sagnac_rotation
 __all__ = ["RangePrediction", "predict_ranges"]
 
 _TAU0_S = 0.075
-#: Numba kernels for one receive instant (:mod:`._numba_range_model`); False: the numpy
-#: form only (the tested reference).
+#: One numba kernel call for one receive instant (:mod:`._numba_range_model`, the numpy
+#: form's values to a few ulp); False: the numpy form only (the tested reference).
 jit = True
-_ZENITH = np.array([np.pi / 2.0])
+_ZERO4 = np.zeros(4)
+_GEO_CX, _GEO_SX = math.cos(GEO_INCLINATION_ROT), math.sin(GEO_INCLINATION_ROT)
+#: relative humidity of the troposphere model (``saastamoinen_zenith``'s default)
+_HUMIDITY = 0.5
 _RATIO_K = KLOBUCHAR_R_M / (KLOBUCHAR_R_M + KLOBUCHAR_H_M)
 _IONO_M_PER_S = C_LIGHT * B1I_TO_B3I
 
@@ -133,59 +135,22 @@ def predict_ranges(ephemerides: Sequence[Ephemeris], week: int, sow_nom, r_rx, c
 def _predict_one_instant(stack, week: int, t_r: float, r: np.ndarray, b: float,
                          tau: np.ndarray, iono: Klobuchar | None, cfg: PvtConfig,
                          passes: int) -> RangePrediction:
-    """:func:`predict_ranges` at one receive instant with the kernels of
-    :mod:`._numba_range_model` (the same values; ``t_r`` BDT of reception [s of week],
-    ``r`` (3,) [m], ``b`` [m], ``tau`` (n,) travel-time seeds [s])."""
+    """:func:`predict_ranges` at one receive instant in one call of
+    :func:`._numba_range_model.predict_instant` (the numpy form's values to a few ulp;
+    ``t_r`` BDT of reception [s of week], ``r`` (3,) [m], ``b`` [m], ``tau`` (n,)
+    travel-time seeds [s], overwritten)."""
     n = stack.size
-    tab = stack.table
-    wk = float(week)
-    w = np.empty((6, n))
-    vk = np.empty(n)
-    r_sat = np.empty((n, 3))
-    v_sat = np.empty((n, 3))
-    dt_sv = np.empty(n)
-    r_rot = np.empty((n, 3))
-    rho = np.empty(n)
-    geo = stack.geo.any()
-    for _ in range(passes):
-        _k.orbit_anomaly(tab, wk, t_r, tau, w)
-        np.arctan2(w[4], w[5], out=vk)
-        _k.orbit_state(tab, w, vk, r_sat, v_sat, dt_sv)
-        if geo:         # (n, 1, 3): the stacked form's shapes, so its matmul's sums
-            geo_to_ecef(r_sat.reshape(n, 1, 3), v_sat.reshape(n, 1, 3),
-                        w[0].reshape(n, 1), stack.geo)
-        _k.sagnac(r_sat, r, r_rot, rho)
-        tau = rho / C_LIGHT
-    # the atmosphere (pvt.atmosphere_delays) at the receiver's geodetic position
-    lat, lon, h = ecef_to_llh_point(r)
-    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
-    h01 = np.empty((2, n))
-    y = np.empty(2 * n)
-    x = np.empty(2 * n)
-    _k.line_of_sight_enu(r_rot, r, sl, cl, so, co, h01, y, x)
-    np.hypot(h01[0], h01[1], out=x[:n])
-    el_az = np.arctan2(y, x)
-    wa = np.empty((5, n))
-    _k.klobuchar_1(el_az, _EL_FLOOR, _RATIO_K, wa)
     ion_on = bool(cfg.ionosphere and iono is not None)
-    phi_m = asin_lam = vk        # (unused without the ionosphere)
-    alpha = beta = _ZENITH
-    t_day = 0.0
-    if ion_on:
-        asin_ratio = np.arcsin(wa[3])
-        arg = np.empty(n)
-        _k.klobuchar_2(wa, asin_ratio, sl, cl, arg)
-        phi_m = np.arcsin(arg)
-        _k.klobuchar_3(wa, phi_m, arg)
-        asin_lam = np.arcsin(arg)
-        alpha, beta = np.asarray(iono.alpha, float), np.asarray(iono.beta, float)
-        t_day = float(np.mod(np.float64(t_r), 86400.0))
-    zenith_m = float(saastamoinen_zenith(np.float64(lat), np.float64(h))) \
-        if cfg.troposphere else 0.0
+    alpha, beta = (np.asarray(iono.alpha, float), np.asarray(iono.beta, float)) if ion_on \
+        else (_ZERO4, _ZERO4)
+    r_rot = np.empty((n, 3))
+    v_sat = np.empty((n, 3))
     P = np.empty((n, 1))
     Pc = np.empty((n, 1))
     U = np.empty((n, 1, 3))
-    _k.ranges(wa, phi_m, asin_lam, lon, t_day, alpha, beta, _IONO_M_PER_S, ion_on, zenith_m,
-              bool(cfg.troposphere), rho, b, dt_sv, r_rot, r, P[:, 0], Pc[:, 0], U[:, 0])
+    _k.predict_instant(stack.table, stack.geo, _GEO_CX, _GEO_SX, float(week), t_r,
+                       np.ascontiguousarray(r, float), b, tau, passes, ion_on, alpha, beta,
+                       bool(cfg.troposphere), _HUMIDITY, _EL_FLOOR, _RATIO_K, _IONO_M_PER_S,
+                       r_rot, v_sat, P[:, 0], Pc[:, 0], U[:, 0])
     return RangePrediction(P=P, Pc=Pc, tau=tau.reshape(n, 1), r_sat=r_rot.reshape(n, 1, 3),
                            v_sat=v_sat.reshape(n, 1, 3), U=U)
