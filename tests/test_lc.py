@@ -67,12 +67,16 @@ def test_range_rate_model_is_first_order_of_exact_ranges(n_sat):
     assert np.all(H[n_sat:, 16] == 1) and np.all(H[n_sat:, 15] == 0)
 
 
-def test_range_rate_geometry_is_that_of_its_position_every_time():
+@pytest.mark.parametrize("jit", [False, True])
+def test_range_rate_geometry_is_that_of_its_position_every_time(jit, monkeypatch):
     """set_geometry keeps the last position's C1, C2 (the deep loop sets two models at one
-    position per interval): H is, bit for bit, the one made from dr_e_dllh and C_e_n at
-    the position of each call, also when positions alternate between two models."""
+    position per interval): H is the one made from dr_e_dllh and C_e_n at the position of
+    each call, also when positions alternate between two models: bit for bit in the numpy
+    form, to an ulp of H's largest entry by the kernel (its sums left to right, numpy's
+    ``matmul`` BLAS's)."""
     from sdr_di.coupling.measurements import dr_e_dllh
 
+    monkeypatch.setattr(RangeRateMeasurementModel, "jit", jit)
     rng = np.random.default_rng(5)
     a, b = RangeRateMeasurementModel(), RangeRateMeasurementModel()
     llhs = [np.array([math.radians(40), math.radians(116), 100.0]),
@@ -89,7 +93,12 @@ def test_range_rate_geometry_is_that_of_its_position_every_time():
             H[:6, 15] = 1.0
             H[6:, 3:6] = -U @ C_e_n(llh[0], llh[1]).T
             H[6:, 16] = 1.0
-            assert model.matrix.tobytes() == H.tobytes()
+            if jit:
+                np.testing.assert_allclose(model.matrix, H, rtol=0.0,
+                                           atol=1e-15 * np.max(np.abs(H)))
+                assert np.array_equal(model.matrix == 0.0, H == 0.0)
+            else:
+                assert model.matrix.tobytes() == H.tobytes()
 
 
 def test_loose_model_matches_differences():

@@ -36,6 +36,7 @@ import numpy as np
 from ..filters.models import LinearMeasurementModel
 from ..filters.state import CLOCK_BIAS, CLOCK_DRIFT, N_STATES, POS, VEL
 from ..frames import C_e_n, llh_to_ecef, radii_of_curvature
+from ._numba_measurements import range_rate_H
 
 __all__ = [
     "LooseMeasurementModel",
@@ -118,6 +119,11 @@ class RangeRateMeasurementModel(LinearMeasurementModel):
         Columns of ``H``: the filter's state dimension (module notes).
     """
 
+    #: Whether :meth:`set_geometry` fills ``H`` by the numba kernel
+    #: (:func:`~sdr_di.coupling._numba_measurements.range_rate_H`, one call); False: the
+    #: numpy form (the tested reference; the two agree to an ulp).
+    jit = True
+
     def __init__(self, llh=None, v_n=None, sat_pos_e=None, sat_vel_e=None, *,
                  n_states: int = N_STATES) -> None:
         self.n_states = int(n_states)
@@ -148,6 +154,10 @@ class RangeRateMeasurementModel(LinearMeasurementModel):
         N = U.shape[0]
         C1, C2 = _position_matrices(llh)
         H = np.zeros((2 * N, self.n_states))
+        if self.jit:
+            range_rate_H(U, C1, C2, POS.start, VEL.start, CLOCK_BIAS, CLOCK_DRIFT, H)
+            self.matrix = H
+            return
         H[:N, POS] = -U @ C1          # H_rho1 (eq 11)
         H[:N, CLOCK_BIAS] = 1.0       # H_rho2 = [1 0]
         H[N:, VEL] = -U @ C2          # H_rhodot1 (eq 12)
