@@ -247,3 +247,22 @@ def test_ensemble_band_book_example_and_bad_input():
             ensemble_band(*bad)
     with pytest.raises(ValueError, match="level"):
         ensemble_band(5, 3, 1.0)
+
+
+@pytest.mark.parametrize("m, n_blocks", [(14, 2), (2, 2), (9, 2), (12, 3), (0, 2)])
+def test_block_nis_kernel_equals_the_numpy_form(m, n_blocks, monkeypatch):
+    """The kernel (``consistency.jit``) against the numpy form: random SPD covariances and
+    innovations, the split and the whole-vector case (``m`` not a multiple), empty ``y``."""
+    from sdr_di.integration import consistency
+
+    rng = np.random.default_rng(m)
+    for _ in range(20):
+        A = rng.normal(size=(m, m))
+        S = A @ A.T + 0.1 * np.eye(m) * rng.uniform(0.01, 100.0)
+        y = rng.normal(size=m) * rng.uniform(0.1, 10.0)
+        monkeypatch.setattr(consistency, "jit", True)
+        fast = block_nis(y, S, n_blocks)
+        monkeypatch.setattr(consistency, "jit", False)
+        ref = block_nis(y, S, n_blocks)
+        np.testing.assert_allclose(fast, ref, rtol=1e-12, atol=0.0)
+        assert np.array_equal(np.isnan(fast), np.isnan(ref))

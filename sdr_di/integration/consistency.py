@@ -39,6 +39,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from ..frames import radii_of_curvature
+from . import _numba_consistency as _nb
 from .metrics import time_window
 
 __all__ = ["BAND_RULE", "CONSISTENCY_KEYS", "NIS_BLOCKS", "SD_COLUMNS", "block_nis",
@@ -64,6 +65,11 @@ BAND_RULE = ("95 % chi-square band of the mean of N_eff * dof samples, divided b
              "autocorrelation summed over the initial positive lags (k <= N/4); N_eff <= N")
 
 
+#: Whether :func:`block_nis` runs its numba kernel (:mod:`._numba_consistency`, one call per
+#: update); False: the numpy form (the tested reference; the two agree to an ulp).
+jit = True
+
+
 def block_nis(y: np.ndarray, S: np.ndarray, n_blocks: int = 2) -> np.ndarray:
     """NIS per degree of freedom of each of ``n_blocks`` equal contiguous blocks of ``y``.
 
@@ -85,6 +91,9 @@ def block_nis(y: np.ndarray, S: np.ndarray, n_blocks: int = 2) -> np.ndarray:
     S = np.asarray(S, float)
     out = np.full(n_blocks, math.nan)
     m = y.size
+    if jit:
+        _nb.block_nis(y, S, n_blocks, out)
+        return out
     if m == 0:
         return out
     if m % n_blocks:
