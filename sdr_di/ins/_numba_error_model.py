@@ -273,3 +273,47 @@ def f_and_jacobian(x, steps, dt, cs0, cs1, C0T, C1T, w_ib_b, f_b, scale_start, g
         fx[j] = Y[2 * n, j]
         for i in range(n):
             F[j, i] = (Y[i, j] - Y[n + i, j]) / (2.0 * steps[i])
+
+
+@numba.njit(cache=True)
+def computed_terms(llh, v, C, f_b, cs):
+    """The computed (INS) state's shared quantities into ``cs`` (:data:`CS_LEN`,): those of
+    :func:`~sdr_di.ins.error_model.computed_state_terms` (its numpy form, the same values)
+    at geodetic ``llh`` (3,) [rad, rad, m], ENU velocity ``v`` (3,) [m/s], ``C = C_b^n``
+    (3, 3) and specific force ``f_b`` (3,) [m/s^2]."""
+    lat, h = llh[0], llh[2]
+    sl = math.sin(lat)
+    cl = math.cos(lat)
+    w = 1.0 - E2_CGCS * (sl * sl)
+    R_N = A_CGCS / math.sqrt(w)
+    R_M = R_N * (1.0 - E2_CGCS) / w
+    RN_h = R_N + h
+    wie0, wie1, wie2 = 0.0, OMEGA_E * cl, OMEGA_E * sl
+    wen0, wen1, wen2 = -v[1] / (R_M + h), v[0] / RN_h, v[0] * sl / cl / RN_h
+    cs[CS_WIN], cs[CS_WIN + 1], cs[CS_WIN + 2] = wie0 + wen0, wie1 + wen1, wie2 + wen2
+    cs[CS_WIE], cs[CS_WIE + 1], cs[CS_WIE + 2] = wie0, wie1, wie2
+    cs[CS_WEN], cs[CS_WEN + 1], cs[CS_WEN + 2] = wen0, wen1, wen2
+    cs[CS_W2] = 2.0 * wie0 + wen0
+    cs[CS_W2 + 1] = 2.0 * wie1 + wen1
+    cs[CS_W2 + 2] = 2.0 * wie2 + wen2
+    for i in range(3):
+        cs[CS_CF + i] = (C[i, 0] * f_b[0] + C[i, 1] * f_b[1]) + C[i, 2] * f_b[2]
+        cs[CS_V + i] = v[i]
+    cs[CS_LAT], cs[CS_H] = lat, h
+    s2 = sl * sl
+    g0 = GAMMA_E * (1.0 + K_SOMIGLIANA * s2) / math.sqrt(1.0 - E2_CGCS * s2)
+    cs[CS_G] = g0 * ((1.0 - _G_H1 * (_G_F - _G_F2 * s2) * h) + 3.0 * h * h / _A2)
+    cs[CS_LONDOT] = v[0] / (RN_h * math.cos(lat))
+
+
+@numba.njit(cache=True)
+def interval_terms(llh0, v0, C0, llh1, v1, C1, f_b, cs0, cs1, C0T, C1T):
+    """:func:`computed_terms` at both ends of a filter interval (``cs0``, ``cs1``) and the
+    transposes ``C0T``, ``C1T`` (3, 3) of their ``C_b^n``: the kernels' arguments of the
+    interval (``InsErrorModel._kernel_args``) in one call."""
+    computed_terms(llh0, v0, C0, f_b, cs0)
+    computed_terms(llh1, v1, C1, f_b, cs1)
+    for i in range(3):
+        for j in range(3):
+            C0T[i, j] = C0[j, i]
+            C1T[i, j] = C1[j, i]

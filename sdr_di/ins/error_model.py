@@ -295,6 +295,12 @@ def _skew_squares(K: np.ndarray) -> np.ndarray:
         + K[:, :, 2, None] * K[:, None, 2, :]
 
 
+def _matrix_times_vector(C: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """``C @ f`` of a 3x3 matrix and a 3-vector, summed left to right (as
+    :func:`_skew_squares`: ``matmul`` would call BLAS)."""
+    return (C[:, 0] * f[0] + C[:, 1] * f[1]) + C[:, 2] * f[2]
+
+
 def _rows_times_transpose(r: np.ndarray, C: np.ndarray) -> np.ndarray:
     """``r @ C.T`` of rows ``r`` (p, 3), summed left to right (as :func:`_skew_squares`)."""
     return (r[:, 0, None] * C[:, 0] + r[:, 1, None] * C[:, 1]) + r[:, 2, None] * C[:, 2]
@@ -342,7 +348,7 @@ def error_derivative(X: np.ndarray, nav: NavState, f_b: np.ndarray, w_ib_b: np.n
          - _rows_times_transpose(eps, Cb))
     phi_dot = np.einsum("pij,pj->pi", _I3 + 0.5 * K + c * KK, u)
     # velocity (eq 2, line 2)
-    Cf = Cb @ f_b
+    Cf = _matrix_times_vector(Cb, f_b)
     dv_dot = (np.einsum("pij,j->pi", I - At, Cf) + np.einsum("pij,pj->pi", At,
                                                               _rows_times_transpose(nab, Cb))
               - cross_rows(2.0 * wie_c + wen_c, dv) - cross_rows(2.0 * d_wie + d_wen, v_t))
@@ -376,7 +382,7 @@ def computed_state_terms(nav: NavState, f_b: np.ndarray) -> np.ndarray:
     cs[_nb.CS_WIE:_nb.CS_WIE + 3] = wie_c
     cs[_nb.CS_WEN:_nb.CS_WEN + 3] = wen_c
     cs[_nb.CS_W2:_nb.CS_W2 + 3] = 2.0 * wie_c + wen_c
-    cs[_nb.CS_CF:_nb.CS_CF + 3] = nav.C_b_n @ f_b
+    cs[_nb.CS_CF:_nb.CS_CF + 3] = _matrix_times_vector(nav.C_b_n, f_b)
     cs[_nb.CS_V:_nb.CS_V + 3] = v_c
     cs[_nb.CS_LAT], cs[_nb.CS_H] = lat_c, h_c
     cs[_nb.CS_G] = float(normal_gravity(lat_c, h_c))
@@ -479,10 +485,13 @@ class InsErrorModel(ProcessModel):
         terms and ``C_b^n^T`` at both ends (made once per interval, :meth:`set_interval`),
         the IMU averages and the layout's and clock's constants."""
         if self._cs is None:
-            self._cs = (computed_state_terms(self.nav0, self.f_b),
-                        computed_state_terms(self.nav1, self.f_b),
-                        np.ascontiguousarray(self.nav0.C_b_n.T),
-                        np.ascontiguousarray(self.nav1.C_b_n.T),
+            n0, n1 = self.nav0, self.nav1
+            cs0, cs1 = np.empty(_nb.CS_LEN), np.empty(_nb.CS_LEN)
+            C0T, C1T = np.empty((3, 3)), np.empty((3, 3))
+            # both ends in one call (computed_state_terms' values, bit for bit)
+            _nb.interval_terms(n0.llh, n0.v_n, n0.C_b_n, n1.llh, n1.v_n, n1.C_b_n, self.f_b,
+                               cs0, cs1, C0T, C1T)
+            self._cs = (cs0, cs1, C0T, C1T,
                         self.w_ib_b, self.f_b, _scale_start(self.layout),
                         self.layout.gauss_markov, self.bias_tau_s[0], self.bias_tau_s[1],
                         float(self.clock.tau_s))
