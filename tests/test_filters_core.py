@@ -287,3 +287,51 @@ def test_clip_fallback_is_recorded():
     assert kf.numerics_events and kf.numerics_events[0]["step"] == "predict"
     assert kf.numerics_events[0]["matrix"] == "P" and kf.numerics_events[0]["min_eigenvalue"] < 0
     assert np.all(np.linalg.eigvalsh(kf.P) > 0) and np.all(np.isfinite(kf.x))
+
+
+@pytest.mark.parametrize("points", ["ukf", "ckf"])
+def test_sigma_moment_kernels_equal_the_numpy_forms(points, monkeypatch):
+    """``weighted_moments`` and the measurement prediction's cross covariance by their
+    kernels (``sigma_filter.jit``) against the numpy forms: UKF weights (negative centre
+    weight) and cubature weights, points about a large mean (the deviations' purpose),
+    17 and 23 states; agreement to rounding of the covariance's scale."""
+    from sdr_di.filters import sigma_filter
+    from sdr_di.filters.sigma_points import CubaturePoints, MerweScaledSigmaPoints
+
+    pts = MerweScaledSigmaPoints() if points == "ukf" else CubaturePoints()
+    rng = np.random.default_rng(28)
+    for n in (17, 23):
+        wm, wc = pts.weights(n)
+        xi = pts.unit_points(n)
+        for _ in range(20):
+            A = rng.normal(size=(n, n)) * np.exp(rng.normal(size=n))
+            L = np.linalg.cholesky(A @ A.T + np.eye(n))
+            x = rng.normal(size=n) * 1e4
+            dX = xi @ L.T
+            Z = np.sin(x + dX)[:, :14] * 3.0 + (x + dX)[:, :14] ** 2 * 1e-3
+            out = {}
+            for jit in (True, False):
+                monkeypatch.setattr(sigma_filter, "jit", jit)
+                mean, cov, D, delta = sigma_filter.weighted_moments(x + dX, wm, wc)
+                zm, Pzz, DZ, dz = sigma_filter.weighted_moments(Z, wm, wc)
+                out[jit] = (mean, cov, D, delta, zm, Pzz, DZ, dz)
+            # rounding scales: the sums' terms (weights times deviations, and squares)
+            for k, (a, b) in enumerate(zip(out[True], out[False])):
+                D_ = out[False][2] if k < 4 else out[False][6]
+                dev = np.max(np.abs(D_)) * np.sum(np.abs(wm))
+                scale = {0: np.max(np.abs(b)), 1: dev * np.max(np.abs(D_)), 2: dev,
+                         3: dev}[k % 4]
+                np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-13 * scale)
+            assert np.array_equal(out[True][1], out[True][1].T)
+        # the cross covariance, through a filter's measurement prediction
+        model = LinearMeasurementModel(rng.normal(size=(6, n)))
+        preds = {}
+        for jit in (True, False):
+            monkeypatch.setattr(sigma_filter, "jit", jit)
+            kf = sigma_filter.UKF(LinearProcessModel(np.eye(n)), model, x, L @ L.T, np.eye(n)) \
+                if points == "ukf" else sigma_filter.CKF(LinearProcessModel(np.eye(n)), model, x, L @ L.T,
+                                                           np.eye(n))
+            preds[jit] = kf.predict_measurement()
+        scale = np.max(np.abs(preds[False].Pxz))
+        np.testing.assert_allclose(preds[True].Pxz, preds[False].Pxz, rtol=0.0,
+                                   atol=1e-12 * scale)

@@ -30,16 +30,23 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import FilterError
+from . import _numba_sigma as _nb
 from .base import KalmanFilterBase, MeasurementPrediction
 from .models import MeasurementModel
 from .sigma_points import CubaturePoints, MerweScaledSigmaPoints, SigmaPoints
 
 __all__ = ["CKF", "UKF", "SigmaPointFilter", "weighted_moments"]
 
+#: Whether the weighted moments and the cross covariance run their numba kernels
+#: (:mod:`._numba_sigma`, one call each); False: the numpy forms (the tested references;
+#: the two agree to rounding).
+jit = True
+
 
 def weighted_moments(Y: np.ndarray, wm: np.ndarray, wc: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Weighted mean and covariance of the rows of ``Y``, computed about ``Y[0]``.
+    """Weighted mean and covariance of the rows of ``Y``, computed about ``Y[0]`` (by
+    :func:`._numba_sigma.moments` unless ``jit`` is off).
 
     Returns
     -------
@@ -51,6 +58,12 @@ def weighted_moments(Y: np.ndarray, wm: np.ndarray, wc: np.ndarray
     delta : (d,) ndarray
         ``mean - Y[0]``.
     """
+    if jit:
+        Y = np.ascontiguousarray(Y, dtype=float)
+        p, d = Y.shape
+        mean, cov, D, delta = np.empty(d), np.empty((d, d)), np.empty((p, d)), np.empty(d)
+        _nb.moments(Y, np.asarray(wm, float), np.asarray(wc, float), mean, cov, D, delta)
+        return mean, cov, D, delta
     ref = Y[0]
     D = Y - ref
     delta = wm @ D
@@ -119,7 +132,11 @@ class SigmaPointFilter(KalmanFilterBase):
         wm, wc = self._wm, self._wc
         z_pred, Pzz, DZ, dz = weighted_moments(Z, wm, wc)
         # cross covariance: X deviations are exact (dX, zero weighted mean by symmetry)
-        Pxz = (dX.T * wc) @ DZ - (wc @ dX)[:, None] * dz
+        if jit:
+            Pxz = np.empty((dX.shape[1], DZ.shape[1]))
+            _nb.cross_covariance(np.ascontiguousarray(dX), DZ, wc, dz, Pxz)
+        else:
+            Pxz = (dX.T * wc) @ DZ - (wc @ dX)[:, None] * dz
         return MeasurementPrediction(z_pred, Pzz, Pxz, model)
 
 
