@@ -74,11 +74,17 @@ from ._linalg import (
     spd_inverse_from_cholesky,
     symmetrize,
 )
+from . import _numba_correct as _nb
 from .models import MeasurementModel, ProcessModel
 
 __all__ = ["KalmanFilterBase", "MeasurementPrediction"]
 
 _LOG_2PI = math.log(2.0 * math.pi)
+#: Whether :meth:`KalmanFilterBase._correct` runs its numba kernel (:mod:`._numba_correct`,
+#: one call); False: the numpy form (the tested reference; the two agree to rounding). The
+#: numpy form also takes over when the kernel finds ``S`` not positive definite (it owns
+#: the failure policy).
+jit = True
 
 
 @dataclasses.dataclass
@@ -406,16 +412,20 @@ class KalmanFilterBase:
 
     def _correct(self, z: np.ndarray, R: np.ndarray, mp: MeasurementPrediction) -> None:
         y = z - mp.z_pred
-        S = symmetrize(mp.Pzz + R)
-        L, S = self._cholesky(S, "update", "S")
-        S_inv = spd_inverse_from_cholesky(L)
-        K = mp.Pxz @ S_inv
-        x = self.x + K @ y
-        P = symmetrize(self.P - K @ mp.Pxz.T)
-        Sy = S_inv @ y
-        nis = float(y @ Sy)
-        self.log_likelihood = -0.5 * (y.size * _LOG_2PI
-                                      + 2.0 * float(np.sum(np.log(np.diagonal(L)))) + nis)
+        out = self._correct_by_kernel(y, R, mp) if jit else None
+        if out is None:
+            S = symmetrize(mp.Pzz + R)
+            L, S = self._cholesky(S, "update", "S")
+            S_inv = spd_inverse_from_cholesky(L)
+            K = mp.Pxz @ S_inv
+            x = self.x + K @ y
+            P = symmetrize(self.P - K @ mp.Pxz.T)
+            Sy = S_inv @ y
+            nis = float(y @ Sy)
+            log_det_half = float(np.sum(np.log(np.diagonal(L))))
+        else:
+            x, P, S, S_inv, K, nis, log_det_half = out
+        self.log_likelihood = -0.5 * (y.size * _LOG_2PI + 2.0 * log_det_half + nis)
         self.x, self.P = x, P
         self.x_post, self.P_post = x.copy(), P.copy()
         self.y, self.S, self.S_inv, self.K, self.nis = y, S, S_inv, K, nis
@@ -423,6 +433,19 @@ class KalmanFilterBase:
         self.residual = z - np.asarray(mp.model.h(x), dtype=float)
         self.last_prediction = mp
         self.epoch += 1
+
+    def _correct_by_kernel(self, y: np.ndarray, R: np.ndarray, mp: MeasurementPrediction
+                           ) -> tuple | None:
+        """:meth:`_correct`'s numbers by :func:`._numba_correct.correct`: ``(x, P, S,
+        S_inv, K, nis, sum of log diag L)``, or None when ``S`` is not positive definite
+        (the numpy form then applies the failure policy)."""
+        n, m = self.x.size, y.size
+        S, L, S_inv = np.empty((m, m)), np.empty((m, m)), np.empty((m, m))
+        K, x, P = np.empty((n, m)), np.empty(n), np.empty((n, n))
+        ok, nis, log_det_half = _nb.correct(
+            self.x, self.P, np.asarray(y, float), np.asarray(mp.Pzz, float),
+            np.asarray(mp.Pxz, float), np.asarray(R, float), S, L, S_inv, K, x, P)
+        return (x, P, S, S_inv, K, nis, log_det_half) if ok else None
 
     def _no_measurement(self) -> None:
         n = self.x.size
