@@ -388,3 +388,31 @@ def test_correction_kernel_leaves_a_singular_s_to_the_failure_policy(monkeypatch
         else:
             kf.update(np.array([1.0, 1.0]))
             assert kf.numerics_events and kf.numerics_events[-1]["matrix"] == "S"
+
+
+@pytest.mark.parametrize("name", ["ukf", "ckf"])
+def test_sigma_point_draw_kernel_equals_the_numpy_form(name, monkeypatch):
+    """The points ``x + L xi_i`` by the kernel (its own Cholesky factor) against the numpy
+    form (LAPACK's), over covariances spread across eight orders of magnitude; a ``P`` that
+    is not positive definite still meets the failure policy."""
+    from sdr_di.filters import sigma_filter
+
+    rng = np.random.default_rng(7)
+    n = 17
+    for _ in range(20):
+        scales = np.exp(rng.uniform(-9.0, 9.0, n))
+        P = _random_spd(rng, n) * np.outer(scales, scales)
+        x = rng.normal(size=n) * scales * 100.0
+        kf = make_filter(name, LinearProcessModel(np.eye(n)), None, x, P, np.eye(n))
+        got = {}
+        for on in (True, False):
+            monkeypatch.setattr(sigma_filter, "jit", on)
+            got[on] = kf._draw(x, P, "predict")
+        for a, b in zip(got[True], got[False]):
+            np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-12 * np.max(np.abs(b)))
+    monkeypatch.setattr(sigma_filter, "jit", True)
+    kf = make_filter(name, LinearProcessModel(np.eye(2)), None, np.zeros(2), np.eye(2),
+                     np.zeros((2, 2)))
+    kf.P = np.array([[1.0, 1.0], [1.0, 1.0]])
+    with pytest.raises(CovarianceError):
+        kf.predict(1.0)

@@ -1,12 +1,15 @@
-"""Numba kernels of the sigma-point filters' weighted moments (every time update and
-measurement prediction of the UKF, the CKF and the adaptive filters built on them): the
-numpy forms, the tested references, are :func:`sdr_di.filters.sigma_filter.weighted_moments`
-and the cross covariance of :meth:`~sdr_di.filters.sigma_filter.SigmaPointFilter.
+"""Numba kernels of the sigma-point filters' points and weighted moments (every time update
+and measurement prediction of the UKF, the CKF and the adaptive filters built on them): the
+numpy forms, the tested references, are :meth:`~sdr_di.filters.sigma_filter.SigmaPointFilter.
+_draw` (LAPACK's Cholesky factor), :func:`sdr_di.filters.sigma_filter.weighted_moments` and
+the cross covariance of :meth:`~sdr_di.filters.sigma_filter.SigmaPointFilter.
 predict_measurement` with ``sigma_filter.jit = False``. Sums over the points run in point
 order (numpy's products call BLAS, whose order is its own), so the two agree to rounding,
 not bit for bit."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -59,3 +62,38 @@ def cross_covariance(dX, DZ, wc, dz, Pxz):
             for i in range(p):
                 s += wc[i] * dX[i, a] * DZ[i, b]
             Pxz[a, b] = s - cx * dz[b]
+
+
+@njit(cache=True, boundscheck=False)
+def draw(x, P, xi, X, dX):
+    """Sigma points ``X = x + dX`` (p, n), ``dX = xi L^T`` (rows), ``L`` the lower Cholesky
+    factor of ``P`` (n, n); ``xi`` (p, n) the unit points. Returns False (``X``, ``dX``
+    unfinished) when ``P`` is not finite or not positive definite: the numpy form then
+    applies the filter's failure policy."""
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(n):
+            if not math.isfinite(P[i, j]):
+                return False
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = P[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return False
+        d = math.sqrt(s)
+        L[j, j] = d
+        for i in range(j + 1, n):
+            s = P[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / d
+    for i in range(xi.shape[0]):
+        for a in range(n):
+            s = 0.0
+            for b in range(a + 1):
+                s += xi[i, b] * L[a, b]
+            dX[i, a] = s
+            X[i, a] = x[a] + s
+    return True

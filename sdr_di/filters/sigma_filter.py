@@ -37,9 +37,9 @@ from .sigma_points import CubaturePoints, MerweScaledSigmaPoints, SigmaPoints
 
 __all__ = ["CKF", "UKF", "SigmaPointFilter", "weighted_moments"]
 
-#: Whether the weighted moments and the cross covariance run their numba kernels
-#: (:mod:`._numba_sigma`, one call each); False: the numpy forms (the tested references;
-#: the two agree to rounding).
+#: Whether the points, the weighted moments and the cross covariance run their numba
+#: kernels (:mod:`._numba_sigma`, one call each); False: the numpy forms (the tested
+#: references; the two agree to rounding).
 jit = True
 
 
@@ -108,7 +108,13 @@ class SigmaPointFilter(KalmanFilterBase):
         self.sigmas_h = np.zeros((self._xi.shape[0], 0))
 
     def _draw(self, x: np.ndarray, P: np.ndarray, step: str) -> tuple[np.ndarray, np.ndarray]:
-        """Points ``x + L xi_i`` (rows) and their deviations ``L xi_i`` from ``x``."""
+        """Points ``x + L xi_i`` (rows) and their deviations ``L xi_i`` from ``x`` (by
+        :func:`._numba_sigma.draw` unless ``jit`` is off; the numpy form applies the failure
+        policy when ``P`` is not positive definite)."""
+        if jit:
+            X, dX = np.empty(self._xi.shape), np.empty(self._xi.shape)
+            if _nb.draw(np.asarray(x, float), np.asarray(P, float), self._xi, X, dX):
+                return X, dX
         L, P_used = self._cholesky(P, step, "P")
         if P_used is not P:
             self.P = P_used
