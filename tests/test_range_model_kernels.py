@@ -110,3 +110,36 @@ def test_saastamoinen_zenith_is_the_slant_delay_at_the_zenith():
             pytest.approx(zen[i], rel=1e-14)
         one = saastamoinen_delay(lat[i], h[i], el[i:i + 3])
         np.testing.assert_allclose(one, z / np.sin(el[i:i + 3]), rtol=1e-15)
+
+
+def test_pvt_atmosphere_kernel_equals_the_numpy_form(nav, monkeypatch):
+    """The PVT's elevations, azimuths and delays (``pvt.atmosphere_delays``) by the range
+    model's atmosphere kernel against the numpy form, for receivers from below sea level to
+    above 11 km, every atmosphere switch, satellites below the horizon included."""
+    from sdr_di.receiver import pvt
+
+    ephs = []
+    for p in nav.prns:
+        try:
+            ephs.append(nav.select(p, WEEK, SOW0))
+        except NoEphemerisError:
+            pass
+    iono = assistance_klobuchar(nav)[0]
+    rng = np.random.default_rng(28)
+    configs = [PvtConfig(), PvtConfig(ionosphere=False), PvtConfig(troposphere=False)]
+    for k in range(40):
+        lat, lon = rng.uniform(-80, 80), rng.uniform(-180, 180)
+        h = rng.choice([-50.0, 30.0, 4000.0, 15000.0]) + rng.uniform(0, 10)
+        r = llh_to_ecef(math.radians(lat), math.radians(lon), h)
+        sow = SOW0 + rng.uniform(-3600.0, 3600.0)
+        pred = range_model.predict_ranges(ephs, WEEK, [sow], [r], [0.0], iono)
+        r_rot = pred.r_sat[:, 0]
+        cfg = configs[k % 3]
+        ion = None if k % 5 == 4 else iono
+        fast = pvt.atmosphere_delays(r, r_rot, sow, ion, cfg)
+        monkeypatch.setattr(pvt, "jit", False)
+        ref = pvt.atmosphere_delays(r, r_rot, sow, ion, cfg)
+        monkeypatch.setattr(pvt, "jit", True)
+        assert (ref[0] < 0.0).any()
+        for a, b, tol in zip(fast, ref, (1e-14, 1e-13, 1e-12, 1e-12)):
+            np.testing.assert_allclose(a, b, rtol=0.0, atol=tol * max(1.0, np.max(np.abs(b))))

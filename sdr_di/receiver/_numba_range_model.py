@@ -31,18 +31,21 @@ last bit, so the kernel's ranges equal the numpy form's to a few ulp (about 1e-8
     azimuth, floored elevation and the pierce point between the ``asin`` steps.
 :func:`saastamoinen_zenith`
     the troposphere's zenith delay (:func:`sdr_di.orbits.atmosphere.saastamoinen_zenith`).
+:func:`atmosphere`
+    elevations, azimuths and both delays of one receiver (also the PVT's,
+    :func:`sdr_di.receiver.pvt.atmosphere_delays`), made of :func:`line_of_sight_enu`,
+    :func:`klobuchar_1` to ``_3``, :func:`saastamoinen_zenith` and :func:`delays` (the
+    Klobuchar delay's rest and the troposphere's slant delay);
 :func:`ranges`
-    the Klobuchar delay's rest, the troposphere's slant delay, ``P``, ``Pc`` and the unit
-    lines of sight.
+    ``P``, ``Pc`` and the unit lines of sight.
 """
 
 from __future__ import annotations
 
 import math
 
-from numba import njit
-
 import numpy as np
+from numba import njit
 
 from ..constants import A_CGCS, C_LIGHT, E2_CGCS, OMEGA_E, SECONDS_PER_WEEK
 
@@ -214,15 +217,15 @@ def klobuchar_3(w, phi_m, out):
 
 
 @njit(cache=True, boundscheck=False)
-def ranges(w, phi_m, asin_lam, lon, t_day, alpha, beta, iono_m_per_s, ion_on, zenith_m,
-           trop_on, rho, b, dt_sv, r_rot, r_rx, P, Pc, U):
-    """``P``, ``Pc`` (n,) [m] and the unit lines of sight ``U`` (n, 3): the Klobuchar
-    delay's rest (``t_day = mod(t, 86400)`` [s], ``iono_m_per_s = c (f_B1I / f_B3I)^2``),
-    the troposphere ``zenith_m / sin(max(el, 1e-3))``, ``b`` the clock bias [m],
-    ``dt_sv`` (n,) the satellite clocks [s]. ``ion_on``/``trop_on``: 0 for no delay."""
-    for i in range(w.shape[1]):
-        el_pos = w[0, i]
-        ion = 0.0
+def delays(wa, phi_m, asin_lam, lon, t_day, alpha, beta, iono_m_per_s, ion_on, zenith_m,
+           trop_on, trop, ion):
+    """The troposphere's slant delay ``zenith_m / sin(max(el, 1e-3))`` and the Klobuchar
+    delay's rest (``t_day = mod(t, 86400)`` [s], ``iono_m_per_s = c (f_B1I / f_B3I)^2``)
+    into ``trop``, ``ion`` (n,) [m], zero at non-positive floored elevations or with the
+    switch (``ion_on``, ``trop_on``) off."""
+    for i in range(wa.shape[1]):
+        el_pos = wa[0, i]
+        d_ion = 0.0
         if ion_on:
             lam_m = lon + asin_lam[i]
             tl = (t_day + lam_m * 43200.0 / math.pi) % 86400.0
@@ -234,19 +237,73 @@ def ranges(w, phi_m, asin_lam, lon, t_day, alpha, beta, iono_m_per_s, ion_on, ze
             dt = tl - 50400.0
             day = A2 * math.cos(2.0 * math.pi * dt / A4) if abs(dt) < A4 / 4.0 else 0.0
             Iz = 5.0e-9 + day
-            ratio = w[3, i]
+            ratio = wa[3, i]
             delay = Iz / math.sqrt(1.0 - ratio * ratio)
-            ion = iono_m_per_s * (delay if el_pos > 0.0 else 0.0)
-        trop = 0.0
+            d_ion = iono_m_per_s * (delay if el_pos > 0.0 else 0.0)
+        d_trop = 0.0
         if trop_on:
             sin_el = math.sin(el_pos if el_pos >= 1e-3 or el_pos != el_pos else 1e-3)
-            trop = zenith_m / sin_el if el_pos > 0.0 else 0.0
+            d_trop = zenith_m / sin_el if el_pos > 0.0 else 0.0
+        trop[i] = d_trop
+        ion[i] = d_ion
+
+
+@njit(cache=True, boundscheck=False)
+def ranges(rho, b, dt_sv, trop, ion, r_rot, r_rx, P, Pc, U):
+    """``P = rho + b - c dt_sv + T + I``, ``Pc = P - 2 I`` (n,) [m] and the unit lines of
+    sight ``U`` (n, 3): ``b`` the clock bias [m], ``dt_sv`` (n,) the satellite clocks [s]."""
+    for i in range(rho.shape[0]):
         d = rho[i]
-        p = d + b - C_LIGHT * dt_sv[i] + trop + ion
+        p = d + b - C_LIGHT * dt_sv[i] + trop[i] + ion[i]
         P[i] = p
-        Pc[i] = p - 2.0 * ion
+        Pc[i] = p - 2.0 * ion[i]
         for k in range(3):
             U[i, k] = (r_rot[i, k] - r_rx[k]) / d
+
+
+@njit(cache=True, boundscheck=False)
+def atmosphere(r_rot, r_rx, t_r, ion_on, alpha, beta, trop_on, humidity, el_floor, ratio_k,
+               iono_m_per_s, el, az, trop, ion):
+    """Elevation (not floored) and azimuth in [0, 2 pi) [rad], tropospheric and B3I
+    ionospheric delays [m] (n,) of satellites ``r_rot`` (n, 3) seen from the receiver
+    ``r_rx`` (3,) [m] at BDT ``t_r`` [s of week]: :func:`sdr_di.receiver.pvt.
+    atmosphere_delays` (its numpy form). Arguments after ``t_r`` as
+    :func:`predict_instant`'s."""
+    n = r_rot.shape[0]
+    lat, lon, h = ecef_to_llh(r_rx)
+    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
+    h01 = np.empty((2, n))
+    y = np.empty(2 * n)
+    x = np.empty(2 * n)
+    line_of_sight_enu(r_rot, r_rx, sl, cl, so, co, h01, y, x)
+    el_az = np.empty(2 * n)
+    for i in range(n):
+        x[i] = math.hypot(h01[0, i], h01[1, i])
+    for i in range(2 * n):
+        el_az[i] = math.atan2(y[i], x[i])
+    wa = np.empty((5, n))
+    klobuchar_1(el_az, el_floor, ratio_k, wa)
+    phi_m = np.zeros(n)
+    asin_lam = np.zeros(n)
+    t_day = 0.0
+    if ion_on:
+        arg = np.empty(n)
+        asin_ratio = np.empty(n)
+        for i in range(n):
+            asin_ratio[i] = math.asin(wa[3, i])
+        klobuchar_2(wa, asin_ratio, sl, cl, arg)
+        for i in range(n):
+            phi_m[i] = math.asin(arg[i])
+        klobuchar_3(wa, phi_m, arg)
+        for i in range(n):
+            asin_lam[i] = math.asin(arg[i])
+        t_day = t_r % 86400.0
+    zenith_m = saastamoinen_zenith(lat, h, humidity) if trop_on else 0.0
+    delays(wa, phi_m, asin_lam, lon, t_day, alpha, beta, iono_m_per_s, ion_on, zenith_m,
+           trop_on, trop, ion)
+    for i in range(n):
+        el[i] = el_az[i]
+        az[i] = wa[1, i]
 
 
 @njit(cache=True, boundscheck=False)
@@ -345,34 +402,10 @@ def predict_instant(tab, geo, cx, sx, week, t_r, r_rx, b, tau, passes, ion_on, a
         for i in range(n):
             tau[i] = rho[i] / C_LIGHT
     # the atmosphere (pvt.atmosphere_delays) at the receiver's geodetic position
-    lat, lon, h = ecef_to_llh(r_rx)
-    sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
-    h01 = np.empty((2, n))
-    y = np.empty(2 * n)
-    x = np.empty(2 * n)
-    line_of_sight_enu(r_rot, r_rx, sl, cl, so, co, h01, y, x)
-    el_az = np.empty(2 * n)
-    for i in range(n):
-        x[i] = math.hypot(h01[0, i], h01[1, i])
-    for i in range(2 * n):
-        el_az[i] = math.atan2(y[i], x[i])
-    wa = np.empty((5, n))
-    klobuchar_1(el_az, el_floor, ratio_k, wa)
-    phi_m = np.zeros(n)
-    asin_lam = np.zeros(n)
-    t_day = 0.0
-    if ion_on:
-        arg = np.empty(n)
-        asin_ratio = np.empty(n)
-        for i in range(n):
-            asin_ratio[i] = math.asin(wa[3, i])
-        klobuchar_2(wa, asin_ratio, sl, cl, arg)
-        for i in range(n):
-            phi_m[i] = math.asin(arg[i])
-        klobuchar_3(wa, phi_m, arg)
-        for i in range(n):
-            asin_lam[i] = math.asin(arg[i])
-        t_day = t_r % 86400.0
-    zenith_m = saastamoinen_zenith(lat, h, humidity) if trop_on else 0.0
-    ranges(wa, phi_m, asin_lam, lon, t_day, alpha, beta, iono_m_per_s, ion_on, zenith_m,
-           trop_on, rho, b, dt_sv, r_rot, r_rx, P, Pc, U)
+    el = np.empty(n)
+    az = np.empty(n)
+    trop = np.empty(n)
+    ion = np.empty(n)
+    atmosphere(r_rot, r_rx, t_r, ion_on, alpha, beta, trop_on, humidity, el_floor, ratio_k,
+               iono_m_per_s, el, az, trop, ion)
+    ranges(rho, b, dt_sv, trop, ion, r_rot, r_rx, P, Pc, U)

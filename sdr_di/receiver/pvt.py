@@ -79,9 +79,11 @@ import numpy as np
 from ..constants import C_LIGHT, OMEGA_E, SECONDS_PER_WEEK
 from ..errors import NoEphemerisError, UnknownPrnError
 from ..frames import C_e_n, ecef_to_llh, elevation_azimuth
-from ..orbits.atmosphere import iono_delay_b3i_m, saastamoinen_delay
+from ..orbits.atmosphere import (B1I_TO_B3I, KLOBUCHAR_H_M, KLOBUCHAR_R_M, iono_delay_b3i_m,
+                                 saastamoinen_delay)
 from ..orbits.broadcast import sat_pos_vel_clock_stacked, stack_ephemerides
 from ..orbits.ephemeris import Ephemeris, Klobuchar
+from . import _numba_range_model as _k
 from .navdata import NavDataInForce
 from .observables import (
     ChannelObservationLike,
@@ -109,6 +111,16 @@ __all__ = [
 ]
 
 _EL_FLOOR = math.radians(0.1)
+#: Klobuchar's ``R / (R + h)`` and ``c (f_B1I / f_B3I)^2`` [m/s], the troposphere model's
+#: relative humidity (``saastamoinen_delay``'s default): the atmosphere kernel's constants
+_RATIO_K = KLOBUCHAR_R_M / (KLOBUCHAR_R_M + KLOBUCHAR_H_M)
+_IONO_M_PER_S = C_LIGHT * B1I_TO_B3I
+_HUMIDITY = 0.5
+_ZERO4 = np.zeros(4)
+#: Whether :func:`atmosphere_delays` runs the range model's atmosphere kernel
+#: (:func:`._numba_range_model.atmosphere`, one call; the numpy form's values to a few
+#: ulp); False: the numpy form :func:`atmosphere_delays_numpy` (the tested reference).
+jit = True
 _PHASE1_TOL_M = 1.0e3
 _ATM_RATE_DT_S = 0.5
 
@@ -420,7 +432,26 @@ def atmosphere_delays(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
     """Elevation, azimuth [rad], tropospheric and B3I ionospheric delays [m].
 
     One receiver position ``r_rx`` (3,) [m], satellites ``r_sat_rot`` (n, 3), BDT ``t_sow``.
+    By the kernel unless ``jit`` is off (:func:`atmosphere_delays_numpy`).
     """
+    if not jit:
+        return atmosphere_delays_numpy(r_rx, r_sat_rot, t_sow, iono, cfg)
+    r_sat_rot = np.asarray(r_sat_rot, float).reshape(-1, 3)
+    n = r_sat_rot.shape[0]
+    el, az, trop, ion = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    ion_on = bool(cfg.ionosphere and iono is not None)
+    alpha, beta = (np.asarray(iono.alpha, float), np.asarray(iono.beta, float)) if ion_on \
+        else (_ZERO4, _ZERO4)
+    _k.atmosphere(r_sat_rot, np.asarray(r_rx, float).reshape(3), float(t_sow), ion_on,
+                  alpha, beta, bool(cfg.troposphere), _HUMIDITY, _EL_FLOOR, _RATIO_K,
+                  _IONO_M_PER_S, el, az, trop, ion)
+    return el, az, trop, ion
+
+
+def atmosphere_delays_numpy(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
+                            iono: Klobuchar | None, cfg: PvtConfig
+                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`atmosphere_delays` in numpy (the reference of the kernel)."""
     llh = ecef_to_llh(r_rx)
     el, az = elevation_azimuth(r_rx, r_sat_rot, llh=llh)
     el_pos = np.maximum(el, _EL_FLOOR)

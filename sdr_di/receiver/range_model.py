@@ -27,12 +27,12 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..constants import C_LIGHT
-from ..orbits.atmosphere import B1I_TO_B3I, KLOBUCHAR_H_M, KLOBUCHAR_R_M
 from ..orbits.broadcast import (GEO_INCLINATION_ROT, sat_pos_vel_clock_stacked,
                                 stack_ephemerides)
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from . import _numba_range_model as _k
-from .pvt import _EL_FLOOR, PvtConfig, atmosphere_delays, sagnac_rotation
+from .pvt import (_EL_FLOOR, _HUMIDITY, _IONO_M_PER_S, _RATIO_K, _ZERO4, PvtConfig,
+                  atmosphere_delays_numpy, sagnac_rotation)
 
 __all__ = ["RangePrediction", "predict_ranges"]
 
@@ -40,12 +40,7 @@ _TAU0_S = 0.075
 #: One numba kernel call for one receive instant (:mod:`._numba_range_model`, the numpy
 #: form's values to a few ulp); False: the numpy form only (the tested reference).
 jit = True
-_ZERO4 = np.zeros(4)
 _GEO_CX, _GEO_SX = math.cos(GEO_INCLINATION_ROT), math.sin(GEO_INCLINATION_ROT)
-#: relative humidity of the troposphere model (``saastamoinen_zenith``'s default)
-_HUMIDITY = 0.5
-_RATIO_K = KLOBUCHAR_R_M / (KLOBUCHAR_R_M + KLOBUCHAR_H_M)
-_IONO_M_PER_S = C_LIGHT * B1I_TO_B3I
 
 
 @dataclasses.dataclass
@@ -125,7 +120,7 @@ def predict_ranges(ephemerides: Sequence[Ephemeris], week: int, sow_nom, r_rx, c
     trop = np.empty((n_s, n_t))
     ion = np.empty((n_s, n_t))
     for j in range(n_t):
-        _, _, T, I = atmosphere_delays(r[j], r_rot[:, j], float(t_r[j]), iono, cfg)
+        _, _, T, I = atmosphere_delays_numpy(r[j], r_rot[:, j], float(t_r[j]), iono, cfg)
         trop[:, j], ion[:, j] = T, I
     P = rho + b[None, :] - C_LIGHT * dt_sv + trop + ion
     U = (r_rot - r[None]) / rho[..., None]
