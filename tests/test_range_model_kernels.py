@@ -45,28 +45,40 @@ def _assert_agree(fast, ref):
         np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-12 * scale, err_msg=name)
 
 
-def test_one_instant_kernels_equal_the_numpy_form(nav, monkeypatch):
-    """Every record in force (GEO, IGSO, MEO), receivers from below sea level to above the
-    troposphere's 11 km, both hemispheres, seeded and unseeded travel times, each
-    atmosphere switch."""
+def _ephs_in_force(nav) -> list:
+    """Every record of the file in force at SOW0 (GEO, IGSO, MEO)."""
     ephs = []
     for p in nav.prns:
         try:
             ephs.append(nav.select(p, WEEK, SOW0))
         except NoEphemerisError:
             pass
-    assert any(is_geo(e.prn) for e in ephs) and any(not is_geo(e.prn) for e in ephs)
+    return ephs
+
+
+def _cases(nav, seed: int):
+    """40 receivers from below sea level to above the troposphere's 11 km, both
+    hemispheres, within an hour of SOW0, each atmosphere switch in turn: ``(r, sow, ion,
+    cfg, rng)``."""
     iono = assistance_klobuchar(nav)[0]
-    rng = np.random.default_rng(47)
+    rng = np.random.default_rng(seed)
     configs = [PvtConfig(), PvtConfig(ionosphere=False), PvtConfig(troposphere=False)]
     for k in range(40):
         lat, lon = rng.uniform(-80, 80), rng.uniform(-180, 180)
         h = rng.choice([-50.0, 30.0, 4000.0, 15000.0]) + rng.uniform(0, 10)
         r = llh_to_ecef(math.radians(lat), math.radians(lon), h)
         sow = SOW0 + rng.uniform(-3600.0, 3600.0)
+        yield r, sow, (None if k % 5 == 4 else iono), configs[k % 3], rng
+
+
+def test_one_instant_kernels_equal_the_numpy_form(nav, monkeypatch):
+    """Every record in force (GEO, IGSO, MEO), receivers from below sea level to above the
+    troposphere's 11 km, both hemispheres, seeded and unseeded travel times, each
+    atmosphere switch."""
+    ephs = _ephs_in_force(nav)
+    assert any(is_geo(e.prn) for e in ephs) and any(not is_geo(e.prn) for e in ephs)
+    for r, sow, ion, cfg, rng in _cases(nav, 47):
         b = rng.uniform(-3e5, 3e5)
-        cfg = configs[k % 3]
-        ion = None if k % 5 == 4 else iono
         fast, ref = _both(monkeypatch, ephs, WEEK, [sow], [r], [b], ion, config=cfg)
         _assert_agree(fast, ref)
         # the deep loop's call: seeded by the last travel times, one pass
@@ -118,24 +130,10 @@ def test_pvt_atmosphere_kernel_equals_the_numpy_form(nav, monkeypatch):
     above 11 km, every atmosphere switch, satellites below the horizon included."""
     from sdr_di.receiver import pvt
 
-    ephs = []
-    for p in nav.prns:
-        try:
-            ephs.append(nav.select(p, WEEK, SOW0))
-        except NoEphemerisError:
-            pass
+    ephs = _ephs_in_force(nav)
     iono = assistance_klobuchar(nav)[0]
-    rng = np.random.default_rng(28)
-    configs = [PvtConfig(), PvtConfig(ionosphere=False), PvtConfig(troposphere=False)]
-    for k in range(40):
-        lat, lon = rng.uniform(-80, 80), rng.uniform(-180, 180)
-        h = rng.choice([-50.0, 30.0, 4000.0, 15000.0]) + rng.uniform(0, 10)
-        r = llh_to_ecef(math.radians(lat), math.radians(lon), h)
-        sow = SOW0 + rng.uniform(-3600.0, 3600.0)
-        pred = range_model.predict_ranges(ephs, WEEK, [sow], [r], [0.0], iono)
-        r_rot = pred.r_sat[:, 0]
-        cfg = configs[k % 3]
-        ion = None if k % 5 == 4 else iono
+    for r, sow, ion, cfg, _ in _cases(nav, 28):
+        r_rot = range_model.predict_ranges(ephs, WEEK, [sow], [r], [0.0], iono).r_sat[:, 0]
         fast = pvt.atmosphere_delays(r, r_rot, sow, ion, cfg)
         monkeypatch.setattr(pvt, "jit", False)
         ref = pvt.atmosphere_delays(r, r_rot, sow, ion, cfg)
