@@ -114,7 +114,11 @@ def iono_delay_b3i_m(iono: Klobuchar, lat, lon, el, az, t_sow) -> np.ndarray:
     return C_LIGHT * B1I_TO_B3I * klobuchar_delay(iono, lat, lon, el, az, t_sow)
 
 
-def saastamoinen_delay(lat, h, el, humidity: float = 0.5) -> np.ndarray:
+#: Relative humidity of the standard atmosphere (the Saastamoinen functions' default).
+STANDARD_HUMIDITY = 0.5
+
+
+def saastamoinen_delay(lat, h, el, humidity: float = STANDARD_HUMIDITY) -> np.ndarray:
     """Saastamoinen tropospheric slant delay [m] with a standard atmosphere (vectorized).
 
     Parameters
@@ -146,7 +150,7 @@ def saastamoinen_delay(lat, h, el, humidity: float = 0.5) -> np.ndarray:
     return np.where(el > 0.0, saastamoinen_zenith(lat, h, humidity) / sin_el, 0.0)
 
 
-def saastamoinen_zenith(lat, h, humidity: float = 0.5):
+def saastamoinen_zenith(lat, h, humidity: float = STANDARD_HUMIDITY):
     """Zenith total (hydrostatic + wet) delay [m] of :func:`saastamoinen_delay`'s standard
     atmosphere (its slant delay is this over ``sin(el)``): geodetic latitude ``lat`` [rad],
     ellipsoidal height ``h`` [m] (clipped to 0..11000 m); arrays or numpy scalars.
@@ -167,7 +171,7 @@ def _zenith_wet(hc, humidity: float):
     return 0.002277 * (1255.0 / T + 0.05) * e
 
 
-def saastamoinen_zenith_wet(h, humidity: float = 0.5) -> np.ndarray:
+def saastamoinen_zenith_wet(h, humidity: float = STANDARD_HUMIDITY) -> np.ndarray:
     """Zenith wet delay [m] of :func:`saastamoinen_delay`'s standard atmosphere (its slant
     wet part is this over ``sin(el)``); ``h`` ellipsoidal height [m], clipped to 0..11000 m.
     About 0.086 m at sea level with 50 % humidity."""

@@ -79,8 +79,8 @@ import numpy as np
 from ..constants import C_LIGHT, OMEGA_E, SECONDS_PER_WEEK
 from ..errors import NoEphemerisError, UnknownPrnError
 from ..frames import C_e_n, ecef_to_llh, elevation_azimuth
-from ..orbits.atmosphere import (B1I_TO_B3I, KLOBUCHAR_H_M, KLOBUCHAR_R_M, iono_delay_b3i_m,
-                                 saastamoinen_delay)
+from ..orbits.atmosphere import (B1I_TO_B3I, KLOBUCHAR_H_M, KLOBUCHAR_R_M, STANDARD_HUMIDITY,
+                                 iono_delay_b3i_m, saastamoinen_delay)
 from ..orbits.broadcast import sat_pos_vel_clock_stacked, stack_ephemerides
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from . import _numba_range_model as _k
@@ -111,11 +111,10 @@ __all__ = [
 ]
 
 _EL_FLOOR = math.radians(0.1)
-#: Klobuchar's ``R / (R + h)`` and ``c (f_B1I / f_B3I)^2`` [m/s], the troposphere model's
-#: relative humidity (``saastamoinen_delay``'s default): the atmosphere kernel's constants
+#: Klobuchar's ``R / (R + h)`` and ``c (f_B1I / f_B3I)^2`` [m/s]: the atmosphere kernel's
+#: constants
 _RATIO_K = KLOBUCHAR_R_M / (KLOBUCHAR_R_M + KLOBUCHAR_H_M)
 _IONO_M_PER_S = C_LIGHT * B1I_TO_B3I
-_HUMIDITY = 0.5
 _ZERO4 = np.zeros(4)
 #: Whether :func:`atmosphere_delays` runs the range model's atmosphere kernel
 #: (:func:`._numba_range_model.atmosphere`, one call; the numpy form's values to a few
@@ -439,13 +438,21 @@ def atmosphere_delays(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,
     r_sat_rot = np.asarray(r_sat_rot, float).reshape(-1, 3)
     n = r_sat_rot.shape[0]
     el, az, trop, ion = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    _k.atmosphere(r_sat_rot, np.asarray(r_rx, float).reshape(3), float(t_sow),
+                  *atmosphere_kernel_args(iono, cfg), el, az, trop, ion)
+    return el, az, trop, ion
+
+
+def atmosphere_kernel_args(iono: Klobuchar | None, cfg: PvtConfig) -> tuple:
+    """The atmosphere kernel's arguments after the receive time
+    (:func:`._numba_range_model.atmosphere`, also :func:`~._numba_range_model.
+    predict_instant`'s): the ionosphere switch and Klobuchar ``alpha``, ``beta``, the
+    troposphere switch and humidity, the elevation floor and the Klobuchar constants."""
     ion_on = bool(cfg.ionosphere and iono is not None)
     alpha, beta = (np.asarray(iono.alpha, float), np.asarray(iono.beta, float)) if ion_on \
         else (_ZERO4, _ZERO4)
-    _k.atmosphere(r_sat_rot, np.asarray(r_rx, float).reshape(3), float(t_sow), ion_on,
-                  alpha, beta, bool(cfg.troposphere), _HUMIDITY, _EL_FLOOR, _RATIO_K,
-                  _IONO_M_PER_S, el, az, trop, ion)
-    return el, az, trop, ion
+    return (ion_on, alpha, beta, bool(cfg.troposphere), STANDARD_HUMIDITY, _EL_FLOOR,
+            _RATIO_K, _IONO_M_PER_S)
 
 
 def atmosphere_delays_numpy(r_rx: np.ndarray, r_sat_rot: np.ndarray, t_sow: float,

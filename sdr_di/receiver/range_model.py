@@ -31,8 +31,8 @@ from ..orbits.broadcast import (GEO_INCLINATION_ROT, sat_pos_vel_clock_stacked,
                                 stack_ephemerides)
 from ..orbits.ephemeris import Ephemeris, Klobuchar
 from . import _numba_range_model as _k
-from .pvt import (_EL_FLOOR, _HUMIDITY, _IONO_M_PER_S, _RATIO_K, _ZERO4, PvtConfig,
-                  atmosphere_delays_numpy, sagnac_rotation)
+from .pvt import (PvtConfig, atmosphere_delays_numpy, atmosphere_kernel_args,
+                  sagnac_rotation)
 
 __all__ = ["RangePrediction", "predict_ranges"]
 
@@ -135,17 +135,14 @@ def _predict_one_instant(stack, week: int, t_r: float, r: np.ndarray, b: float,
     ``t_r`` BDT of reception [s of week], ``r`` (3,) [m], ``b`` [m], ``tau`` (n,)
     travel-time seeds [s], overwritten)."""
     n = stack.size
-    ion_on = bool(cfg.ionosphere and iono is not None)
-    alpha, beta = (np.asarray(iono.alpha, float), np.asarray(iono.beta, float)) if ion_on \
-        else (_ZERO4, _ZERO4)
     r_rot = np.empty((n, 3))
     v_sat = np.empty((n, 3))
     P = np.empty((n, 1))
     Pc = np.empty((n, 1))
     U = np.empty((n, 1, 3))
     _k.predict_instant(stack.table, stack.geo, _GEO_CX, _GEO_SX, float(week), t_r,
-                       np.ascontiguousarray(r, float), b, tau, passes, ion_on, alpha, beta,
-                       bool(cfg.troposphere), _HUMIDITY, _EL_FLOOR, _RATIO_K, _IONO_M_PER_S,
-                       r_rot, v_sat, P[:, 0], Pc[:, 0], U[:, 0])
+                       np.ascontiguousarray(r, float), b, tau, passes,
+                       *atmosphere_kernel_args(iono, cfg), r_rot, v_sat, P[:, 0], Pc[:, 0],
+                       U[:, 0])
     return RangePrediction(P=P, Pc=Pc, tau=tau.reshape(n, 1), r_sat=r_rot.reshape(n, 1, 3),
                            v_sat=v_sat.reshape(n, 1, 3), U=U)
