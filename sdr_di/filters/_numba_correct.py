@@ -16,6 +16,33 @@ from numba import njit
 
 
 @njit(cache=True, boundscheck=False)
+def cholesky_lower(A, L):
+    """Lower Cholesky factor ``L`` (n, n) of ``A`` (n, n; its lower triangle read), the upper
+    triangle zeroed. Returns False (``L`` unfinished) when ``A`` is not positive definite
+    (a pivot not above zero, or NaN). The correction's and the sigma points' factor
+    (:func:`sdr_di.filters._numba_sigma.draw`; numba's cache does not see a change here
+    from that module: delete its cache files after editing this function, speed notes,
+    session 27)."""
+    n = A.shape[0]
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return False
+        d = math.sqrt(s)
+        L[j, j] = d
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / d
+        for i in range(j):
+            L[i, j] = 0.0
+    return True
+
+
+@njit(cache=True, boundscheck=False)
 def correct(x, P, y, Pzz, Pxz, R, S, L, S_inv, K, x_out, P_out):
     """The correction of prior ``x`` (n,), ``P`` (n, n) by innovation ``y`` (m,) with the
     prediction's ``Pzz`` (m, m), ``Pxz`` (n, m) and noise ``R`` (m, m). Out: ``S = sym(Pzz
@@ -29,24 +56,11 @@ def correct(x, P, y, Pzz, Pxz, R, S, L, S_inv, K, x_out, P_out):
             S[i, j] = 0.5 * ((Pzz[i, j] + R[i, j]) + (Pzz[j, i] + R[j, i]))
             if not math.isfinite(S[i, j]):
                 return False, 0.0, 0.0
-    # Cholesky S = L L^T
+    if not cholesky_lower(S, L):
+        return False, 0.0, 0.0
     log_det = 0.0
     for j in range(m):
-        s = S[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False, 0.0, 0.0
-        d = math.sqrt(s)
-        L[j, j] = d
-        log_det += math.log(d)
-        for i in range(j + 1, m):
-            s = S[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / d
-        for i in range(j):
-            L[i, j] = 0.0
+        log_det += math.log(L[j, j])
     # S^-1 = L^-T L^-1 from the lower inverse L^-1 (forward substitution)
     Li = np.zeros((m, m))
     for j in range(m):

@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ._numba_correct import cholesky_lower
+
 
 @njit(cache=True, boundscheck=False)
 def moments(Y, wm, wc, mean, cov, D, delta):
@@ -75,20 +77,9 @@ def draw(x, P, xi, X, dX):
         for j in range(n):
             if not math.isfinite(P[i, j]):
                 return False
-    L = np.zeros((n, n))
-    for j in range(n):
-        s = P[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        d = math.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, n):
-            s = P[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / d
+    L = np.empty((n, n))
+    if not cholesky_lower(P, L):
+        return False
     for i in range(xi.shape[0]):
         for a in range(n):
             s = 0.0
