@@ -25,17 +25,11 @@ last bit, so the kernel's ranges equal the numpy form's to a few ulp (about 1e-8
     the travel-time iteration of :func:`~sdr_di.receiver.pvt.sagnac_rotation`.
 :func:`ecef_to_llh`
     the receiver's geodetic position (the iteration of :func:`sdr_di.frames.ecef_to_llh`).
-:func:`line_of_sight_enu`
-    ENU components of the lines of sight.
-:func:`klobuchar_1`, :func:`klobuchar_2`, :func:`klobuchar_3`
-    azimuth, floored elevation and the pierce point between the ``asin`` steps.
 :func:`saastamoinen_zenith`
     the troposphere's zenith delay (:func:`sdr_di.orbits.atmosphere.saastamoinen_zenith`).
 :func:`atmosphere`
-    elevations, azimuths and both delays of one receiver (also the PVT's,
-    :func:`sdr_di.receiver.pvt.atmosphere_delays`), made of :func:`line_of_sight_enu`,
-    :func:`klobuchar_1` to ``_3``, :func:`saastamoinen_zenith` and :func:`delays` (the
-    Klobuchar delay's rest and the troposphere's slant delay);
+    elevations, azimuths and both delays of one receiver, satellite by satellite (also the
+    PVT's, :func:`sdr_di.receiver.pvt.atmosphere_delays`), with :func:`_klobuchar_m`;
 :func:`ranges`
     ``P``, ``Pc`` and the unit lines of sight.
 """
@@ -153,43 +147,6 @@ def sagnac(r_sat, r_rx, r_rot, rho):
 
 
 @njit(cache=True, boundscheck=False)
-def line_of_sight_enu(r_rot, r_rx, sl, cl, so, co, h01, y, x):
-    """ENU components of ``r_rot - r_rx`` at geodetic latitude/longitude with sines and
-    cosines ``sl, cl, so, co`` (``np.einsum``'s order of the sums): ``h01`` (2, n) East,
-    North (for ``hypot``), ``y`` (2 n,) Up then East, ``x[n:]`` North (``arctan2(y, x)``
-    gives elevation then unreduced azimuth once ``x[:n]`` holds the horizontal norms)."""
-    n = r_rot.shape[0]
-    for i in range(n):
-        d0, d1, d2 = r_rot[i, 0] - r_rx[0], r_rot[i, 1] - r_rx[1], r_rot[i, 2] - r_rx[2]
-        e = 0.0 + ((-so * d0 + 0.0 * d2) + co * d1)
-        nn = 0.0 + ((-sl * co * d0 + cl * d2) + -sl * so * d1)
-        u = 0.0 + ((cl * co * d0 + sl * d2) + cl * so * d1)
-        h01[0, i] = e
-        h01[1, i] = nn
-        y[i] = u
-        y[n + i] = e
-        x[n + i] = nn
-
-
-@njit(cache=True, boundscheck=False)
-def klobuchar_1(el_az, el_floor, ratio_k, w):
-    """From ``el_az`` (2 n,) (elevations, unreduced azimuths [rad]): rows of ``w``:
-    0 elevation floored at ``el_floor``, 1 azimuth in [0, 2 pi), 2 ``el_c = max(el, 0)``,
-    3 ``R / (R + h) cos el_c`` (``ratio_k = R / (R + h)``)."""
-    n = w.shape[1]
-    for i in range(n):
-        el = el_az[i]
-        el_pos = el if (el >= el_floor or el != el) else el_floor
-        a = el_az[n + i]
-        az = a % _TWO_PI            # Python's and numpy's float modulo: the same rule
-        el_c = el_pos if (el_pos >= 0.0 or el_pos != el_pos) else 0.0
-        w[0, i] = el_pos
-        w[1, i] = az
-        w[2, i] = el_c
-        w[3, i] = ratio_k * math.cos(el_c)
-
-
-@njit(cache=True, boundscheck=False)
 def _clip1(a):
     if a < -1.0:
         return -1.0
@@ -199,53 +156,22 @@ def _clip1(a):
 
 
 @njit(cache=True, boundscheck=False)
-def klobuchar_2(w, asin_ratio, sl, cl, out):
-    """Row 4 of ``w``: ``psi = pi/2 - el_c - arcsin(ratio)``; ``out`` (n,): the clipped
-    ``sin phi_M`` of the pierce point (argument of ``arcsin``)."""
-    for i in range(w.shape[1]):
-        psi = math.pi / 2.0 - w[2, i] - asin_ratio[i]
-        w[4, i] = psi
-        out[i] = _clip1(sl * math.cos(psi) + cl * math.sin(psi) * math.cos(w[1, i]))
-
-
-@njit(cache=True, boundscheck=False)
-def klobuchar_3(w, phi_m, out):
-    """``out`` (n,): the clipped ``sin(lam_M - lam_u)`` of the pierce point."""
-    for i in range(w.shape[1]):
-        psi = w[4, i]
-        out[i] = _clip1(math.sin(psi) * math.sin(w[1, i]) / math.cos(phi_m[i]))
-
-
-@njit(cache=True, boundscheck=False)
-def delays(wa, phi_m, asin_lam, lon, t_day, alpha, beta, iono_m_per_s, ion_on, zenith_m,
-           trop_on, trop, ion):
-    """The troposphere's slant delay ``zenith_m / sin(max(el, 1e-3))`` and the Klobuchar
-    delay's rest (``t_day = mod(t, 86400)`` [s], ``iono_m_per_s = c (f_B1I / f_B3I)^2``)
-    into ``trop``, ``ion`` (n,) [m], zero at non-positive floored elevations or with the
-    switch (``ion_on``, ``trop_on``) off."""
-    for i in range(wa.shape[1]):
-        el_pos = wa[0, i]
-        d_ion = 0.0
-        if ion_on:
-            lam_m = lon + asin_lam[i]
-            tl = (t_day + lam_m * 43200.0 / math.pi) % 86400.0
-            x = abs(phi_m[i] / math.pi)
-            A2 = alpha[0] + x * (alpha[1] + x * (alpha[2] + x * alpha[3]))
-            A2 = A2 if (A2 >= 0.0 or A2 != A2) else 0.0
-            A4 = beta[0] + x * (beta[1] + x * (beta[2] + x * beta[3]))
-            A4 = _clip(A4, 72000.0, 172800.0)
-            dt = tl - 50400.0
-            day = A2 * math.cos(2.0 * math.pi * dt / A4) if abs(dt) < A4 / 4.0 else 0.0
-            Iz = 5.0e-9 + day
-            ratio = wa[3, i]
-            delay = Iz / math.sqrt(1.0 - ratio * ratio)
-            d_ion = iono_m_per_s * (delay if el_pos > 0.0 else 0.0)
-        d_trop = 0.0
-        if trop_on:
-            sin_el = math.sin(el_pos if el_pos >= 1e-3 or el_pos != el_pos else 1e-3)
-            d_trop = zenith_m / sin_el if el_pos > 0.0 else 0.0
-        trop[i] = d_trop
-        ion[i] = d_ion
+def _klobuchar_m(phi_m, asin_lam, lon, t_day, alpha, beta, ratio, iono_m_per_s):
+    """B3I Klobuchar code delay [m] from the pierce point's geomagnetic latitude ``phi_m``
+    [rad], ``asin_lam`` (its longitude less the receiver's ``lon``) [rad], ``t_day =
+    mod(t, 86400)`` [s] and ``ratio = R / (R + h) cos(el)``; ``iono_m_per_s = c (f_B1I /
+    f_B3I)^2`` (:func:`sdr_di.orbits.atmosphere.klobuchar_delay`)."""
+    lam_m = lon + asin_lam
+    tl = (t_day + lam_m * 43200.0 / math.pi) % 86400.0
+    x = abs(phi_m / math.pi)
+    A2 = alpha[0] + x * (alpha[1] + x * (alpha[2] + x * alpha[3]))
+    A2 = A2 if (A2 >= 0.0 or A2 != A2) else 0.0
+    A4 = beta[0] + x * (beta[1] + x * (beta[2] + x * beta[3]))
+    A4 = _clip(A4, 72000.0, 172800.0)
+    dt = tl - 50400.0
+    day = A2 * math.cos(2.0 * math.pi * dt / A4) if abs(dt) < A4 / 4.0 else 0.0
+    Iz = 5.0e-9 + day
+    return iono_m_per_s * (Iz / math.sqrt(1.0 - ratio * ratio))
 
 
 @njit(cache=True, boundscheck=False)
@@ -268,42 +194,38 @@ def atmosphere(r_rot, r_rx, t_r, ion_on, alpha, beta, trop_on, humidity, el_floo
     ionospheric delays [m] (n,) of satellites ``r_rot`` (n, 3) seen from the receiver
     ``r_rx`` (3,) [m] at BDT ``t_r`` [s of week]: :func:`sdr_di.receiver.pvt.
     atmosphere_delays` (its numpy form). Arguments after ``t_r`` as
-    :func:`predict_instant`'s."""
-    n = r_rot.shape[0]
+    :func:`predict_instant`'s. The ENU components are summed in ``np.einsum``'s order;
+    elevations are floored at ``el_floor`` for the delays, which are zero at non-positive
+    floored elevations or with the switch (``ion_on``, ``trop_on``) off."""
     lat, lon, h = ecef_to_llh(r_rx)
     sl, cl, so, co = math.sin(lat), math.cos(lat), math.sin(lon), math.cos(lon)
-    h01 = np.empty((2, n))
-    y = np.empty(2 * n)
-    x = np.empty(2 * n)
-    line_of_sight_enu(r_rot, r_rx, sl, cl, so, co, h01, y, x)
-    el_az = np.empty(2 * n)
-    for i in range(n):
-        x[i] = math.hypot(h01[0, i], h01[1, i])
-    for i in range(2 * n):
-        el_az[i] = math.atan2(y[i], x[i])
-    wa = np.empty((5, n))
-    klobuchar_1(el_az, el_floor, ratio_k, wa)
-    phi_m = np.zeros(n)
-    asin_lam = np.zeros(n)
-    t_day = 0.0
-    if ion_on:
-        arg = np.empty(n)
-        asin_ratio = np.empty(n)
-        for i in range(n):
-            asin_ratio[i] = math.asin(wa[3, i])
-        klobuchar_2(wa, asin_ratio, sl, cl, arg)
-        for i in range(n):
-            phi_m[i] = math.asin(arg[i])
-        klobuchar_3(wa, phi_m, arg)
-        for i in range(n):
-            asin_lam[i] = math.asin(arg[i])
-        t_day = t_r % 86400.0
     zenith_m = saastamoinen_zenith(lat, h, humidity) if trop_on else 0.0
-    delays(wa, phi_m, asin_lam, lon, t_day, alpha, beta, iono_m_per_s, ion_on, zenith_m,
-           trop_on, trop, ion)
-    for i in range(n):
-        el[i] = el_az[i]
-        az[i] = wa[1, i]
+    t_day = t_r % 86400.0 if ion_on else 0.0
+    for i in range(r_rot.shape[0]):
+        d0, d1, d2 = r_rot[i, 0] - r_rx[0], r_rot[i, 1] - r_rx[1], r_rot[i, 2] - r_rx[2]
+        e = 0.0 + ((-so * d0 + 0.0 * d2) + co * d1)
+        nn = 0.0 + ((-sl * co * d0 + cl * d2) + -sl * so * d1)
+        u = 0.0 + ((cl * co * d0 + sl * d2) + cl * so * d1)
+        el_i = math.atan2(u, math.hypot(e, nn))
+        az_i = math.atan2(e, nn) % _TWO_PI     # Python's and numpy's float modulo alike
+        el_pos = el_i if (el_i >= el_floor or el_i != el_i) else el_floor
+        el_c = el_pos if (el_pos >= 0.0 or el_pos != el_pos) else 0.0
+        ratio = ratio_k * math.cos(el_c)
+        d_ion = 0.0
+        if ion_on and el_pos > 0.0:
+            psi = math.pi / 2.0 - el_c - math.asin(ratio)
+            phi_m = math.asin(_clip1(sl * math.cos(psi) + cl * math.sin(psi) * math.cos(az_i)))
+            asin_lam = math.asin(_clip1(math.sin(psi) * math.sin(az_i) / math.cos(phi_m)))
+            d_ion = _klobuchar_m(phi_m, asin_lam, lon, t_day, alpha, beta, ratio,
+                                 iono_m_per_s)
+        d_trop = 0.0
+        if trop_on:
+            sin_el = math.sin(el_pos if el_pos >= 1e-3 or el_pos != el_pos else 1e-3)
+            d_trop = zenith_m / sin_el if el_pos > 0.0 else 0.0
+        el[i] = el_i
+        az[i] = az_i
+        trop[i] = d_trop
+        ion[i] = d_ion
 
 
 @njit(cache=True, boundscheck=False)
