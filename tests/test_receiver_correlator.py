@@ -559,7 +559,7 @@ def test_thread_choice_is_made_per_call_size(monkeypatch):
     m = kt.max_threads
     if m < 2:
         pytest.skip("needs two numba threads")
-    small, large = 2e3, 2e6              # samples per call
+    small, large = 1.5 * 2**20, 2**23    # samples per call, both large enough to split
     cost = {(small, 1): 1e-9, (small, m): 5e-9, (large, 1): 2e-9, (large, m): 1e-9}
 
     def call(work):
@@ -574,6 +574,25 @@ def test_thread_choice_is_made_per_call_size(monkeypatch):
     assert call(large) == m and call(small) == 1 and call(large) == m
     assert kt.costs[int(np.log2(small))] == pytest.approx({1: 1e-9, m: 5e-9})
     assert kt.costs[int(np.log2(large))] == pytest.approx({1: 2e-9, m: 1e-9})
+
+
+def test_small_calls_run_on_one_thread(monkeypatch):
+    """A call of fewer than SPLIT_MIN_SAMPLES samples runs on the caller, even where the
+    split measured cheaper per call (receiver.threads, *Small calls on one thread*: whole
+    2.5 and 5 MHz runs took 20-55 % more CPU split); a call of that many samples may still
+    split; a fixed thread count (SDR_DI_KERNEL_THREADS) is kept for every size."""
+    from sdr_di.receiver.threads import ENV_THREADS, SPLIT_MIN_SAMPLES, KernelThreads
+
+    monkeypatch.delenv(ENV_THREADS, raising=False)
+    kt = KernelThreads()
+    m = kt.max_threads
+    if m < 2:
+        pytest.skip("needs two numba threads")
+    for work in (SPLIT_MIN_SAMPLES - 1, float(SPLIT_MIN_SAMPLES)):
+        kt.costs[int(np.log2(work))] = {1: 3e-9, m: 1e-9}     # the split cheaper
+    assert {kt.pick(SPLIT_MIN_SAMPLES - 1) for _ in range(600)} == {1}
+    assert kt.pick(float(SPLIT_MIN_SAMPLES)) == m
+    assert KernelThreads(2).pick(1e3) == min(2, m)
 
 
 def _split_in_child():

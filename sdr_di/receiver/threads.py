@@ -14,6 +14,35 @@ CPU time (6.0-6.1 ms) for the first two, 14.9 ms for ``prange``.
 A row's sums never depend on which thread computes it (one task per row), so the results
 are identical whatever the thread count or the split.
 
+Small calls on one thread
+-------------------------
+A call of fewer than :data:`SPLIT_MIN_SAMPLES` samples (all rows together) runs on the
+calling thread, whatever the measured costs say. The split's price is not all inside the
+call that :meth:`RowsCall.wait` times: the worker's hand-off and its Python after the kernel
+take the GIL from the caller's Python between the calls, and the futex wake-ups add system
+time. Whole runs on the 2-core VM (2026-12-08, ``SDR_DI_KERNEL_THREADS`` 1 against 2,
+two rounds each, default scenario; ``docs/notes/speed.md``, session 29), CPU-s (wall s):
+
+=====================  ======================  ==========================  ======================
+file, calls' samples   mode                    one thread                  split
+=====================  ======================  ==========================  ======================
+2.5 MHz 60 s, 2^17-18  scalar / deep           5.8, 5.6 (5.3, 5.1) /       8.1, 8.4 (6.5, 6.7) /
+                                               6.5, 6.2 (6.0, 5.7)         7.8, 9.4 (6.0, 7.3)
+5 MHz 40 s, 2^18-19    scalar / deep           6.8, 6.0 (6.2, 5.4) /       8.2, 8.3 (6.2, 6.3) /
+                                               5.7, 5.9 (5.1, 5.3)         7.9, 9.1 (5.9, 6.9)
+10 MHz 40 s, 2^19-20   scalar / deep           10.5, 9.4 (9.5, 8.5) /      11.6, 10.9 (8.2, 7.6) /
+                                               10.6, 8.9 (9.7, 8.0)        10.7, 11.3 (7.4, 7.9)
+25 MHz 40 s, 2^20-21   scalar / deep           12.7, 14.0 (11.5, 12.6) /   16.3, 13.2 (10.7, 8.6) /
+                                               12.4, 13.2 (11.1, 11.7)     14.7, 12.9 (9.7, 8.4)
+=====================  ======================  ==========================  ======================
+
+Below 2^19 samples a call (2.5 and 5 MHz) the split cost 20-55 % more CPU and saved no
+wall time (mostly it took more), though the adaptive choice below, which times each call
+alone, took it. From 10 MHz up it saved 1-32 % of the wall time for -6 to +28 % of CPU.
+The bound sits between: a 10 MHz scalar run's calls (2^19) now run on one thread, 11-14 %
+slower in wall and as much cheaper in CPU; calls of 2^20 samples and more (10 MHz deep,
+25 MHz) are left to the adaptive choice.
+
 :class:`KernelThreads` measures both settings (1 thread and numba's thread count), re-explores
 the other one for 1 call in every 256, and uses the split unless one thread costs less than 0.8
 of it per sample. The first call of each setting
@@ -59,11 +88,16 @@ import numpy as np
 
 from ..settings import KERNEL_THREADS, kernel_threads
 
-__all__ = ["KernelThreads", "RowsCall", "balanced_cuts", "split_stats", "wait_for_split_calls"]
+__all__ = ["SPLIT_MIN_SAMPLES", "KernelThreads", "RowsCall", "balanced_cuts", "split_stats",
+           "wait_for_split_calls"]
 
 #: Environment variable fixing the thread count of every automatic :class:`KernelThreads`
 #: (benchmarks: ``scripts/bench_deep.py --kernel-threads``).
 ENV_THREADS = KERNEL_THREADS
+#: Fewest samples (all rows of a call together) for which :meth:`KernelThreads.pick` may
+#: split a call; smaller calls run on the calling thread (module notes, *Small calls on one
+#: thread*).
+SPLIT_MIN_SAMPLES = 1 << 20
 #: Interpreter switch interval while the caller runs ``before`` in :meth:`KernelThreads.
 #: run_rows` [s] (default 5 ms: a worker that ends its part would wait that long for the
 #: GIL to return).
@@ -202,7 +236,7 @@ class KernelThreads:
         self._calls[size] = calls + 1
         if self.fixed is not None:
             t = self.fixed
-        elif self.max_threads == 1:
+        elif self.max_threads == 1 or work < SPLIT_MIN_SAMPLES:
             t = 1
         else:
             c1, cm = cost[1], cost[self.max_threads]
