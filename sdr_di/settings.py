@@ -7,8 +7,8 @@ variable                   meaning                                              
                            samples, the low-rate kernel below ~10.6 MHz; ``float``:      and ``GATHER_PATH`` (read when that
                            the float32 reference kernel for every input                  module is imported)
                            (docs/notes/correlator.md)
-``SDR_DI_KERNEL_THREADS``  threads of the correlation kernels (default: chosen per       :class:`sdr_di.receiver.threads.KernelThreads`
-                           call size from measured costs)
+``SDR_DI_KERNEL_THREADS``  threads of the correlation kernels (default: one for calls     :class:`sdr_di.receiver.threads.KernelThreads`
+                           under 2^20 samples, else chosen from measured costs)
 ``SDR_DI_LOOP_THREAD``     ``1``: the integration loop runs on a thread of the run's     :meth:`sdr_di.integration.loop_process.LoopChild.start`
                            process instead of a child process
 ``OMP_WAIT_POLICY``        numba's OpenMP workers; the generator and the receivers ask   :func:`passive_kernel_workers` (``sim.ifgen.IfGenerator``,

@@ -73,7 +73,7 @@ def add_task_parts(part, n_sub, out):
                 out[c, j, 1] += part[t, 2 * j + 1]
 
 
-#: Columns between the exactly evaluated entries of a rotation table (:func:`rotation_tables`).
+#: Columns between the anchors of a rotation table (:func:`rotation_tables`).
 ROT_ANCHOR = 16
 
 
@@ -83,32 +83,48 @@ def rotation_tables(dphi, rot_re, rot_im):
     evaluated in float64 and rounded to float32.
 
     With ``m = i + j``, ``i`` a multiple of ``S = ROT_ANCHOR`` and ``j < S``, the phasor is
-    the float64 product of ``exp(j 2 pi a_i)`` and ``exp(j 2 pi a_j)``, each from libm on its
-    phase ``a = m dphi`` reduced to ``[0, 1)`` cycles (angle addition): ``2 S`` libm calls a
-    row of ``B`` columns instead of ``2 B`` (256 columns: 32 against 512; 140 rows, one deep
-    interval, 0.13 against 0.46 ms). Each value is within a few float64 ulp of the directly
-    evaluated ``cos``/``sin`` of the reduced ``m dphi``; after the rounding to float32 about
-    one value in 1.5 million lies one float32 ulp (6e-8 at most) from the directly evaluated
-    one, and the integer kernel's tables (``rint(127 v)``) were equal in all of 51 million
-    values of random steps (``tests/test_receiver_correlator.py``)."""
+    the float64 product of ``exp(j 2 pi i dphi)`` and ``exp(j 2 pi j dphi)`` (angle
+    addition). Both factors come from two libm evaluations a row, ``exp(j 2 pi dphi)`` and
+    ``exp(j 2 pi S dphi)`` on their phases reduced to ``[0, 1)`` cycles, by complex
+    products in float64 (``S - 1`` steps each): 4 libm calls a row instead of 32 with
+    every factor from libm (256 columns; 140 rows, one deep interval at 2.5 MHz: 0.046
+    against 0.10 ms; 0.46 ms with every column from libm). Each value is within about
+    1e-14 of the directly evaluated ``cos``/``sin`` of the reduced ``m dphi``; after the
+    rounding to float32 about one value in 3 million lies one float32 ulp (6e-8 at most)
+    from the directly rounded one (the libm factors: one in 1.5 million), and the integer
+    kernel's tables (``rint(127 v)``) were equal in all of 400 million values of random
+    steps (``tests/test_receiver_correlator.py``, docs/notes/speed.md session 29)."""
     two_pi = 2.0 * math.pi
     n = rot_re.shape[1]
     c_j = np.empty(ROT_ANCHOR)
     s_j = np.empty(ROT_ANCHOR)
     for r in range(dphi.shape[0]):
         d = dphi[r]
-        for j in range(min(ROT_ANCHOR, n)):
-            a = d * float(j)
-            a -= math.floor(a)
-            a *= two_pi
-            c_j[j] = math.cos(a)
-            s_j[j] = math.sin(a)
+        rr = rot_re[r]
+        ri = rot_im[r]
+        a = (d - math.floor(d)) * two_pi
+        c1 = math.cos(a)
+        s1 = math.sin(a)
+        a = d * float(ROT_ANCHOR)
+        a = (a - math.floor(a)) * two_pi
+        c_step = math.cos(a)
+        s_step = math.sin(a)
+        c_j[0] = 1.0
+        s_j[0] = 0.0
+        for j in range(1, ROT_ANCHOR):
+            c_j[j] = c_j[j - 1] * c1 - s_j[j - 1] * s1
+            s_j[j] = s_j[j - 1] * c1 + c_j[j - 1] * s1
+        c_i = 1.0
+        s_i = 0.0
         for i in range(0, n, ROT_ANCHOR):
-            a = d * float(i)
-            a -= math.floor(a)
-            a *= two_pi
-            c_i = math.cos(a)
-            s_i = math.sin(a)
-            for j in range(min(ROT_ANCHOR, n - i)):
-                rot_re[r, i + j] = np.float32(c_i * c_j[j] - s_i * s_j[j])
-                rot_im[r, i + j] = np.float32(-(s_i * c_j[j] + c_i * s_j[j]))
+            if i + ROT_ANCHOR <= n:     # a whole anchor span (a constant trip count: SIMD)
+                for j in range(ROT_ANCHOR):
+                    rr[i + j] = np.float32(c_i * c_j[j] - s_i * s_j[j])
+                    ri[i + j] = np.float32(-(s_i * c_j[j] + c_i * s_j[j]))
+            else:
+                for j in range(n - i):
+                    rr[i + j] = np.float32(c_i * c_j[j] - s_i * s_j[j])
+                    ri[i + j] = np.float32(-(s_i * c_j[j] + c_i * s_j[j]))
+            c_next = c_i * c_step - s_i * s_step
+            s_i = s_i * c_step + c_i * s_step
+            c_i = c_next
