@@ -90,10 +90,11 @@ def rotation_tables(dphi, rot_re, rot_im):
     every factor from libm (256 columns; 140 rows, one deep interval at 2.5 MHz: 0.046
     against 0.10 ms; 0.46 ms with every column from libm). Each value is within about
     1e-14 of the directly evaluated ``cos``/``sin`` of the reduced ``m dphi``; after the
-    rounding to float32 about one value in 3 million lies one float32 ulp (6e-8 at most)
-    from the directly rounded one (the libm factors: one in 1.5 million), and the integer
-    kernel's tables (``rint(127 v)``) were equal in all of 400 million values of random
-    steps (``tests/test_receiver_correlator.py``, docs/notes/speed.md session 29)."""
+    rounding to float32 about one value in 2.5 million lies one float32 ulp (6e-8 at most)
+    from the directly rounded one (41 of 102 million values of random steps), and the
+    integer kernel's tables (``rint(127 v)``) were equal to the directly rounded values'
+    in all of them (``tests/test_receiver_correlator.py``, docs/notes/speed.md session
+    29)."""
     two_pi = 2.0 * math.pi
     n = rot_re.shape[1]
     c_j = np.empty(ROT_ANCHOR)
