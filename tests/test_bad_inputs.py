@@ -9,6 +9,7 @@ compared before and after each case: a case that leaves a file (or a folder) beh
 
 from __future__ import annotations
 
+import gzip
 import json
 import shutil
 from pathlib import Path
@@ -16,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from sdr_di.cli import main
-from sdr_di.scenario import DEFAULT_SCENARIO
+from sdr_di.scenario import DEFAULT_SCENARIO, REPO_ROOT
 
 #: Arguments of a small valid set (0.02 s at 2.5 MHz): cheap to generate, and the base of the
 #: generate cases (so a case that wrongly starts work finishes quickly).
@@ -77,6 +78,10 @@ CASES: list[tuple] = [
     ("generate-ephemeris-missing", [*GD, "--ephemeris", "{d}/nope.rnx", "--out", "{d}/o"]),
     ("generate-ephemeris-binary", [*GD, "--ephemeris", "{d}/set/s.bin", "--out", "{d}/o"]),
     ("generate-ephemeris-csv", [*GD, "--ephemeris", "{d}/set/s_imu.csv", "--out", "{d}/o"]),
+    # a BDS record dated before the BDT epoch (year "0020" for "2020": a ValueError from the
+    # time conversion escaped the parser, found by tests/test_fuzz_parsers.py)
+    ("generate-ephemeris-year-0020", [*GD, "--ephemeris", "{d}/y0020_nav.rnx", "--out",
+                                      "{d}/o"]),
     ("generate-name-empty", [*GD, "--name", "", "--out", "{d}/o"]),
     ("generate-name-slash", [*GD, "--name", "a/b", "--out", "{d}/o"]),
     ("generate-name-dot", [*GD, "--name", ".hidden", "--out", "{d}/o"]),
@@ -437,6 +442,11 @@ def make_workdir(d: Path, generated: Path) -> None:
     (d / "short_imu.csv").write_text(
         "".join(ln for ln in lines if not ln[:1].isdigit()) + "".join(rows[:2]))
     (d / "empty.bin").write_bytes(b"")
+    nav = gzip.decompress((REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz")
+                          .read_bytes()).decode("latin-1").splitlines(keepends=True)
+    k = next(i for i, ln in enumerate(nav) if ln[:1] == "C" and ln[3:9] == " 2020 ")
+    nav[k] = nav[k][:3] + " 0020 " + nav[k][9:]
+    (d / "y0020_nav.rnx").write_text("".join(nav), encoding="latin-1")
     (d / "foreign").mkdir()                      # the IF file alone, without its sidecar
     shutil.copy(generated / "s.bin", d / "foreign" / "s.bin")
     shutil.copytree(generated, d / "trunc")      # an IF file cut short beside its sidecar
@@ -500,11 +510,7 @@ def _issue49_inputs(d: Path, generated: Path) -> None:
     """Inputs of issue 49's cases: a set beside its ephemeris and a scenario named like the
     outputs, a TOML nested 3000 deep, a million-cell study, text, constant and periodic
     bytes, a study spec with a plugin and a bad key."""
-    import gzip
-
     import numpy as np
-
-    from sdr_di.scenario import REPO_ROOT
 
     shutil.copytree(generated, d / "navset")
     nav = REPO_ROOT / "ephemeris" / "ESBC00DNK_R_20201770000_01D_MN.rnx.gz"

@@ -374,6 +374,21 @@ def test_the_seed_nav4_file_parses(generated):
     assert nav.prns == (1, 20) and nav.iono is not None
 
 
+def test_nav_record_before_the_bdt_epoch_is_the_parsers_error(generated):
+    """A record dated before 2006 (the year column "0023": hypothesis's find in
+    test_rinex4_nav_mutations) is an EphemerisError naming the line, not the time
+    conversion's ValueError."""
+    from sdr_di.errors import EphemerisError
+
+    lines = list(_NAV4)
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("C20 2023"))
+    lines[k] = lines[k].replace("C20 2023", "C20 0023", 1)
+    p = generated / "y0023.rnx"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(EphemerisError, match=f"line {k + 1} is before the BDT epoch"):
+        load_nav(p)
+
+
 @FUZZ
 @given(data=st.data())
 def test_rinex4_nav_mutations(generated, data):

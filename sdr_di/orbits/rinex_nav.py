@@ -554,7 +554,12 @@ def _record_to_ephemeris(start: int, lines: list[str], path: Path) -> tuple[Ephe
         raise EphemerisError(f"navigation file {path}: truncated {sv} record at line {start + 1} (end of file)")
     v = _fields_of_record(lines, start, path)
 
-    toc_week, toc = datetime_to_bdt(toc_dt)
+    try:
+        toc_week, toc = datetime_to_bdt(toc_dt)
+    except ValueError:          # before the BDT epoch (a year "0023" for "2023", say)
+        raise EphemerisError(
+            f"navigation file {path}: epoch {head[4:23].strip()!r} of {sv} record at line "
+            f"{start + 1} is before the BDT epoch 2006-01-01") from None
     week = int(round(v["week"]))
     toe = v["toe"]
     if not 0.0 <= toe < SECONDS_PER_WEEK:
