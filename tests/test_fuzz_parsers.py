@@ -432,6 +432,23 @@ _SP3 = gzip.decompress((REPO / "ephemeris" / "Sta21114.sp3.gz").read_bytes()).de
     "latin-1").splitlines()[:200]
 
 
+def test_sp3_utc_epochs_before_the_bdt_epoch_are_the_parsers_error(generated):
+    """An SP3 file on the UTC scale dated 2005 (no BDT - UTC leap seconds before 2006) is
+    an EphemerisError naming the file, not the leap-second table's ValueError."""
+    from sdr_di.errors import EphemerisError
+
+    lines = gzip.decompress((REPO / "ephemeris" / "Sta21114.sp3.gz").read_bytes()).decode(
+        "latin-1").splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("%c"))
+    lines[k] = lines[k].replace(" GPS ", " UTC ", 1)
+    lines = [ln.replace("*  2020", "*  2005", 1) for ln in lines]
+    p = generated / "utc2005.sp3"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(EphemerisError, match="utc2005.sp3: UTC time 2005-06-25 00:00:00 is "
+                                             "before the BDT epoch"):
+        load_sp3(p)
+
+
 @FUZZ
 @given(data=st.data(), gz=st.booleans())
 def test_sp3_mutations(generated, data, gz):

@@ -245,7 +245,10 @@ def load_sp3(path: str | Path) -> Sp3Orbits:
     if len(epochs) < n_epochs:
         raise EphemerisError(
             f"SP3 file {path}: {len(epochs)} epochs, header announces {n_epochs} (truncated file)")
-    t_bdt = np.array([_to_bdt_seconds(t, time_system) for t in epochs])
+    try:
+        t_bdt = np.array([_to_bdt_seconds(t, time_system) for t in epochs])
+    except ValueError as exc:   # UTC epochs before 2006: no BDT - UTC leap seconds
+        raise EphemerisError(f"SP3 file {path}: {exc}") from None
     return Sp3Orbits(path=path, version=version, time_system=time_system, coord_system=coord,
                      agency=agency, epochs=epochs, t_bdt=t_bdt, svs=tuple(svs),
                      positions=np.stack(pos_rows), clocks=np.stack(clk_rows))
