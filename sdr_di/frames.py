@@ -9,7 +9,6 @@ R_z(-yaw) R_x(pitch) R_y(roll) (paper 004 Table 1 conventions).
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from .constants import A_CGCS, E2_CGCS, OMEGA_E

@@ -31,7 +31,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sdr_di.errors import SdrDiError
+from sdr_di.errors import EphemerisError, SdrDiError
 from sdr_di.io.imu_files import read_imu, read_truth
 from sdr_di.io.sidecar import read_sidecar
 from sdr_di.io.tag_sidecar import read_tag, tag_source
@@ -378,8 +378,6 @@ def test_nav_record_before_the_bdt_epoch_is_the_parsers_error(generated):
     """A record dated before 2006 (the year column "0023": hypothesis's find in
     test_rinex4_nav_mutations) is an EphemerisError naming the line, not the time
     conversion's ValueError."""
-    from sdr_di.errors import EphemerisError
-
     lines = list(_NAV4)
     k = next(i for i, ln in enumerate(lines) if ln.startswith("C20 2023"))
     lines[k] = lines[k].replace("C20 2023", "C20 0023", 1)
@@ -435,8 +433,6 @@ _SP3 = gzip.decompress((REPO / "ephemeris" / "Sta21114.sp3.gz").read_bytes()).de
 def test_sp3_utc_epochs_before_the_bdt_epoch_are_the_parsers_error(generated):
     """An SP3 file on the UTC scale dated 2005 (no BDT - UTC leap seconds before 2006) is
     an EphemerisError naming the file, not the leap-second table's ValueError."""
-    from sdr_di.errors import EphemerisError
-
     lines = gzip.decompress((REPO / "ephemeris" / "Sta21114.sp3.gz").read_bytes()).decode(
         "latin-1").splitlines()
     k = next(i for i, ln in enumerate(lines) if ln.startswith("%c"))
